@@ -1,0 +1,20 @@
+"""jaxgeo: differentiable sensor models and bundle adjustment for satellite imagery.
+
+Conventions: ground ``(lon_deg, lat_deg, h_m)`` on WGS84 (ellipsoidal height), ECEF in metres,
+image ``(x, y) = (col, row)`` px with integer values at pixel centres, float64 everywhere.
+"""
+
+import jax as _jax
+
+_jax.config.update("jax_enable_x64", True)
+
+from . import geodesy as geodesy  # noqa: E402
+from . import rotations as rotations  # noqa: E402
+from .models import RPC as RPC  # noqa: E402
+from .models import AbstractSensorModel as AbstractSensorModel  # noqa: E402
+from .models import Affine as Affine  # noqa: E402
+from .models import Biased as Biased  # noqa: E402
+from .models import Shift as Shift  # noqa: E402
+from .models import ShiftDrift as ShiftDrift  # noqa: E402
+
+__version__ = "0.1.0"
