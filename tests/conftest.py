@@ -21,3 +21,49 @@ def real_data() -> pathlib.Path:
             f"real test data not found at {REAL_DATA}; set JAXGEO_REAL_DATA to ../shared/data/real"
         )
     return REAL_DATA
+
+
+def rpc_from_rasterio(path):
+    """An RPC built from GDAL's own reading of a file (independent of jaxgeo.io)."""
+    import rasterio
+
+    from jaxgeo import RPC
+
+    with rasterio.open(path) as src:
+        r = src.rpcs
+    return RPC.from_vendor(
+        line_num=r.line_num_coeff,
+        line_den=r.line_den_coeff,
+        samp_num=r.samp_num_coeff,
+        samp_den=r.samp_den_coeff,
+        lon_off=r.long_off,
+        lon_scale=r.long_scale,
+        lat_off=r.lat_off,
+        lat_scale=r.lat_scale,
+        height_off=r.height_off,
+        height_scale=r.height_scale,
+        line_off=r.line_off,
+        line_scale=r.line_scale,
+        samp_off=r.samp_off,
+        samp_scale=r.samp_scale,
+    ), r
+
+
+PLEIADES_TIF = "PHR1B_P_201709281038393_SEN_PRG_FC_178609-001.tif"
+REFERENCE_GROUND = (7.048662660737769592, 43.72774839443545858, 0.0)
+REFERENCE_IMAGE = (100.0, 200.0)  # GDAL's (100.5, 200.5) minus 0.5
+
+
+@pytest.fixture(scope="session")
+def pleiades(real_data):
+    """(RPC, rasterio RPC object) of the real Pleiades scene 178609-001, read by GDAL."""
+    return rpc_from_rasterio(real_data / PLEIADES_TIF)
+
+
+def cube_points(rpc, n, seed=0, fraction=1.0):
+    """``n`` uniform random ground points in ``fraction`` of the RPC's validity cube."""
+    import numpy as np
+
+    rng = np.random.default_rng(seed)
+    u = rng.uniform(-fraction, fraction, (n, 3))
+    return np.asarray(rpc.ground_offset) + u * np.asarray(rpc.ground_scale)
