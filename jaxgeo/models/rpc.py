@@ -63,18 +63,28 @@ def from_rpc00b(coeffs: ArrayLike, order: TermOrder) -> np.ndarray:
     raise ValueError(f"unknown RPC term order {order!r}; expected 'RPC00A' or 'RPC00B'")
 
 
+def _monomial_list(normalized: Float[Array, "*batch 3"]) -> list[Float[Array, "*batch"]]:
+    lon, lat, h = normalized[..., 0], normalized[..., 1], normalized[..., 2]
+    ll, pp, hh = lon * lon, lat * lat, h * h
+    return [
+        jnp.ones_like(lon), lon, lat, h, lon * lat, lon * h, lat * h, ll, pp, hh,
+        lat * lon * h, ll * lon, lon * pp, lon * hh, ll * lat, pp * lat, lat * hh, ll * h,
+        pp * h, hh * h,
+    ]  # fmt: skip
+
+
 def monomials(normalized: Float[Array, "*batch 3"]) -> Float[Array, "*batch 20"]:
     """The 20 cubic monomials of normalised ``(L, P, H)`` in RPC00B order."""
-    lon, lat, h = normalized[..., 0], normalized[..., 1], normalized[..., 2]
-    one = jnp.ones_like(lon)
-    return jnp.stack(
-        [
-            one, lon, lat, h, lon * lat, lon * h, lat * h, lon * lon, lat * lat, h * h,
-            lat * lon * h, lon**3, lon * lat * lat, lon * h * h, lon * lon * lat, lat**3,
-            lat * h * h, lon * lon * h, lat * lat * h, h**3,
-        ],
-        axis=-1,
-    )  # fmt: skip
+    return jnp.stack(_monomial_list(normalized), axis=-1)
+
+
+def _polynomial(coeffs: Float[Array, "20"], terms: list[Float[Array, "*batch"]]):
+    # written out term by term (not a stacked matmul) so that XLA fuses the whole rational
+    # function into one elementwise loop: ~4x faster on CPU than materialising (n, 20)
+    out = coeffs[0] * terms[0]
+    for k in range(1, 20):
+        out = out + coeffs[k] * terms[k]
+    return out
 
 
 class RPC(AbstractSensorModel):
@@ -186,9 +196,10 @@ class RPC(AbstractSensorModel):
         ground = jnp.asarray(ground, dtype=float)
         if ground.shape[-1:] != (3,):
             raise ValueError(f"ground coordinates must have a last axis of size 3, got {ground.shape}")
-        m = monomials(self.normalize_ground(ground))
-        ratio = jnp.einsum("...k,ik->...i", m, self.num) / jnp.einsum("...k,ik->...i", m, self.den)
-        return self.image_offset + self.image_scale * ratio
+        terms = _monomial_list(self.normalize_ground(ground))
+        x = _polynomial(self.num[0], terms) / _polynomial(self.den[0], terms)
+        y = _polynomial(self.num[1], terms) / _polynomial(self.den[1], terms)
+        return self.image_offset + self.image_scale * jnp.stack([x, y], axis=-1)
 
     def reference_ground(self) -> Float[Array, "3"]:
         return self.ground_offset
