@@ -1,0 +1,126 @@
+"""Level 2 of the full-strip adjustment: the universal lat/lon correction (003_ eq. 12-13).
+
+    dlat = a0 + a1 lat + a2 lon + a3 lat^2 + a4 lon^2 + a5 lat lon
+    dlon = b0 + b1 lat + b2 lon + b3 lat^2 + b4 lon^2 + b5 lat lon
+
+with ``(lat, lon)`` the ground coordinates after the level-1 (relative) adjustment, normalised
+"as in the RPCs" (offset and scale of the GCPs' extent), and ``(dlat, dlon)`` in degrees the
+correction that takes them to the true coordinates. One correction serves the whole strip, so
+sub-scenes without GCPs are corrected too.
+"""
+
+from __future__ import annotations
+
+import equinox as eqx
+import jax.numpy as jnp
+import numpy as np
+from jaxtyping import Array, ArrayLike, Float
+
+from ..models.base import AbstractSensorModel
+
+N_TERMS = {"shift": 1, "affine": 3, "quadratic": 6}
+"""Leading terms of eq. 12-13 kept by each degree (the paper uses ``quadratic``)."""
+
+
+def _terms(lat_n, lon_n):
+    return jnp.stack(
+        [jnp.ones_like(lat_n), lat_n, lon_n, lat_n**2, lon_n**2, lat_n * lon_n], axis=-1
+    )
+
+
+class UniversalCorrection(eqx.Module):
+    """The eq. 12-13 correction: ``coeffs`` ``(2, 6)``, row 0 ``a`` (dlat), row 1 ``b`` (dlon).
+
+    ``offset``/``scale`` ``(2,)`` normalise ``(lat_deg, lon_deg)``; degrees throughout.
+    """
+
+    coeffs: Float[Array, "2 6"]
+    offset: Float[Array, "2"]
+    scale: Float[Array, "2"]
+
+    def delta(self, ground: Float[ArrayLike, "*batch 3"]) -> Float[Array, "*batch 2"]:
+        """``(dlon_deg, dlat_deg)`` at ``(lon_deg, lat_deg, h_m)`` (level-1 coordinates)."""
+        ground = jnp.asarray(ground, dtype=float)
+        lat_n = (ground[..., 1] - self.offset[0]) / self.scale[0]
+        lon_n = (ground[..., 0] - self.offset[1]) / self.scale[1]
+        t = _terms(lat_n, lon_n)
+        dlat = t @ self.coeffs[0]
+        dlon = t @ self.coeffs[1]
+        return jnp.stack([dlon, dlat], axis=-1)
+
+    def apply(self, ground: Float[ArrayLike, "*batch 3"]) -> Float[Array, "*batch 3"]:
+        """Level-1 ground -> corrected (absolute) ground."""
+        ground = jnp.asarray(ground, dtype=float)
+        return ground.at[..., :2].add(self.delta(ground))
+
+    def invert(
+        self, ground: Float[ArrayLike, "*batch 3"], iterations: int = 4
+    ) -> Float[Array, "*batch 3"]:
+        """Corrected ground -> level-1 ground (fixed point; the correction is tiny and smooth)."""
+        ground = jnp.asarray(ground, dtype=float)
+        level1 = ground
+        for _ in range(iterations):
+            level1 = ground.at[..., :2].add(-self.delta(level1))
+        return level1
+
+
+def fit_universal_correction(
+    level1: Float[ArrayLike, "n 3"],
+    truth: Float[ArrayLike, "n 3"],
+    degree: str = "quadratic",
+) -> tuple[UniversalCorrection, np.ndarray]:
+    """Least-squares fit of eq. 12-13 from GCPs: level-1 ground and true ground, ``(n, 3)``.
+
+    Returns the correction and the residuals ``(n, 2)`` (dlon, dlat) in degrees after the fit.
+    Needs at least as many GCPs as terms (6 for ``quadratic``); fewer raise a ``ValueError``.
+    """
+    if degree not in N_TERMS:
+        raise ValueError(f"degree must be one of {list(N_TERMS)}, got {degree!r}")
+    level1 = np.asarray(level1, dtype=float).reshape(-1, 3)
+    truth = np.asarray(truth, dtype=float).reshape(-1, 3)
+    k = N_TERMS[degree]
+    n = len(level1)
+    if n < k:
+        raise ValueError(
+            f"the {degree} universal correction needs at least {k} GCPs, got {n} "
+            f"(use degree='affine' (3) or 'shift' (1))"
+        )
+    if not (np.all(np.isfinite(level1)) and np.all(np.isfinite(truth))):
+        raise ValueError("universal correction: non-finite GCP coordinates")
+    latlon = level1[:, [1, 0]]
+    offset = latlon.mean(axis=0)
+    scale = np.maximum(np.abs(latlon - offset).max(axis=0), 1e-9)
+    t = np.asarray(_terms(*((latlon - offset) / scale).T))[:, :k]
+    rank = np.linalg.matrix_rank(t, tol=1e-8 * np.abs(t).max())
+    if rank < k:
+        raise ValueError(
+            f"the {degree} universal correction is not determined by these {n} GCPs "
+            f"(design rank {rank} < {k}: GCPs too few or aligned along the strip)"
+        )
+    d = (truth - level1)[:, [1, 0]]  # (dlat, dlon)
+    sol, *_ = np.linalg.lstsq(t, d, rcond=None)
+    coeffs = np.zeros((2, 6))
+    coeffs[:, :k] = sol.T
+    corr = UniversalCorrection(jnp.asarray(coeffs), jnp.asarray(offset), jnp.asarray(scale))
+    resid = (truth - np.asarray(corr.apply(level1)))[:, :2]
+    return corr, resid
+
+
+class UniversallyCorrected(AbstractSensorModel):
+    """A sensor model followed by the universal correction: ground truth -> image.
+
+    ``project(g) = model.project(correction.invert(g))``: the level-1 model sees the ground point
+    where the uncorrected strip puts it.
+    """
+
+    model: AbstractSensorModel
+    correction: UniversalCorrection
+
+    def project(self, ground: Float[ArrayLike, "*batch 3"]) -> Float[Array, "*batch 2"]:
+        return self.model.project(self.correction.invert(ground))
+
+    def localize(self, image, h, guess=None):
+        return self.correction.apply(self.model.localize(image, h, guess))
+
+    def reference_ground(self) -> Float[Array, "3"]:
+        return self.correction.apply(self.model.reference_ground())
