@@ -16,5 +16,9 @@ from .models import Affine as Affine  # noqa: E402
 from .models import Biased as Biased  # noqa: E402
 from .models import Shift as Shift  # noqa: E402
 from .models import ShiftDrift as ShiftDrift  # noqa: E402
+from .io import read_rpc as read_rpc  # noqa: E402
+from .io import write_geotiff_rpc as write_geotiff_rpc  # noqa: E402
+from .io import write_rpb as write_rpb  # noqa: E402
+from .io import write_rpc_text as write_rpc_text  # noqa: E402
 
 __version__ = "0.1.0"

@@ -1,0 +1,16 @@
+"""File input/output: vendor RPC files, GCP/tie-point tables, metadata, adjusted-model writers.
+
+Image coordinates in every file jaxgeo writes follow its convention (integer values at pixel
+centres, ``(0, 0)`` the centre of the first pixel); readers convert vendor conventions on input.
+"""
+
+from .rpc_common import RPCFormatError as RPCFormatError
+from .rpc_formats import detect_rpc_format as detect_rpc_format
+from .rpc_formats import read_rpc as read_rpc
+from .rpc_gdal import from_rasterio_rpc as from_rasterio_rpc
+from .rpc_gdal import to_rasterio_rpc as to_rasterio_rpc
+from .rpc_gdal import write_geotiff_rpc as write_geotiff_rpc
+from .rpc_text import write_rpb as write_rpb
+from .rpc_text import write_rpc_text as write_rpc_text
+
+# --- other io modules (tables, metadata, ...) re-export below this line ---

@@ -1,0 +1,346 @@
+"""Scene metadata: the approximate geometry that initialises physical sensor models.
+
+One :class:`SceneMetadata` per image: size, corner coordinates, nominal flying height, view
+angles, camera constants and line timing. :func:`read_metadata` reads two formats, one scene or
+several per file:
+
+**Cartosat-1-like text** -- ``key = value`` lines; ``#`` starts a comment; keys are
+case-insensitive; unknown keys (vendor files carry many) are ignored. A ``[name]`` line starts a
+new scene (its ``image_id`` defaults to ``name``); a file without sections holds one scene.
+
+==========================  ==============================================  ==================
+key                         meaning                                         aliases
+==========================  ==============================================  ==================
+image_id                    scene identifier (text)                         ProductID, SceneID
+n_cols, n_rows              image size in pixels (columns, rows = lines)    NoPixels, NoScans
+ul_lon_deg, ul_lat_deg      upper-left corner (x = 0, y = 0), WGS84 deg     ProdULLon, ProdULLat
+ur_lon_deg, ur_lat_deg      upper-right corner (x = n_cols-1, y = 0)        ProdURLon, ProdURLat
+lr_lon_deg, lr_lat_deg      lower-right corner (x = n_cols-1, y = n_rows-1) ProdLRLon, ProdLRLat
+ll_lon_deg, ll_lat_deg      lower-left corner (x = 0, y = n_rows-1)         ProdLLLon, ProdLLLat
+ul_h_m ... ll_h_m           corner ellipsoidal heights (optional)
+corner_h_m                  height of every corner without its own (def. 0)
+flying_height_m             nominal orbit altitude above the ellipsoid (m)
+along_track_angle_deg       view angle along track, + forward (fore +26)
+across_track_angle_deg      view angle across track (optional, default 0)
+focal_length_mm             focal length (optional)
+pixel_size_um               detector pitch (optional)
+line_time_s                 time per image line (optional; 0.336e-3)
+first_line_time_s           time of line 0 after the sequence epoch (def. 0)
+epoch_utc                   the sequence epoch, ISO 8601 text (optional)
+==========================  ==============================================  ==================
+
+**JSON** -- an object with the :class:`SceneMetadata` field names (``corners`` a 4 x 3 list of
+``[lon_deg, lat_deg, h_m]`` in the order UL, UR, LR, LL), a list of such objects, or
+``{"scenes": [...]}``. :func:`write_metadata_json` writes that format.
+
+Errors name the file, the scene, every missing field, and the key and line of a bad value.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import json
+import math
+import os
+import pathlib
+import re
+import tempfile
+from collections.abc import Iterable, Sequence
+from typing import Any
+
+import numpy as np
+
+CORNER_NAMES = ("ul", "ur", "lr", "ll")
+"""Corner order of :attr:`SceneMetadata.corners`: UL (0, 0), UR, LR, LL."""
+
+_FLOAT_FIELDS = (
+    "flying_height_m",
+    "along_track_angle_deg",
+    "across_track_angle_deg",
+    "focal_length_mm",
+    "pixel_size_um",
+    "line_time_s",
+    "first_line_time_s",
+)
+_REQUIRED = ("image_id", "n_cols", "n_rows", "corners", "flying_height_m", "along_track_angle_deg")
+
+
+@dataclasses.dataclass(frozen=True, eq=False)
+class SceneMetadata:
+    """Approximate geometry of one scene (see the module docstring for the file formats).
+
+    ``corners`` is ``(4, 3)``: ``(lon_deg, lat_deg, h_m)`` of UL ``(x=0, y=0)``, UR
+    ``(x=n_cols-1, y=0)``, LR ``(x=n_cols-1, y=n_rows-1)``, LL ``(x=0, y=n_rows-1)``.
+    Angles in degrees, along-track ``+`` = forward looking (Cartosat-1 fore +26, aft -5).
+    ``first_line_time_s`` is the time of line 0 after the sequence epoch; the fore/aft
+    interval of an along-track pair is the difference between the two scenes.
+    """
+
+    image_id: str
+    n_cols: int
+    n_rows: int
+    corners: np.ndarray
+    flying_height_m: float
+    along_track_angle_deg: float
+    across_track_angle_deg: float = 0.0
+    focal_length_mm: float | None = None
+    pixel_size_um: float | None = None
+    line_time_s: float | None = None
+    first_line_time_s: float = 0.0
+    epoch_utc: str | None = None
+
+    def __post_init__(self):
+        corners = np.array(self.corners, dtype=float)
+        if corners.shape != (4, 3):
+            raise ValueError(
+                f"scene {self.image_id!r}: corners must have shape (4, 3) (UL, UR, LR, LL x "
+                f"lon_deg, lat_deg, h_m), got {corners.shape}"
+            )
+        if not np.all(np.isfinite(corners)):
+            raise ValueError(f"scene {self.image_id!r}: corners must be finite, got {corners}")
+        if np.any(np.abs(corners[:, 1]) > 90.0):
+            raise ValueError(f"scene {self.image_id!r}: corner latitude outside [-90, 90] deg")
+        corners.setflags(write=False)
+        object.__setattr__(self, "corners", corners)
+        for name in ("n_cols", "n_rows"):
+            value = getattr(self, name)
+            if int(value) != value or int(value) < 2:
+                raise ValueError(f"scene {self.image_id!r}: {name} must be an integer >= 2, got {value}")
+            object.__setattr__(self, name, int(value))
+        for name in _FLOAT_FIELDS:
+            value = getattr(self, name)
+            if value is None:
+                continue
+            value = float(value)
+            if not math.isfinite(value):
+                raise ValueError(f"scene {self.image_id!r}: {name} must be finite, got {value}")
+            object.__setattr__(self, name, value)
+        for name in ("flying_height_m", "focal_length_mm", "pixel_size_um", "line_time_s"):
+            value = getattr(self, name)
+            if value is not None and value <= 0.0:
+                raise ValueError(f"scene {self.image_id!r}: {name} must be positive, got {value}")
+
+    def __eq__(self, other: object) -> bool:
+        if not isinstance(other, SceneMetadata):
+            return NotImplemented
+        return all(
+            np.array_equal(getattr(self, f.name), getattr(other, f.name))
+            if f.name == "corners"
+            else getattr(self, f.name) == getattr(other, f.name)
+            for f in dataclasses.fields(self)
+        )
+
+    __hash__ = None  # mutable-looking array field: not hashable
+
+    @property
+    def center(self) -> np.ndarray:
+        """Mean of the four corners ``(lon_deg, lat_deg, h_m)`` (a point near the scene centre)."""
+        return self.corners.mean(axis=0)
+
+    def corner_pixels(self) -> np.ndarray:
+        """``(4, 2)`` image coordinates ``(x, y)`` of the corners, in :attr:`corners` order."""
+        c, r = self.n_cols - 1.0, self.n_rows - 1.0
+        return np.array([[0.0, 0.0], [c, 0.0], [c, r], [0.0, r]])
+
+    def to_dict(self) -> dict[str, Any]:
+        """JSON-ready dictionary with the field names (corners as nested lists)."""
+        out = {f.name: getattr(self, f.name) for f in dataclasses.fields(self)}
+        out["corners"] = self.corners.tolist()
+        return out
+
+
+# --- text -------------------------------------------------------------------------------
+
+_ALIASES = {
+    "productid": "image_id",
+    "sceneid": "image_id",
+    "nopixels": "n_cols",
+    "noscans": "n_rows",
+    **{
+        f"prod{c}{ll}": f"{c}_{ll}_deg"
+        for c in CORNER_NAMES
+        for ll in ("lon", "lat")
+    },
+}
+_SECTION = re.compile(r"^\[\s*([^\]]+?)\s*\]$")
+
+
+def _canonical_key(key: str) -> str:
+    k = key.strip().lower()
+    return _ALIASES.get(k, k)
+
+
+def _parse_text(text: str, path: str) -> list[dict[str, tuple[str, int]]]:
+    """Split into scenes of ``{key: (value, line_number)}``."""
+    scenes: list[dict[str, tuple[str, int]]] = []
+    current: dict[str, tuple[str, int]] | None = None
+    for number, raw in enumerate(text.splitlines(), start=1):
+        line = raw.split("#", 1)[0].strip()
+        if not line:
+            continue
+        section = _SECTION.match(line)
+        if section:
+            current = {"image_id": (section.group(1), number)}
+            scenes.append(current)
+            continue
+        if "=" not in line:
+            raise ValueError(f"{path}:{number}: expected 'key = value' or '[scene]', got {raw!r}")
+        key, value = line.split("=", 1)
+        key = _canonical_key(key)
+        if current is None:
+            current = {}
+            scenes.append(current)
+        if key in current and key != "image_id":
+            raise ValueError(
+                f"{path}:{number}: duplicate key {key!r} (first on line {current[key][1]}); "
+                "start each further scene with a '[name]' line"
+            )
+        current[key] = (value.strip(), number)
+    if not scenes:
+        raise ValueError(f"{path}: no scene metadata found (empty file)")
+    return scenes
+
+
+def _number(path: str, key: str, value: str, line: int | None) -> float:
+    where = f"{path}:{line}" if line is not None else path
+    try:
+        x = float(value)
+    except (TypeError, ValueError):
+        raise ValueError(f"{where}: {key} must be a number, got {value!r}") from None
+    if not math.isfinite(x):
+        raise ValueError(f"{where}: {key} must be finite, got {value!r}")
+    return x
+
+
+def _integer(path: str, key: str, value: Any, line: int | None) -> int:
+    x = _number(path, key, value, line)
+    if x != int(x):
+        where = f"{path}:{line}" if line is not None else path
+        raise ValueError(f"{where}: {key} must be an integer, got {value!r}")
+    return int(x)
+
+
+def _scene_from_text(entries: dict[str, tuple[str, int]], path: str, index: int) -> SceneMetadata:
+    name = entries.get("image_id", (f"#{index}", None))[0]
+    corner_keys = [f"{c}_{ll}_deg" for c in CORNER_NAMES for ll in ("lon", "lat")]
+    required = ["image_id", "n_cols", "n_rows", *corner_keys, "flying_height_m"]
+    required.append("along_track_angle_deg")
+    missing = [k for k in required if k not in entries]
+    if missing:
+        raise ValueError(
+            f"{path}: scene {name!r} is missing required field(s): {', '.join(missing)}"
+        )
+
+    def num(key):
+        value, line = entries[key]
+        return _number(path, key, value, line)
+
+    default_h = num("corner_h_m") if "corner_h_m" in entries else 0.0
+    corners = [
+        [num(f"{c}_lon_deg"), num(f"{c}_lat_deg"), num(f"{c}_h_m") if f"{c}_h_m" in entries else default_h]
+        for c in CORNER_NAMES
+    ]
+    kwargs: dict[str, Any] = {
+        "image_id": entries["image_id"][0],
+        "n_cols": _integer(path, "n_cols", *entries["n_cols"]),
+        "n_rows": _integer(path, "n_rows", *entries["n_rows"]),
+        "corners": corners,
+    }
+    for key in _FLOAT_FIELDS:
+        if key in entries:
+            kwargs[key] = num(key)
+    if "epoch_utc" in entries:
+        kwargs["epoch_utc"] = entries["epoch_utc"][0]
+    try:
+        return SceneMetadata(**kwargs)
+    except ValueError as err:
+        raise ValueError(f"{path}: {err}") from None
+
+
+# --- JSON -------------------------------------------------------------------------------
+
+_FIELDS = tuple(f.name for f in dataclasses.fields(SceneMetadata))
+
+
+def _scene_from_json(obj: Any, path: str, index: int) -> SceneMetadata:
+    if not isinstance(obj, dict):
+        raise ValueError(f"{path}: scene #{index} must be a JSON object, got {type(obj).__name__}")
+    name = obj.get("image_id", f"#{index}")
+    missing = [k for k in _REQUIRED if k not in obj]
+    if missing:
+        raise ValueError(
+            f"{path}: scene {name!r} is missing required field(s): {', '.join(missing)}"
+        )
+    unknown = sorted(set(obj) - set(_FIELDS))
+    if unknown:
+        raise ValueError(f"{path}: scene {name!r} has unknown field(s): {', '.join(unknown)}")
+    kwargs = dict(obj)
+    kwargs["image_id"] = str(obj["image_id"])
+    for key in ("n_cols", "n_rows"):
+        kwargs[key] = _integer(path, f"scene {name!r} {key}", obj[key], None)
+    for key in _FLOAT_FIELDS:
+        if obj.get(key) is not None:
+            kwargs[key] = _number(path, f"scene {name!r} {key}", obj[key], None)
+    try:
+        corners = np.array(obj["corners"], dtype=float)
+    except (TypeError, ValueError):
+        raise ValueError(f"{path}: scene {name!r} corners must be a 4 x 3 list of numbers") from None
+    kwargs["corners"] = corners
+    try:
+        return SceneMetadata(**kwargs)
+    except ValueError as err:
+        raise ValueError(f"{path}: {err}") from None
+
+
+# --- public functions -------------------------------------------------------------------
+
+
+def read_metadata(path: str | os.PathLike) -> list[SceneMetadata]:
+    """Read one or several scenes from a Cartosat-1-like text file or a JSON file.
+
+    The format is recognised from the content (JSON starts with ``{`` or ``[``). Returns the
+    scenes in file order.
+    """
+    path = pathlib.Path(path)
+    text = path.read_text(encoding="utf-8-sig")
+    stripped = text.lstrip()
+    if stripped.startswith(("{", "[")):
+        try:
+            data = json.loads(text)
+        except json.JSONDecodeError as err:
+            raise ValueError(f"{path}:{err.lineno}: invalid JSON: {err.msg}") from None
+        if isinstance(data, dict) and "scenes" in data:
+            data = data["scenes"]
+        items = data if isinstance(data, list) else [data]
+        if not items:
+            raise ValueError(f"{path}: no scene metadata found (empty list)")
+        return [_scene_from_json(obj, str(path), i) for i, obj in enumerate(items)]
+    return [_scene_from_text(s, str(path), i) for i, s in enumerate(_parse_text(text, str(path)))]
+
+
+def write_metadata_json(
+    scenes: SceneMetadata | Sequence[SceneMetadata] | Iterable[SceneMetadata],
+    path: str | os.PathLike,
+    overwrite: bool = False,
+) -> pathlib.Path:
+    """Write scenes as a JSON list, atomically (temporary file + rename).
+
+    Raises ``FileExistsError`` if ``path`` exists and ``overwrite`` is False.
+    """
+    path = pathlib.Path(path)
+    if isinstance(scenes, SceneMetadata):
+        scenes = [scenes]
+    payload = [s.to_dict() for s in scenes]
+    if path.exists() and not overwrite:
+        raise FileExistsError(f"{path} exists; pass overwrite=True to replace it")
+    fd, tmp = tempfile.mkstemp(prefix=f".{path.name}.", suffix=".tmp", dir=path.parent or ".")
+    try:
+        with os.fdopen(fd, "w", encoding="utf-8") as f:
+            json.dump(payload, f, indent=2)
+            f.write("\n")
+        os.replace(tmp, path)
+    except BaseException:
+        if os.path.exists(tmp):
+            os.unlink(tmp)
+        raise
+    return path
