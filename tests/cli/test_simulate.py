@@ -1,0 +1,42 @@
+"""``jaxgeo simulate``: writes the scene files, refuses to overwrite them."""
+
+import json
+
+from jaxgeo.cli import main
+
+
+def test_cartosat1_writes_and_refuses_to_overwrite(tmp_path, capsys):
+    out = tmp_path / "pair"
+    assert main(["simulate", "cartosat1", "--seed", "5", "--out", str(out)]) == 0
+    files = sorted(p.name for p in out.iterdir())
+    assert files == ["aft.txt", "fore.txt", "ground.csv", "observations.csv", "truth.json"]
+    assert "vendor RPC direct georeferencing" in capsys.readouterr().out
+    before = {p.name: p.read_bytes() for p in out.iterdir()}
+    assert main(["simulate", "cartosat1", "--seed", "6", "--out", str(out)]) == 2
+    err = capsys.readouterr().err
+    assert "refusing to overwrite" in err and "fore.txt" in err and "--overwrite" in err
+    assert {p.name: p.read_bytes() for p in out.iterdir()} == before
+    assert main(["simulate", "cartosat1", "--seed", "6", "--out", str(out), "--overwrite"]) == 0
+    assert (out / "fore.txt").read_bytes() != before["fore.txt"]
+    assert json.loads((out / "truth.json").read_text())["params"]["seed"] == 6
+
+
+def test_carto2s_strip(tmp_path, capsys):
+    out = tmp_path / "strip"
+    argv = ["simulate", "carto2s-strip", "--scenes", "2", "--seed", "1", "--out", str(out)]
+    assert main([*argv, "--gcp-every", "1"]) == 0
+    names = sorted(p.name for p in out.iterdir())
+    assert names == ["ground.csv", "observations.csv", "scene_000.txt", "scene_001.txt",
+                     "strip.json", "truth.json"]  # fmt: skip
+    meta = json.loads((out / "strip.json").read_text())
+    assert [s["first_line"] for s in meta["scenes"]] == [0, 46500]
+    assert main(argv) == 2
+    assert "refusing to overwrite" in capsys.readouterr().err
+
+
+def test_bad_arguments(tmp_path, capsys):
+    assert main(["simulate", "carto2s-strip", "--scenes", "0", "--out", str(tmp_path)]) == 2
+    assert "--scenes must be >= 1" in capsys.readouterr().err
+    (tmp_path / "file").write_text("x")
+    assert main(["simulate", "cartosat1", "--out", str(tmp_path / "file")]) == 2
+    assert "not a directory" in capsys.readouterr().err
