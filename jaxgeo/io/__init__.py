@@ -14,3 +14,6 @@ from .rpc_text import write_rpb as write_rpb
 from .rpc_text import write_rpc_text as write_rpc_text
 
 # --- other io modules (tables, metadata, ...) re-export below this line ---
+from .metadata import SceneMetadata as SceneMetadata
+from .metadata import read_metadata as read_metadata
+from .metadata import write_metadata_json as write_metadata_json

@@ -105,7 +105,9 @@ class SceneMetadata:
         for name in ("n_cols", "n_rows"):
             value = getattr(self, name)
             if int(value) != value or int(value) < 2:
-                raise ValueError(f"scene {self.image_id!r}: {name} must be an integer >= 2, got {value}")
+                raise ValueError(
+                    f"scene {self.image_id!r}: {name} must be an integer >= 2, got {value}"
+                )
             object.__setattr__(self, name, int(value))
         for name in _FLOAT_FIELDS:
             value = getattr(self, name)
@@ -156,11 +158,7 @@ _ALIASES = {
     "sceneid": "image_id",
     "nopixels": "n_cols",
     "noscans": "n_rows",
-    **{
-        f"prod{c}{ll}": f"{c}_{ll}_deg"
-        for c in CORNER_NAMES
-        for ll in ("lon", "lat")
-    },
+    **{f"prod{c}{ll}": f"{c}_{ll}_deg" for c in CORNER_NAMES for ll in ("lon", "lat")},
 }
 _SECTION = re.compile(r"^\[\s*([^\]]+?)\s*\]$")
 
@@ -235,9 +233,9 @@ def _scene_from_text(entries: dict[str, tuple[str, int]], path: str, index: int)
         value, line = entries[key]
         return _number(path, key, value, line)
 
-    default_h = num("corner_h_m") if "corner_h_m" in entries else 0.0
+    h0 = num("corner_h_m") if "corner_h_m" in entries else 0.0
     corners = [
-        [num(f"{c}_lon_deg"), num(f"{c}_lat_deg"), num(f"{c}_h_m") if f"{c}_h_m" in entries else default_h]
+        [num(f"{c}_lon_deg"), num(f"{c}_lat_deg"), num(f"{c}_h_m") if f"{c}_h_m" in entries else h0]
         for c in CORNER_NAMES
     ]
     kwargs: dict[str, Any] = {
@@ -284,7 +282,8 @@ def _scene_from_json(obj: Any, path: str, index: int) -> SceneMetadata:
     try:
         corners = np.array(obj["corners"], dtype=float)
     except (TypeError, ValueError):
-        raise ValueError(f"{path}: scene {name!r} corners must be a 4 x 3 list of numbers") from None
+        msg = f"{path}: scene {name!r} corners must be a 4 x 3 list of numbers"
+        raise ValueError(msg) from None
     kwargs["corners"] = corners
     try:
         return SceneMetadata(**kwargs)
@@ -298,13 +297,16 @@ def _scene_from_json(obj: Any, path: str, index: int) -> SceneMetadata:
 def read_metadata(path: str | os.PathLike) -> list[SceneMetadata]:
     """Read one or several scenes from a Cartosat-1-like text file or a JSON file.
 
-    The format is recognised from the content (JSON starts with ``{`` or ``[``). Returns the
-    scenes in file order.
+    JSON is recognised by a ``.json`` suffix or content starting with ``{`` or ``[`` (a text
+    file may start with a ``[scene]`` line). Returns the scenes in file order.
     """
     path = pathlib.Path(path)
     text = path.read_text(encoding="utf-8-sig")
     stripped = text.lstrip()
-    if stripped.startswith(("{", "[")):
+    first_line = stripped.split("\n", 1)[0].split("#", 1)[0].strip()
+    is_json = path.suffix.lower() == ".json" or stripped.startswith("{")
+    is_json |= stripped.startswith("[") and not _SECTION.match(first_line)
+    if is_json:
         try:
             data = json.loads(text)
         except json.JSONDecodeError as err:
