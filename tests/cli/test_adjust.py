@@ -1,0 +1,103 @@
+"""``jaxgeo adjust`` and ``jaxgeo demo`` on the embedded Cartosat-1 scene."""
+
+import json
+import shutil
+
+import numpy as np
+import pytest
+
+from jaxgeo.cli import main
+from jaxgeo.io import read_rpc
+from jaxgeo.simulate import demo_dir
+
+
+@pytest.fixture()
+def scene(tmp_path):
+    d = tmp_path / "in"
+    shutil.copytree(demo_dir(), d)
+    return d
+
+
+def _args(d, *extra):
+    return [
+        "adjust",
+        "--image",
+        f"fore={d / 'fore.txt'}",
+        "--image",
+        f"aft={d / 'aft.txt'}",
+        "--ground",
+        str(d / "ground.csv"),
+        "--observations",
+        str(d / "observations.csv"),
+        *extra,
+    ]
+
+
+def test_adjust_json_and_outputs(scene, tmp_path, capsys):
+    out = tmp_path / "out"
+    assert main(_args(scene, "--bias", "shift", "--json", "--out", str(out))) == 0
+    data = json.loads(capsys.readouterr().out)
+    assert data["converged"] and 0.3 < data["s0"] < 1.0
+    chk = data["checkpoints"]
+    assert chk["n"] == 60 and len(chk["rms_m"]) == 3
+    assert max(chk["rms_m"][:2]) < 1.25 and chk["rms_m"][2] < 2.5
+    assert all(lo <= hi for lo, hi in zip(chk["min_m"], chk["max_m"], strict=True))
+    for name in ("fore", "aft"):
+        assert max(data["images"][name]["rms_px"]) < 0.6
+        assert set(data["images"][name]["params"]) == {".bias.shift_px[0]", ".bias.shift_px[1]"}
+    assert data["direct"]["checkpoints"]["rms_m"][1] > 30.0  # before: tens of metres
+    names = {p.split("/")[-1] for p in data["written"]}
+    assert names == {
+        "fore_adjusted_RPC.TXT",
+        "aft_adjusted_RPC.TXT",
+        "adjusted_models.json",
+        "ground_adjusted.csv",
+        "residuals.csv",
+        "report.json",
+        "report.txt",
+    }
+    # the shift folds exactly into the RPC: the written file reproduces the adjusted model
+    models = json.loads((out / "adjusted_models.json").read_text())["images"]
+    shift = np.array([models["fore"]["parameters"][f".bias.shift_px[{i}]"] for i in (0, 1)])
+    vendor = read_rpc(scene / "fore.txt")
+    folded = read_rpc(out / "fore_adjusted_RPC.TXT")
+    g = np.asarray(vendor.ground_offset)
+    np.testing.assert_allclose(
+        np.asarray(folded.project(g)), np.asarray(vendor.project(g)) - shift, atol=1e-6
+    )
+    # never over existing outputs, never over the inputs
+    assert main(_args(scene, "--bias", "shift", "--out", str(out))) == 2
+    assert "exists" in capsys.readouterr().err
+    clash = out / "residuals.csv"  # an input named like an output: not even --overwrite
+    shutil.copy(scene / "observations.csv", clash)
+    args = _args(scene, "--bias", "shift", "--out", str(out), "--overwrite")
+    args[args.index("--observations") + 1] = str(clash)
+    assert main(args) == 2
+    assert "over an input" in capsys.readouterr().err
+    assert clash.read_text() == (scene / "observations.csv").read_text()
+
+
+def test_adjust_table_and_errors(scene, capsys):
+    assert main(_args(scene, "--bias", "none")) == 0
+    text = capsys.readouterr().out
+    assert "RMS_x [pixel]" in text and "s0" in text and "direct" in text
+    bad = [
+        "adjust",
+        "--image",
+        f"fore={scene / 'fore.txt'}",
+        "--ground",
+        str(scene / "ground.csv"),
+        "--observations",
+        str(scene / "observations.csv"),
+    ]
+    assert main(bad) == 2
+    assert "unknown image 'aft'" in capsys.readouterr().err
+    assert main(["adjust", "--image", "fore", "--observations", "x.csv"]) == 2
+    assert "NAME=RPCFILE" in capsys.readouterr().err
+
+
+def test_demo_compares_direct_and_adjusted(capsys):
+    assert main(["demo", "--json"]) == 0
+    data = json.loads(capsys.readouterr().out)
+    assert data["direct"]["checkpoints"]["rms_m"][1] > 30.0
+    assert max(data["checkpoints"]["rms_m"][:2]) < 1.25
