@@ -127,9 +127,7 @@ def enu_to_geodetic(
 
 _N = WGS84_F / (2.0 - WGS84_F)
 _E = WGS84_E2**0.5
-_RECTIFYING_RADIUS_M = (
-    WGS84_A_M / (1.0 + _N) * (1.0 + _N**2 / 4.0 + _N**4 / 64.0 + _N**6 / 256.0)
-)
+_RECTIFYING_RADIUS_M = WGS84_A_M / (1.0 + _N) * (1.0 + _N**2 / 4.0 + _N**4 / 64.0 + _N**6 / 256.0)
 
 
 def _poly(coeffs: tuple[float, ...]) -> float:

@@ -1,4 +1,4 @@
-"""Rotation matrices in pure JAX: elementary rotations, omega/phi/kappa, roll/pitch/yaw, orbit frames.
+"""Rotation matrices in pure JAX: elementary, omega/phi/kappa, roll/pitch/yaw, orbit frames.
 
 Angles are radians. All functions broadcast over leading batch axes of their angle inputs and
 return ``(..., 3, 3)`` matrices. Rotations are *passive-free*: ``rot_x(a) @ v`` rotates the

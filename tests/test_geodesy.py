@@ -32,9 +32,7 @@ def test_ecef_matches_pyproj_and_round_trips(seed, high):
     h = (4.0e5, 9.0e5) if high else (-500.0, 9000.0)  # orbit altitudes too
     g = _random_geodetic(rng, N_POINTS, h=h)
     ours = np.asarray(geodesy.geodetic_to_ecef(g))
-    ref = np.array(
-        Transformer.from_crs("EPSG:4979", "EPSG:4978", always_xy=True).transform(*g.T)
-    ).T
+    ref = np.array(Transformer.from_crs("EPSG:4979", "EPSG:4978", always_xy=True).transform(*g.T)).T
     assert np.abs(ours - ref).max() < 1e-6  # metres
     back = np.asarray(geodesy.ecef_to_geodetic(ours))
     lon_err = ((back[:, 0] - g[:, 0] + 180) % 360 - 180) * 111320 * np.cos(np.deg2rad(g[:, 1]))
@@ -51,18 +49,22 @@ def test_utm_matches_pyproj_over_the_zone(zone, seed, north):
     lat = (0.0, 84.0) if north else (-80.0, 0.0)
     g = _random_geodetic(rng, N_POINTS, lon0=cm, half_width=3.0, lat=lat)
     epsg = geodesy.utm_epsg(zone, north)
-    ref = np.array(Transformer.from_crs("EPSG:4326", f"EPSG:{epsg}", always_xy=True).transform(
-        g[:, 0], g[:, 1]
-    )).T
+    ref = np.array(
+        Transformer.from_crs("EPSG:4326", f"EPSG:{epsg}", always_xy=True).transform(
+            g[:, 0], g[:, 1]
+        )
+    ).T
     ours = np.asarray(geodesy.geodetic_to_utm(g, zone, north))
     assert np.abs(ours[:, :2] - ref).max() < 1e-3  # < 1 mm, the bar
     assert np.abs(ours[:, :2] - ref).max() < 1e-5  # what Krueger n^6 actually gives
     np.testing.assert_array_equal(ours[:, 2], g[:, 2])
     back = np.asarray(geodesy.utm_to_geodetic(ours, zone, north))
     # inverse against pyproj's inverse, in metres on the ground
-    ref_inv = np.array(Transformer.from_crs(f"EPSG:{epsg}", "EPSG:4326", always_xy=True).transform(
-        ours[:, 0], ours[:, 1]
-    )).T
+    ref_inv = np.array(
+        Transformer.from_crs(f"EPSG:{epsg}", "EPSG:4326", always_xy=True).transform(
+            ours[:, 0], ours[:, 1]
+        )
+    ).T
     for ll in (g[:, :2], ref_inv):
         d_lon = (back[:, 0] - ll[:, 0]) * 111320 * np.cos(np.deg2rad(ll[:, 1]))
         d_lat = (back[:, 1] - ll[:, 1]) * 110574
@@ -82,13 +84,16 @@ def test_enu_matches_proj_topocentric(seed):
     topo = Transformer.from_pipeline(
         "+proj=pipeline +step +proj=unitconvert +xy_in=deg +xy_out=rad "
         "+step +proj=cart +ellps=WGS84 "
-        f"+step +proj=topocentric +ellps=WGS84 +lon_0={float(origin[0])!r} +lat_0={float(origin[1])!r} "
+        "+step +proj=topocentric +ellps=WGS84 "
+        f"+lon_0={float(origin[0])!r} +lat_0={float(origin[1])!r} "
         f"+h_0={float(origin[2])!r}"
     )
     ref = np.array(topo.transform(g[:, 0], g[:, 1], g[:, 2])).T
     assert np.abs(ours - ref).max() < 1e-6
     back = np.asarray(geodesy.enu_to_geodetic(ours, origin))
-    assert np.abs(back[:, :2] - g[:, :2]).max() < 1e-11 and np.abs(back[:, 2] - g[:, 2]).max() < 1e-6
+    assert (
+        np.abs(back[:, :2] - g[:, :2]).max() < 1e-11 and np.abs(back[:, 2] - g[:, 2]).max() < 1e-6
+    )
 
 
 def test_utm_zone_helpers():

@@ -4,6 +4,10 @@ Image coordinates in every file jaxgeo writes follow its convention (integer val
 centres, ``(0, 0)`` the centre of the first pixel); readers convert vendor conventions on input.
 """
 
+# --- other io modules (tables, metadata, ...) re-export below this line ---
+from .metadata import SceneMetadata as SceneMetadata
+from .metadata import read_metadata as read_metadata
+from .metadata import write_metadata_json as write_metadata_json
 from .rpc_common import RPCFormatError as RPCFormatError
 from .rpc_formats import detect_rpc_format as detect_rpc_format
 from .rpc_formats import read_rpc as read_rpc
@@ -12,8 +16,3 @@ from .rpc_gdal import to_rasterio_rpc as to_rasterio_rpc
 from .rpc_gdal import write_geotiff_rpc as write_geotiff_rpc
 from .rpc_text import write_rpb as write_rpb
 from .rpc_text import write_rpc_text as write_rpc_text
-
-# --- other io modules (tables, metadata, ...) re-export below this line ---
-from .metadata import SceneMetadata as SceneMetadata
-from .metadata import read_metadata as read_metadata
-from .metadata import write_metadata_json as write_metadata_json

@@ -7,8 +7,10 @@ import pathlib
 import tempfile
 
 
-def atomic_write_bytes(path: str | os.PathLike, data: bytes, overwrite: bool = False) -> pathlib.Path:
-    """Write ``data`` to ``path`` atomically; refuse to replace an existing file unless ``overwrite``.
+def atomic_write_bytes(
+    path: str | os.PathLike, data: bytes, overwrite: bool = False
+) -> pathlib.Path:
+    """Write ``data`` to ``path`` atomically; refuse to replace an existing file by default.
 
     The data goes to a temporary file in the same directory, is flushed and fsynced, then renamed
     onto ``path`` (``os.replace`` is atomic on POSIX): a reader never sees a half-written file, and
@@ -16,7 +18,9 @@ def atomic_write_bytes(path: str | os.PathLike, data: bytes, overwrite: bool = F
     """
     path = pathlib.Path(path)
     if path.exists() and not overwrite:
-        raise FileExistsError(f"{path}: refusing to overwrite an existing file (pass overwrite=True)")
+        raise FileExistsError(
+            f"{path}: refusing to overwrite an existing file (pass overwrite=True)"
+        )
     path.parent.mkdir(parents=True, exist_ok=True)
     fd, tmp = tempfile.mkstemp(prefix=f".{path.name}.", suffix=".tmp", dir=path.parent)
     try:

@@ -44,7 +44,7 @@ class TableError(ValueError):
 
 @dataclasses.dataclass(frozen=True)
 class GroundPoints:
-    """Ground points: ``ids`` (n,), ``lonlath`` (n, 3) deg/deg/m, ``role`` (n,), ``sigma_m`` (n, 3) ENU."""
+    """Ground points: ``ids``, ``lonlath`` (n, 3) deg/deg/m, ``role``, ``sigma_m`` (n, 3) ENU m."""
 
     ids: tuple[str, ...]
     lonlath: np.ndarray
@@ -76,12 +76,14 @@ class GroundPoints:
                 raise ValueError(f"role of point {pid!r} must be one of {ROLES}, got {r!r}")
             if pid not in self.ids:
                 raise KeyError(f"no ground point {pid!r}")
-        return dataclasses.replace(self, role=tuple(roles.get(i, r) for i, r in zip(self.ids, self.role)))
+        return dataclasses.replace(
+            self, role=tuple(roles.get(i, r) for i, r in zip(self.ids, self.role, strict=True))
+        )
 
 
 @dataclasses.dataclass(frozen=True)
 class Observations:
-    """Image measurements: ``point_ids`` (m,), ``images`` (m,), ``xy`` (m, 2) px, ``sigma_px`` (m,)."""
+    """Image measurements: ``point_ids``, ``images``, ``xy`` (m, 2) px, ``sigma_px`` (m,)."""
 
     point_ids: tuple[str, ...]
     images: tuple[str, ...]
@@ -126,10 +128,10 @@ def _rows(path: pathlib.Path, required: tuple[str, ...]):
             f"{path}:{lines[0][0]}: header lacks column(s) {', '.join(missing)} "
             f"(got {','.join(header)})"
         )
-    for (lineno, _), row in zip(lines[1:], reader):
+    for (lineno, _), row in zip(lines[1:], reader, strict=True):
         if len(row) != len(header):
             raise TableError(f"{path}:{lineno}: expected {len(header)} fields, got {len(row)}")
-        yield lineno, dict(zip(header, (c.strip() for c in row)))
+        yield lineno, dict(zip(header, (c.strip() for c in row), strict=True))
 
 
 def read_ground(
@@ -152,7 +154,9 @@ def read_ground(
             raise TableError(f"{where}: point {pid!r} has lon/lat out of range: {lon}, {lat}")
         role = row["role"].lower()
         if role not in ROLES:
-            raise TableError(f"{where}: point {pid!r} has role {row['role']!r}; expected gcp or check")
+            raise TableError(
+                f"{where}: point {pid!r} has role {row['role']!r}; expected gcp or check"
+            )
         sig = [
             _float(row.get(c, ""), where, c, allow_empty=True)
             for c in ("sigma_e_m", "sigma_n_m", "sigma_h_m")
@@ -217,11 +221,11 @@ def _csv(header: list[str], rows) -> str:
 
 def write_ground(points: GroundPoints, path: str | os.PathLike, overwrite: bool = False):
     """Write a GROUND.csv table atomically (full float64 precision)."""
+    cols = (points.ids, points.lonlath, points.role, points.sigma_m)
     rows = [
-        [pid, repr(float(c[0])), repr(float(c[1])), repr(float(c[2])), role,
-         *(repr(float(s)) for s in sig)]
-        for pid, c, role, sig in zip(points.ids, points.lonlath, points.role, points.sigma_m)
-    ]  # fmt: skip
+        [pid, *(repr(float(v)) for v in c), role, *(repr(float(s)) for s in sig)]
+        for pid, c, role, sig in zip(*cols, strict=True)
+    ]
     header = ["id", "lon", "lat", "h", "role", "sigma_e_m", "sigma_n_m", "sigma_h_m"]
     return atomic_write_text(path, _csv(header, rows), overwrite=overwrite)
 
@@ -230,6 +234,6 @@ def write_observations(obs: Observations, path: str | os.PathLike, overwrite: bo
     """Write an OBS.csv table atomically (full float64 precision)."""
     rows = [
         [pid, img, repr(float(p[0])), repr(float(p[1])), repr(float(s))]
-        for pid, img, p, s in zip(obs.point_ids, obs.images, obs.xy, obs.sigma_px)
+        for pid, img, p, s in zip(obs.point_ids, obs.images, obs.xy, obs.sigma_px, strict=True)
     ]
     return atomic_write_text(path, _csv(["id", "image", "x", "y", "sigma_px"], rows), overwrite)

@@ -1,24 +1,24 @@
 """Sensor models: each an equinox Module with ``project`` and ``localize``."""
 
+from .affine3d import Affine3D as Affine3D
 from .base import AbstractSensorModel as AbstractSensorModel
 from .bias import AbstractBias as AbstractBias
 from .bias import Affine as Affine
 from .bias import Biased as Biased
 from .bias import Shift as Shift
 from .bias import ShiftDrift as ShiftDrift
-from .rpc import RPC as RPC
-
-# --- physical models (issue 3) are re-exported below this line ---
-from .pushbroom import GenericPushbroom as GenericPushbroom
-from .spline import SplineObservations as SplineObservations
-from .spline import Spline as Spline
 from .ephemeris import CircularOrbit as CircularOrbit
 from .ephemeris import EphemerisModel as EphemerisModel
 from .ephemeris import ephemeris_from_orbit as ephemeris_from_orbit
-from .rpc_fit import RPCFitReport as RPCFitReport
-from .rpc_fit import fit_rpc as fit_rpc
-from .rpc_fit import fit_rpcs as fit_rpcs
-from .affine3d import Affine3D as Affine3D
 from .kepler import KeplerCamera as KeplerCamera
 from .kepler import KeplerImage as KeplerImage
 from .kepler import KeplerSequence as KeplerSequence
+
+# --- physical models (issue 3) are re-exported below this line ---
+from .pushbroom import GenericPushbroom as GenericPushbroom
+from .rpc import RPC as RPC
+from .rpc_fit import RPCFitReport as RPCFitReport
+from .rpc_fit import fit_rpc as fit_rpc
+from .rpc_fit import fit_rpcs as fit_rpcs
+from .spline import Spline as Spline
+from .spline import SplineObservations as SplineObservations

@@ -77,7 +77,9 @@ class ShiftDrift(AbstractBias):
     drift: Float[Array, "2"]
 
     def __init__(
-        self, shift_px: Float[ArrayLike, "2"] = (0.0, 0.0), drift: Float[ArrayLike, "2"] = (0.0, 0.0)
+        self,
+        shift_px: Float[ArrayLike, "2"] = (0.0, 0.0),
+        drift: Float[ArrayLike, "2"] = (0.0, 0.0),
     ):
         self.shift_px = jnp.asarray(shift_px, dtype=float)
         self.drift = jnp.asarray(drift, dtype=float)
@@ -106,9 +108,7 @@ class Affine(AbstractBias):
         self.matrix = jnp.asarray(matrix, dtype=float)
 
     @classmethod
-    def from_image_affine(
-        cls, a: Float[ArrayLike, "3"], b: Float[ArrayLike, "3"]
-    ) -> Affine:
+    def from_image_affine(cls, a: Float[ArrayLike, "3"], b: Float[ArrayLike, "3"]) -> Affine:
         """From eq. 10-11 of 003_: ``x = x_m + a0 + a1 x + a2 y``, ``y = y_m + b0 + b1 x + b2 y``.
 
         Rearranged, ``x - a0 - a1 x - a2 y = x_m``: the eq. 2 coefficients are the negatives.
@@ -129,7 +129,7 @@ class Affine(AbstractBias):
 
 
 class Biased(AbstractSensorModel):
-    """A sensor model with an image-space bias correction: ``project = bias.from_model(model(.))``."""
+    """A sensor model with an image-space bias: ``project = bias.from_model(model.project(.))``."""
 
     model: AbstractSensorModel
     bias: AbstractBias

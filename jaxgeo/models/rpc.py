@@ -195,7 +195,9 @@ class RPC(AbstractSensorModel):
         """Ground ``(lon_deg, lat_deg, h_m)`` -> image ``(x, y)`` px (RPC00B rational functions)."""
         ground = jnp.asarray(ground, dtype=float)
         if ground.shape[-1:] != (3,):
-            raise ValueError(f"ground coordinates must have a last axis of size 3, got {ground.shape}")
+            raise ValueError(
+                f"ground coordinates must have a last axis of size 3, got {ground.shape}"
+            )
         terms = _monomial_list(self.normalize_ground(ground))
         x = _polynomial(self.num[0], terms) / _polynomial(self.den[0], terms)
         y = _polynomial(self.num[1], terms) / _polynomial(self.den[1], terms)
@@ -230,7 +232,7 @@ class RPC(AbstractSensorModel):
 
 
 def check_rpc(rpc: RPC, source: str = "RPC") -> RPC:
-    """Raise a ``ValueError`` naming ``source`` if ``rpc`` holds a non-finite value or a zero scale."""
+    """Raise a ``ValueError`` naming ``source`` on a non-finite value or a zero scale."""
     for name in ("num", "den", "ground_offset", "ground_scale", "image_offset", "image_scale"):
         value = np.asarray(getattr(rpc, name))
         if not np.all(np.isfinite(value)):
@@ -241,4 +243,3 @@ def check_rpc(rpc: RPC, source: str = "RPC") -> RPC:
     if np.all(np.asarray(rpc.den) == 0.0):
         raise ValueError(f"{source}: RPC denominators are all zero")
     return rpc
-

@@ -91,4 +91,3 @@ def test_gradients(pleiades, kind):
         lambda x: model.localize(x, g[:, 2]), (img,), order=1, modes=("fwd", "rev"),
         eps=1e-3, atol=1e-9, rtol=1e-4,
     )  # fmt: skip
-

@@ -20,11 +20,14 @@ def test_ties_are_the_same_strip_pixel_in_both_scenes(seed):
         rows = np.flatnonzero(ties.point == t)
         (i, j) = ties.scene[rows]
         assert j == i + 1 == ties.pair[t] + 1
-        strip_line = [ties.xy[r, 1] + scenes[s].line_offset for r, s in zip(rows, ties.scene[rows])]
+        strip_line = [
+            ties.xy[r, 1] + scenes[s].line_offset
+            for r, s in zip(rows, ties.scene[rows], strict=True)
+        ]
         assert strip_line[0] == strip_line[1]
         assert ties.xy[rows[0], 0] == ties.xy[rows[1], 0]
         # inside both scenes, in the overlap
-        for r, s in zip(rows, ties.scene[rows]):
+        for r, s in zip(rows, ties.scene[rows], strict=True):
             assert 0 <= ties.xy[r, 1] <= scenes[s].n_rows - 1
             assert 0 <= ties.xy[r, 0] <= scenes[s].n_cols - 1
         first, last = overlap_lines(scenes[i], scenes[j])
