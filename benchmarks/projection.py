@@ -22,6 +22,7 @@ import rasterio
 from rasterio.transform import RPCTransformer
 
 import jaxgeo
+from jaxgeo.io import from_rasterio_rpc
 from jaxgeo.models.rpc import RPC
 
 HERE = pathlib.Path(__file__).resolve().parent
@@ -70,14 +71,7 @@ def main() -> None:
 
     with rasterio.open(args.tif) as src:
         rpcs = src.rpcs
-    rpc = RPC.from_vendor(
-        line_num=rpcs.line_num_coeff, line_den=rpcs.line_den_coeff,
-        samp_num=rpcs.samp_num_coeff, samp_den=rpcs.samp_den_coeff,
-        lon_off=rpcs.long_off, lon_scale=rpcs.long_scale, lat_off=rpcs.lat_off,
-        lat_scale=rpcs.lat_scale, height_off=rpcs.height_off, height_scale=rpcs.height_scale,
-        line_off=rpcs.line_off, line_scale=rpcs.line_scale, samp_off=rpcs.samp_off,
-        samp_scale=rpcs.samp_scale,
-    )  # fmt: skip
+    rpc = from_rasterio_rpc(rpcs, str(args.tif))
     vendor = {k: np.asarray(v) for k, v in rpc.to_vendor().items()}
     project = eqx.filter_jit(RPC.project)
 
