@@ -19,7 +19,6 @@ import optimistix as optx
 from jaxtyping import Array, Float, Int
 
 from .. import geodesy
-from ..models import AbstractSensorModel, Biased
 from .problem import Problem
 from .schur import (
     StructuredGaussNewton,
@@ -33,15 +32,7 @@ METHODS = ("lm", "gn", "dense")
 
 
 def block_priors(block) -> Float[Array, " q"]:
-    """A block's own weighted prior residuals (soft constraints), ``(0,)`` if none.
-
-    A :class:`~jaxgeo.models.Biased` model that does not override ``prior_residuals`` passes on
-    those of the model it wraps.
-    """
-    if isinstance(block, Biased) and (
-        type(block).prior_residuals is AbstractSensorModel.prior_residuals
-    ):
-        return block_priors(block.model)
+    """A block's own weighted prior residuals (soft constraints), ``(0,)`` if none."""
     if hasattr(block, "prior_residuals"):
         return jnp.asarray(block.prior_residuals(), dtype=float).reshape(-1)
     return jnp.zeros((0,))

@@ -148,6 +148,10 @@ class Biased(AbstractSensorModel):
     def reference_ground(self) -> Float[Array, "3"]:
         return self.model.reference_ground()
 
+    def prior_residuals(self) -> Float[Array, " n"]:
+        """The wrapped model's soft constraints (the bias itself has none)."""
+        return self.model.prior_residuals()
+
 
 BIAS_KINDS = {"shift": Shift, "shift-drift": ShiftDrift, "affine": Affine}
 """CLI / config names of the bias corrections."""

@@ -91,3 +91,25 @@ def test_gradients(pleiades, kind):
         lambda x: model.localize(x, g[:, 2]), (img,), order=1, modes=("fwd", "rev"),
         eps=1e-3, atol=1e-9, rtol=1e-4,
     )  # fmt: skip
+
+
+def test_biased_model_keeps_the_soft_constraints_of_the_model_it_wraps(pleiades):
+    import jaxgeo.models.base as base
+
+    rpc, _ = pleiades
+
+    class Constrained(base.AbstractSensorModel):
+        inner: object
+
+        def project(self, ground):
+            return self.inner.project(ground)
+
+        def reference_ground(self):
+            return self.inner.reference_ground()
+
+        def prior_residuals(self):
+            return jnp.array([1.5, -2.0])
+
+    wrapped = Biased(Constrained(rpc), Affine())
+    np.testing.assert_array_equal(np.asarray(wrapped.prior_residuals()), [1.5, -2.0])
+    assert Biased(rpc, Shift()).prior_residuals().shape == (0,)
