@@ -154,22 +154,7 @@ class StripScene:
             "vendor_strip_model": self.vendor_strip.to_dict(),
             "vendor_scene_view_errors_rad": self.vendor_scene_errors_rad.tolist(),
             "rpc_fit": {n: sc.rounded(r.to_dict(), 9) for n, r in self.fit_reports.items()},
-            "terrain": self.terrain.to_dict(),
-            "points": {
-                "ids": list(self.ground.ids),
-                "role": list(self.ground.role),
-                "lonlath_true": self.ground_true.tolist(),
-            },
-            "image_true": [
-                [p, i, float(x), float(y)]
-                for p, i, (x, y) in zip(
-                    self.image_true.point_ids,
-                    self.image_true.images,
-                    self.image_true.xy,
-                    strict=False,
-                )
-            ],
-            "vendor_accuracy": self.accuracy(),
+            **sc.truth_tail(self),
         }
 
     def save(self, directory: os.PathLike, overwrite: bool = False) -> list[pathlib.Path]:

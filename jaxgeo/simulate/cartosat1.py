@@ -138,22 +138,7 @@ class StereoScene:
                 }
                 for n in self.names
             },
-            "terrain": self.terrain.to_dict(),
-            "points": {
-                "ids": list(self.ground.ids),
-                "role": list(self.ground.role),
-                "lonlath_true": self.ground_true.tolist(),
-            },
-            "image_true": [
-                [p, i, float(x), float(y)]
-                for p, i, (x, y) in zip(
-                    self.image_true.point_ids,
-                    self.image_true.images,
-                    self.image_true.xy,
-                    strict=False,
-                )
-            ],
-            "vendor_accuracy": self.accuracy(),
+            **sc.truth_tail(self),
         }
 
 

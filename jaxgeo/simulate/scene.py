@@ -255,3 +255,26 @@ def rounded(x, decimals: int = 6):
     if isinstance(x, np.integer):
         return int(x)
     return x
+
+
+def truth_tail(scene) -> dict:
+    """The part of ``truth.json`` every simulated scene shares: terrain, true ground points, true
+    image measurements and the vendor models' accuracy (keys in this order)."""
+    return {
+        "terrain": scene.terrain.to_dict(),
+        "points": {
+            "ids": list(scene.ground.ids),
+            "role": list(scene.ground.role),
+            "lonlath_true": scene.ground_true.tolist(),
+        },
+        "image_true": [
+            [p, i, float(x), float(y)]
+            for p, i, (x, y) in zip(
+                scene.image_true.point_ids,
+                scene.image_true.images,
+                scene.image_true.xy,
+                strict=True,
+            )
+        ],
+        "vendor_accuracy": scene.accuracy(),
+    }
