@@ -192,8 +192,22 @@ def adjust(
         loss_scale=loss_scale,
         check_control=check,
     )
+    sol = _solve_jit(setup.problem, method=method, max_steps=max_steps, tol=tol)
+    return finish(setup, sol, observations, ground, blunder_k)
+
+
+def finish(
+    setup: Setup,
+    sol: core.Solution,
+    observations: Observations,
+    ground: GroundPoints | None,
+    blunder_k: float = BLUNDER_K,
+) -> AdjustResult:
+    """The :class:`AdjustResult` of a solved :class:`Setup` (``build`` + ``core.solve`` done
+    elsewhere, e.g. inside a larger jitted function): raises
+    :class:`~.errors.SingularNormalEquations` naming the undetermined unknowns, warns
+    :class:`~.errors.NotConvergedWarning` if the solve did not converge."""
     problem = setup.problem
-    sol = _solve_jit(problem, method=method, max_steps=max_steps, tol=tol)
     converged, message = _message(sol.status)
     theta = tuple(np.asarray(t) for t in sol.theta)
     s0 = float(sol.s0)
@@ -208,7 +222,7 @@ def adjust(
             f"bundle adjustment did not converge ({message}) after {int(sol.num_steps)} steps; "
             f"returning the last state (cost {float(sol.cost):.6g}, s0 {s0:.4g})",
             NotConvergedWarning,
-            stacklevel=2,
+            stacklevel=3,
         )
     return _result(setup, sol, theta, s0, converged, message, blunder_k, observations, ground)
 

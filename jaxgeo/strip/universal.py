@@ -78,15 +78,23 @@ def fit_universal_correction(
         raise ValueError(f"degree must be one of {list(N_TERMS)}, got {degree!r}")
     level1 = np.asarray(level1, dtype=float).reshape(-1, 3)
     truth = np.asarray(truth, dtype=float).reshape(-1, 3)
-    k = N_TERMS[degree]
-    n = len(level1)
+    if not (np.all(np.isfinite(level1)) and np.all(np.isfinite(truth))):
+        raise ValueError("universal correction: non-finite GCP coordinates")
+    check_design(level1, degree)
+    corr = fit_correction(jnp.asarray(level1), jnp.asarray(truth), degree)
+    resid = (truth - np.asarray(corr.apply(level1)))[:, :2]
+    return corr, resid
+
+
+def check_design(level1: np.ndarray, degree: str) -> None:
+    """Raise a ``ValueError`` if GCPs at ``level1`` (n, 3) cannot determine the correction."""
+    level1 = np.asarray(level1, dtype=float).reshape(-1, 3)
+    k, n = N_TERMS[degree], len(level1)
     if n < k:
         raise ValueError(
             f"the {degree} universal correction needs at least {k} GCPs, got {n} "
             f"(use degree='affine' (3) or 'shift' (1))"
         )
-    if not (np.all(np.isfinite(level1)) and np.all(np.isfinite(truth))):
-        raise ValueError("universal correction: non-finite GCP coordinates")
     latlon = level1[:, [1, 0]]
     offset = latlon.mean(axis=0)
     scale = np.maximum(np.abs(latlon - offset).max(axis=0), 1e-9)
@@ -97,13 +105,29 @@ def fit_universal_correction(
             f"the {degree} universal correction is not determined by these {n} GCPs "
             f"(design rank {rank} < {k}: GCPs too few or aligned along the strip)"
         )
-    d = (truth - level1)[:, [1, 0]]  # (dlat, dlon)
-    sol, *_ = np.linalg.lstsq(t, d, rcond=None)
-    coeffs = np.zeros((2, 6))
-    coeffs[:, :k] = sol.T
-    corr = UniversalCorrection(jnp.asarray(coeffs), jnp.asarray(offset), jnp.asarray(scale))
-    resid = (truth - np.asarray(corr.apply(level1)))[:, :2]
-    return corr, resid
+
+
+def fit_correction(
+    level1: Float[Array, "n 3"],
+    truth: Float[Array, "n 3"],
+    degree: str = "quadratic",
+    weight: Float[Array, " n"] | None = None,
+) -> UniversalCorrection:
+    """The least-squares fit of eq. 12-13 as a pure jax function (jit, vmap), no checks.
+
+    ``weight`` (n,) 0/1 masks GCPs out (e.g. padding in a batch); see
+    :func:`fit_universal_correction` for the checked numpy entry point.
+    """
+    k = N_TERMS[degree]
+    w = jnp.ones(level1.shape[0]) if weight is None else weight
+    latlon = level1[:, jnp.array([1, 0])]
+    offset = jnp.sum(w[:, None] * latlon, axis=0) / jnp.sum(w)
+    scale = jnp.maximum(jnp.max(w[:, None] * jnp.abs(latlon - offset), axis=0), 1e-9)
+    t = _terms(*((latlon - offset) / scale).T)[:, :k] * w[:, None]
+    d = (truth - level1)[:, jnp.array([1, 0])] * w[:, None]  # (dlat, dlon)
+    sol = jnp.linalg.lstsq(t, d)[0]
+    coeffs = jnp.zeros((2, 6)).at[:, :k].set(sol.T)
+    return UniversalCorrection(coeffs, offset, scale)
 
 
 class UniversallyCorrected(AbstractSensorModel):

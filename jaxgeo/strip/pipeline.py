@@ -1,0 +1,164 @@
+"""The two-level strip adjustment as one pure function of arrays (jit, vmap).
+
+Level 1 is :func:`jaxgeo.adjust.core.solve` on the strip's problem (affine bias per sub-scene,
+formed ties with height priors, GCPs where they exist). Level 2 localises every GCP measurement
+with its level-1 model at the GCP's surveyed height, fits the universal correction of 003_
+eq. 12-13 to the differences, and applies it; check points are localised the same way (mono-
+plotting at their surveyed height, as an ortho does) before and after the correction.
+Everything happens inside :func:`two_level`, so a batch of strips (or Monte-Carlo draws of one
+strip's measurements) is one ``vmap`` of one compiled function.
+"""
+
+from __future__ import annotations
+
+import equinox as eqx
+import jax
+import jax.numpy as jnp
+from jaxtyping import Array, Float, Int
+
+from ..adjust import core
+from ..adjust.problem import Problem, metres_per_unit
+from .universal import UniversalCorrection, fit_correction
+
+
+class Level2Data(eqx.Module):
+    """What level 2 needs besides the level-1 solution (indices into the strip's sub-scenes).
+
+    GCPs: ``gcp_scene`` (g,), ``gcp_xy`` (g, 2) px, ``gcp_lonlath`` (g, 3) surveyed (every
+    GCP measurement; a GCP seen in two sub-scenes gives two rows). Check points: ``check_scene`` (c,), ``check_xy`` (c, 2) px,
+    ``check_lonlath`` (c, 3) surveyed. Tie points, for the continuity figures: ``tie_scene``
+    (t, 2) the two sub-scenes, ``tie_xy`` (t, 2, 2) px in each, ``tie_h`` (t,) m.
+    """
+
+    gcp_scene: Int[Array, " g"]
+    gcp_xy: Float[Array, "g 2"]
+    gcp_lonlath: Float[Array, "g 3"]
+    check_scene: Int[Array, " c"]
+    check_xy: Float[Array, "c 2"]
+    check_lonlath: Float[Array, "c 3"]
+    tie_scene: Int[Array, "t 2"]
+    tie_xy: Float[Array, "t 2 2"]
+    tie_h: Float[Array, " t"]
+
+
+class TwoLevelSolution(eqx.Module):
+    """Output of :func:`two_level`: the level-1 solution, the universal correction, and the
+    GCPs' level-1 positions with their ``(east, north)`` errors (m, estimate - surveyed)."""
+
+    level1: core.Solution
+    correction: UniversalCorrection
+    gcp_level1: Float[Array, "g 3"]
+    gcp_error_level1_m: Float[Array, "g 2"]
+    gcp_error_level2_m: Float[Array, "g 2"]
+
+
+class Evaluation(eqx.Module):
+    """Output of :func:`evaluate`; errors are ``(east, north)`` metres, estimate - surveyed.
+
+    ``check_error_*_m`` (c, 2) per check measurement; ``tie_gap_*_m`` (t, 2): ground position of
+    a tie localised in its second sub-scene minus in its first, at the tie's height, with the
+    vendor (``before``), level-1 and level-2 models.
+    """
+
+    check_error_before_m: Float[Array, "c 2"]
+    check_error_level1_m: Float[Array, "c 2"]
+    check_error_level2_m: Float[Array, "c 2"]
+    tie_gap_before_m: Float[Array, "t 2"]
+    tie_gap_level1_m: Float[Array, "t 2"]
+    tie_gap_level2_m: Float[Array, "t 2"]
+
+
+def _take(tree, index):
+    return jax.tree.map(lambda x: x[index] if eqx.is_array(x) else x, tree)
+
+
+def localize_in(blocks, scene, xy, h) -> Float[Array, "n 3"]:
+    """Localise ``xy`` (n, 2) at ``h`` (n,) with the stacked sub-scene models ``blocks[scene]``."""
+    if scene.shape[0] == 0:
+        return jnp.zeros((0, 3))
+    return jax.vmap(lambda m, p, z: m.localize(p, z))(_take(blocks, scene), xy, h)
+
+
+def en_error_m(estimate: Float[Array, "n 3"], reference: Float[Array, "n 3"]):
+    """``(east, north)`` metres of ``estimate - reference`` (local linearisation; cm-exact)."""
+    return ((estimate - reference) * metres_per_unit(reference))[:, :2]
+
+
+def _tie_gap(blocks, data: Level2Data, correction=None):
+    g = [localize_in(blocks, data.tie_scene[:, i], data.tie_xy[:, i], data.tie_h) for i in (0, 1)]
+    if correction is not None:
+        g = [correction.apply(x) for x in g]
+    return en_error_m(g[1], g[0])
+
+
+def two_level(
+    problem: Problem,
+    data: Level2Data,
+    degree: str = "quadratic",
+    method: str = "lm",
+    max_steps: int = 50,
+    tol: float = 1e-6,
+) -> TwoLevelSolution:
+    """Level 1 (bundle adjustment of ``problem``, one model group of single-image blocks, one
+    block per sub-scene in strip order) then level 2 (universal correction from the GCPs)."""
+    (group,) = problem.groups
+    sol = core.solve(problem, method=method, max_steps=max_steps, tol=tol)
+    adjusted = group.blocks(sol.theta[0])
+    gcp1 = localize_in(adjusted, data.gcp_scene, data.gcp_xy, data.gcp_lonlath[:, 2])
+    corr = fit_correction(gcp1, data.gcp_lonlath, degree)
+    return TwoLevelSolution(
+        level1=sol,
+        correction=corr,
+        gcp_level1=gcp1,
+        gcp_error_level1_m=en_error_m(gcp1, data.gcp_lonlath),
+        gcp_error_level2_m=en_error_m(corr.apply(gcp1), data.gcp_lonlath),
+    )
+
+
+def evaluate(problem: Problem, data: Level2Data, sol: TwoLevelSolution) -> Evaluation:
+    """Check-point errors and tie gaps of the vendor, level-1 and level-2 models."""
+    (group,) = problem.groups
+    vendor = group.blocks(group.theta0)
+    adjusted = group.blocks(sol.level1.theta[0])
+    corr = sol.correction
+    h = data.check_lonlath[:, 2]
+    chk0 = localize_in(vendor, data.check_scene, data.check_xy, h)
+    chk1 = localize_in(adjusted, data.check_scene, data.check_xy, h)
+    return Evaluation(
+        check_error_before_m=en_error_m(chk0, data.check_lonlath),
+        check_error_level1_m=en_error_m(chk1, data.check_lonlath),
+        check_error_level2_m=en_error_m(corr.apply(chk1), data.check_lonlath),
+        tie_gap_before_m=_tie_gap(vendor, data),
+        tie_gap_level1_m=_tie_gap(adjusted, data),
+        tie_gap_level2_m=_tie_gap(adjusted, data, corr),
+    )
+
+
+two_level_jit = eqx.filter_jit(two_level)
+evaluate_jit = eqx.filter_jit(evaluate)
+
+
+@eqx.filter_jit
+def two_level_batch(
+    problem: Problem,
+    data: Level2Data,
+    xy: Float[Array, "b m 2"],
+    gcp_xy: Float[Array, "b g 2"],
+    check_xy: Float[Array, "b c 2"],
+    degree: str = "quadratic",
+    method: str = "lm",
+    max_steps: int = 50,
+    tol: float = 1e-6,
+) -> tuple[TwoLevelSolution, Evaluation]:
+    """:func:`two_level` and :func:`evaluate` for a batch of measurement sets of one strip structure: ``xy`` the
+    problem's concatenated image observations, ``gcp_xy``/``check_xy`` those of level 2, per
+    batch item.
+    One compiled, vmapped call (Monte-Carlo runs, or many strips of one layout)."""
+
+    def one(xy_b, gcp_b, check_b):
+        d = eqx.tree_at(lambda t: (t.gcp_xy, t.check_xy), data, (gcp_b, check_b))
+        p = problem.with_xy(xy_b)
+        sol = two_level(p, d, degree, method, max_steps, tol)
+        return sol, evaluate(p, d, sol)
+
+    return jax.vmap(one)(xy, gcp_xy, check_xy)
