@@ -145,7 +145,9 @@ def read_strip(
         try:
             rpcs[name] = read_rpc(rpc_path)
         except FileNotFoundError as err:
-            raise StripFormatError(f"{path}: RPC file of scene {name!r} not found: {rpc_path}") from err
+            raise StripFormatError(
+                f"{path}: RPC file of scene {name!r} not found: {rpc_path}"
+            ) from err
     order = np.argsort([s.line_offset for s in scenes], kind="stable")
     if not np.array_equal(order, np.arange(len(scenes))):
         raise StripFormatError(f"{path}: sub-scenes must be listed in strip order (first_line)")

@@ -25,9 +25,10 @@ class Level2Data(eqx.Module):
     """What level 2 needs besides the level-1 solution (indices into the strip's sub-scenes).
 
     GCPs: ``gcp_scene`` (g,), ``gcp_xy`` (g, 2) px, ``gcp_lonlath`` (g, 3) surveyed (every
-    GCP measurement; a GCP seen in two sub-scenes gives two rows). Check points: ``check_scene`` (c,), ``check_xy`` (c, 2) px,
-    ``check_lonlath`` (c, 3) surveyed. Tie points, for the continuity figures: ``tie_scene``
-    (t, 2) the two sub-scenes, ``tie_xy`` (t, 2, 2) px in each, ``tie_h`` (t,) m.
+    GCP measurement; a GCP seen in two sub-scenes gives two rows). Check points:
+    ``check_scene`` (c,), ``check_xy`` (c, 2) px, ``check_lonlath`` (c, 3) surveyed.
+    Tie points, for the continuity figures: ``tie_scene`` (t, 2) the two sub-scenes,
+    ``tie_xy`` (t, 2, 2) px in each, ``tie_h`` (t,) m.
     """
 
     gcp_scene: Int[Array, " g"]
@@ -150,10 +151,10 @@ def two_level_batch(
     max_steps: int = 50,
     tol: float = 1e-6,
 ) -> tuple[TwoLevelSolution, Evaluation]:
-    """:func:`two_level` and :func:`evaluate` for a batch of measurement sets of one strip structure: ``xy`` the
-    problem's concatenated image observations, ``gcp_xy``/``check_xy`` those of level 2, per
-    batch item.
-    One compiled, vmapped call (Monte-Carlo runs, or many strips of one layout)."""
+    """:func:`two_level` and :func:`evaluate` for a batch of measurement sets of one strip
+    structure: ``xy`` the problem's concatenated image observations, ``gcp_xy``/``check_xy``
+    those of level 2, per batch item. One compiled, vmapped call (Monte-Carlo runs, or many
+    strips of one layout)."""
 
     def one(xy_b, gcp_b, check_b):
         d = eqx.tree_at(lambda t: (t.gcp_xy, t.check_xy), data, (gcp_b, check_b))

@@ -54,7 +54,8 @@ class StripReport:
         ]
         for r in self.scenes:
             cells = "".join(f"  {r[s]['e']:6.2f}/{r[s]['n']:<6.2f}" for s in STAGES)
-            lines.append(f"{r['name']:<16} {'yes' if r['gcp'] else ' - '}  {r['n_check']:6d} {cells}")
+            gcp = "yes" if r["gcp"] else " - "
+            lines.append(f"{r['name']:<16} {gcp}  {r['n_check']:6d} {cells}")
         lines.append("")
         lines.append("pair                            ties   tie gap RMS/max (m): direct    level 1"
                      "      level 2")  # fmt: skip
@@ -164,4 +165,3 @@ def strip_report(strip, sol, ev, rows: dict, inp, unknowns: int, degree: str) ->
         info,
         rows,
     )
-
