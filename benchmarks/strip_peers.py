@@ -17,13 +17,18 @@ gcp_point           (C,)       point index of each ground observation (GCP or he
 gcp_lonlath         (C,3)      observed (lon_deg, lat_deg, h_m)
 gcp_sigma_m         (C,3)      sigma east / north / up in metres; ``inf`` drops that axis
 origin              (3,)       (lon_deg, lat_deg, h_m) where ENU metres are linearised
+gcp_scale           (C,3)      optional: metres per unit of (lon_deg, lat_deg, h_m) for each ground
+                               observation (e.g. ``enu_scale`` of its ``gcp_lonlath``), used in
+                               place of ``enu_scale(origin)`` when given
 ==================  =========  =====================================================================
 
 Model: the biased projection of point ``g`` in scene ``s`` is
 ``(I + M)^-1 (rpc_s(g) - a0)`` with ``a0 = (B0, A0)`` and ``M = [[B2, B1], [A2, A1]]``, i.e.
 ``jaxgeo.Biased(rpc, Affine(shift_px=(B0, A0), matrix=M)).project``. Residuals, all whitened:
 ``(project - obs_xy) / obs_sigma`` (2 per image observation, listed first), then
-``enu_scale(origin) * (point - gcp_lonlath) / gcp_sigma_m`` for every finite sigma. The cost is
+``enu_scale(origin) * (point - gcp_lonlath) / gcp_sigma_m`` for every finite sigma (``gcp_scale``
+in place of ``enu_scale(origin)`` when given: ENU linearised at each observed point, which over a
+long strip is what jaxgeo's exact ENU about the observed point amounts to). The cost is
 ``0.5 * sum(residuals**2)``; the unknowns are ``bias`` (S,6) and ``points`` (N,3), stacked as
 ``x = [bias.ravel(), points.ravel()]``.
 
@@ -105,6 +110,17 @@ def validate(problem: dict) -> dict:
         bad = np.flatnonzero(~(out[key] > 0).reshape(len(out[key]), -1).all(axis=1))
         if bad.size:
             raise ValueError(f"strip problem: {key}[{bad[0]}] is not > 0")
+    if "gcp_scale" in problem:
+        scale = np.asarray(problem["gcp_scale"], dtype=np.float64)
+        if scale.shape != out["gcp_lonlath"].shape:
+            raise ValueError(
+                f"strip problem: 'gcp_scale' must have shape {out['gcp_lonlath'].shape} (as "
+                f"'gcp_lonlath'), got {scale.shape}"
+            )
+        bad = np.flatnonzero(~((scale > 0) | ~np.isfinite(out["gcp_sigma_m"])).all(axis=1))
+        if bad.size:
+            raise ValueError(f"strip problem: gcp_scale[{bad[0]}] is not > 0 on a used axis")
+        out["gcp_scale"] = scale
     bad = np.flatnonzero(~np.isfinite(out["obs_sigma"]))
     if bad.size:
         raise ValueError(f"strip problem: obs_sigma[{bad[0]}] is not finite")
@@ -137,6 +153,14 @@ def enu_scale(origin) -> np.ndarray:
     meridian = WGS84_A_M * (1.0 - WGS84_E2) / w2**1.5
     deg = math.pi / 180.0
     return np.array([(prime_vertical + h) * math.cos(lat) * deg, (meridian + h) * deg, 1.0])
+
+
+def ground_scale_m(problem: dict) -> np.ndarray:
+    """(C,3) metres per unit of (lon_deg, lat_deg, h_m) of every ground observation: the
+    problem's ``gcp_scale`` if given, else ``enu_scale(origin)`` for all."""
+    if "gcp_scale" in problem:
+        return np.asarray(problem["gcp_scale"], dtype=float)
+    return np.tile(enu_scale(problem["origin"]), (len(problem["gcp_point"]), 1))
 
 
 def _monomials(n: np.ndarray, jacobian: bool):
@@ -237,7 +261,7 @@ class Layout:
     def of(cls, problem: dict) -> Layout:
         finite = np.isfinite(problem["gcp_sigma_m"])
         rows, axes = np.nonzero(finite)
-        weight = enu_scale(problem["origin"])[axes] / problem["gcp_sigma_m"][rows, axes]
+        weight = ground_scale_m(problem)[rows, axes] / problem["gcp_sigma_m"][rows, axes]
         return cls(
             n_scenes=len(problem["num"]),
             n_points=len(problem["points0"]),
@@ -357,7 +381,8 @@ def solve_scipy(
     """``scipy.optimize.least_squares`` (trf, LSMR, ``x_scale="jac"``) on the strip problem.
 
     ``jac="2-point"`` (default) is scipy's usual sparse usage: finite differences grouped by the
-    exact ``jac_sparsity``; ``jac="analytic"`` passes the analytic sparse Jacobian instead.
+    exact ``jac_sparsity`` (``"3-point"``: central differences, twice the evaluations);
+    ``jac="analytic"`` passes the analytic sparse Jacobian instead.
     ``lsmr_tol`` sets LSMR's ``atol = btol`` (scipy's default, 1e-6, when None): the default
     inner solves are too loose to converge to 1e-8 in cost on this ill-conditioned problem
     (the affine biases of scenes without GCPs are weakly determined); 1e-12 converges in a few
@@ -371,13 +396,15 @@ def solve_scipy(
     layout = Layout.of(problem)
     ev = _Evaluator(problem, layout)
     x0 = np.concatenate([problem["bias0"].ravel(), problem["points0"].ravel()])
-    if jac == "2-point":
-        kwargs = dict(jac="2-point", jac_sparsity=scipy.sparse.csr_matrix(
+    if jac in ("2-point", "3-point"):
+        kwargs = dict(jac=jac, jac_sparsity=scipy.sparse.csr_matrix(
             (np.ones(len(ev.indices)), ev.indices, ev.indptr), shape=ev.shape))  # fmt: skip
     elif jac == "analytic":
         kwargs = dict(jac=ev.jac)
     else:
-        raise ValueError(f"solve_scipy: jac must be '2-point' or 'analytic', got {jac!r}")
+        raise ValueError(
+            f"solve_scipy: jac must be '2-point', '3-point' or 'analytic', got {jac!r}"
+        )
     res = scipy.optimize.least_squares(
         ev.fun, x0, method="trf", x_scale="jac", tr_solver="lsmr", ftol=ftol, xtol=xtol,
         gtol=gtol, max_nfev=max_nfev, verbose=verbose,

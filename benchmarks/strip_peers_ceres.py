@@ -10,7 +10,7 @@ import time
 
 import numpy as np
 import pyceres
-from strip_peers import enu_scale, validate
+from strip_peers import ground_scale_m, validate
 
 
 class ImageCost(pyceres.CostFunction):
@@ -135,11 +135,11 @@ def solve_ceres(
     for m, (s, i) in enumerate(pairs):
         costs.append(ImageCost(problem, s, m))
         ceres_problem.add_residual_block(costs[-1], None, [bias[s], points[i]])
-    scale = enu_scale(problem["origin"])
+    scale = ground_scale_m(problem)  # enu_scale(origin), or the problem's gcp_scale
     for c, i in enumerate(problem["gcp_point"].tolist()):
         axes = np.flatnonzero(np.isfinite(problem["gcp_sigma_m"][c]))
         if axes.size:
-            weight = scale[axes] / problem["gcp_sigma_m"][c, axes]
+            weight = scale[c, axes] / problem["gcp_sigma_m"][c, axes]
             costs.append(GroundCost(problem["gcp_lonlath"][c], weight, axes))
             ceres_problem.add_residual_block(costs[-1], None, [points[i]])
     options = pyceres.SolverOptions()

@@ -211,7 +211,7 @@ def finish(
     converged, message = _message(sol.status)
     theta = tuple(np.asarray(t) for t in sol.theta)
     s0 = float(sol.s0)
-    bad_params, bad_points = _undetermined(sol)
+    bad_params, bad_points = _undetermined(sol, problem)
     if bad_params or bad_points:
         if not np.all(np.isfinite(np.asarray(sol.inflation_params))):  # Cholesky failed: find
             bad_params, more = undetermined(problem, *_final_y(problem, sol))  # the null space
@@ -232,10 +232,24 @@ INFLATION_MAX = 1e6
 1000x by correlations) is numerically undetermined; minimal legitimate set-ups stay below ~1e3."""
 
 
-def _undetermined(sol) -> tuple[list[int], list[int]]:
+def _undetermined(sol, problem) -> tuple[list[int], list[int]]:
     ip = np.asarray(sol.inflation_params)
     iq = np.asarray(sol.inflation_points)
-    bad_p = np.flatnonzero(~(np.abs(ip) < INFLATION_MAX))
+    # a parameter with a prior is determined by it, however weakly the observations see it
+    # (e.g. the common bias of a strip tied only to itself): only a variance above the prior's
+    # (impossible in exact arithmetic) is then a numerical failure
+    wt = np.concatenate(
+        [
+            np.asarray(w).reshape(-1) if np.shape(w)[1] else np.zeros(g.n_blocks * g.n_params)
+            for w, g in zip(problem.prior_weight, problem.groups, strict=True)
+        ]
+        + [np.zeros(0)]
+    )
+    q = np.diag(np.asarray(sol.q_params))
+    has_prior = wt > 0
+    with np.errstate(divide="ignore", invalid="ignore"):
+        prior_ok = has_prior & (q * np.where(has_prior, wt, 0.0) ** 2 < 1.5)
+    bad_p = np.flatnonzero(~(np.abs(ip) < INFLATION_MAX) & ~prior_ok)
     bad_q = np.flatnonzero(np.any(~(np.abs(iq) < INFLATION_MAX), axis=1))
     return [int(i) for i in bad_p], [int(j) for j in bad_q]
 

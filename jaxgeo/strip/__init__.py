@@ -15,6 +15,8 @@ from .pipeline import TwoLevelSolution as TwoLevelSolution
 from .pipeline import two_level as two_level
 from .report import StripReport as StripReport
 from .solve import StripResult as StripResult
+from .solve import UniversalCorrectionWarning as UniversalCorrectionWarning
+from .solve import adjust_individually as adjust_individually
 from .solve import adjust_strip as adjust_strip
 from .solve import monte_carlo as monte_carlo
 from .solve import time_two_level as time_two_level

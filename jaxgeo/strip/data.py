@@ -20,7 +20,7 @@ import pathlib
 
 import numpy as np
 
-from ..io import read_rpc
+from ..io import RPCFormatError, read_rpc
 from ..io.tables import GroundPoints, Observations, read_ground, read_observations
 from ..models.rpc import RPC
 from .ties import SubScene
@@ -148,6 +148,8 @@ def read_strip(
             raise StripFormatError(
                 f"{path}: RPC file of scene {name!r} not found: {rpc_path}"
             ) from err
+        except RPCFormatError as err:
+            raise StripFormatError(f"{path}: RPC of scene {name!r}: {err}") from err
     order = np.argsort([s.line_offset for s in scenes], kind="stable")
     if not np.array_equal(order, np.arange(len(scenes))):
         raise StripFormatError(f"{path}: sub-scenes must be listed in strip order (first_line)")
@@ -156,4 +158,5 @@ def read_strip(
     try:
         return Strip(tuple(scenes), rpcs, g, o)
     except StripFormatError as err:
-        raise StripFormatError(f"{path}: {err}") from err
+        where = observations or path.parent / "observations.csv"
+        raise StripFormatError(f"{path} with {where}: {err}") from err

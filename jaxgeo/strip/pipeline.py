@@ -18,14 +18,15 @@ from jaxtyping import Array, Float, Int
 
 from ..adjust import core
 from ..adjust.problem import Problem, metres_per_unit
-from .universal import UniversalCorrection, fit_correction
+from .universal import N_TERMS, UniversalCorrection, cross_validate, fit_correction
 
 
 class Level2Data(eqx.Module):
     """What level 2 needs besides the level-1 solution (indices into the strip's sub-scenes).
 
     GCPs: ``gcp_scene`` (g,), ``gcp_xy`` (g, 2) px, ``gcp_lonlath`` (g, 3) surveyed (every
-    GCP measurement; a GCP seen in two sub-scenes gives two rows). Check points:
+    GCP measurement; a GCP seen in two sub-scenes gives two rows), ``gcp_group`` (G, g) 0/1
+    the measurements of each sub-scene with GCPs (for cross-validation). Check points:
     ``check_scene`` (c,), ``check_xy`` (c, 2) px, ``check_lonlath`` (c, 3) surveyed.
     Tie points, for the continuity figures: ``tie_scene`` (t, 2) the two sub-scenes,
     ``tie_xy`` (t, 2, 2) px in each, ``tie_h`` (t,) m.
@@ -34,6 +35,7 @@ class Level2Data(eqx.Module):
     gcp_scene: Int[Array, " g"]
     gcp_xy: Float[Array, "g 2"]
     gcp_lonlath: Float[Array, "g 3"]
+    gcp_group: Float[Array, "G g"]
     check_scene: Int[Array, " c"]
     check_xy: Float[Array, "c 2"]
     check_lonlath: Float[Array, "c 3"]
@@ -43,11 +45,15 @@ class Level2Data(eqx.Module):
 
 
 class TwoLevelSolution(eqx.Module):
-    """Output of :func:`two_level`: the level-1 solution, the universal correction, and the
-    GCPs' level-1 positions with their ``(east, north)`` errors (m, estimate - surveyed)."""
+    """Output of :func:`two_level`: the level-1 solution, the universal correction, the GCPs'
+    level-1 positions with their ``(east, north)`` errors (m, estimate - surveyed), and the
+    leave-one-GCP-scene-out RMS (m) of every degree of ``universal.N_TERMS`` (``cv_rms_m``)
+    with the index of the degree used (``degree_index``)."""
 
     level1: core.Solution
     correction: UniversalCorrection
+    cv_rms_m: Float[Array, " d"]
+    degree_index: Int[Array, ""]
     gcp_level1: Float[Array, "g 3"]
     gcp_error_level1_m: Float[Array, "g 2"]
     gcp_error_level2_m: Float[Array, "g 2"]
@@ -85,7 +91,8 @@ def en_error_m(estimate: Float[Array, "n 3"], reference: Float[Array, "n 3"]):
     return ((estimate - reference) * metres_per_unit(reference))[:, :2]
 
 
-def _tie_gap(blocks, data: Level2Data, correction=None):
+def tie_gap(blocks, data: Level2Data, correction=None):
+    """Tie ground gaps (t, 2) east/north m: second sub-scene minus first, at the tie height."""
     g = [localize_in(blocks, data.tie_scene[:, i], data.tie_xy[:, i], data.tie_h) for i in (0, 1)]
     if correction is not None:
         g = [correction.apply(x) for x in g]
@@ -101,15 +108,26 @@ def two_level(
     tol: float = 1e-6,
 ) -> TwoLevelSolution:
     """Level 1 (bundle adjustment of ``problem``, one model group of single-image blocks, one
-    block per sub-scene in strip order) then level 2 (universal correction from the GCPs)."""
+    block per sub-scene in strip order) then level 2 (universal correction from the GCPs;
+    ``degree`` one of ``universal.N_TERMS`` or ``"auto"``: the one with the lowest
+    leave-one-GCP-scene-out error)."""
     (group,) = problem.groups
     sol = core.solve(problem, method=method, max_steps=max_steps, tol=tol)
     adjusted = group.blocks(sol.theta[0])
     gcp1 = localize_in(adjusted, data.gcp_scene, data.gcp_xy, data.gcp_lonlath[:, 2])
-    corr = fit_correction(gcp1, data.gcp_lonlath, degree)
+    cv = cross_validate(gcp1, data.gcp_lonlath, data.gcp_group, metres_per_unit(gcp1))
+    if degree == "auto":  # the degree that best predicts GCP scenes left out
+        fits = [fit_correction(gcp1, data.gcp_lonlath, d) for d in N_TERMS]
+        index = jnp.argmin(jnp.where(jnp.isfinite(cv), cv, jnp.inf))
+        corr = jax.tree.map(lambda *c: jnp.stack(c)[index], *fits)
+    else:
+        index = jnp.asarray(list(N_TERMS).index(degree))
+        corr = fit_correction(gcp1, data.gcp_lonlath, degree)
     return TwoLevelSolution(
         level1=sol,
         correction=corr,
+        cv_rms_m=cv,
+        degree_index=index,
         gcp_level1=gcp1,
         gcp_error_level1_m=en_error_m(gcp1, data.gcp_lonlath),
         gcp_error_level2_m=en_error_m(corr.apply(gcp1), data.gcp_lonlath),
@@ -129,9 +147,9 @@ def evaluate(problem: Problem, data: Level2Data, sol: TwoLevelSolution) -> Evalu
         check_error_before_m=en_error_m(chk0, data.check_lonlath),
         check_error_level1_m=en_error_m(chk1, data.check_lonlath),
         check_error_level2_m=en_error_m(corr.apply(chk1), data.check_lonlath),
-        tie_gap_before_m=_tie_gap(vendor, data),
-        tie_gap_level1_m=_tie_gap(adjusted, data),
-        tie_gap_level2_m=_tie_gap(adjusted, data, corr),
+        tie_gap_before_m=tie_gap(vendor, data),
+        tie_gap_level1_m=tie_gap(adjusted, data),
+        tie_gap_level2_m=tie_gap(adjusted, data, corr),
     )
 
 

@@ -17,6 +17,8 @@ from collections.abc import Mapping, Sequence
 
 import numpy as np
 
+from .universal import N_TERMS
+
 STAGES = ("direct", "level1", "level2")
 
 
@@ -76,6 +78,11 @@ class StripReport:
             f"{s['steps']} steps, {'converged' if s['converged'] else 'NOT CONVERGED'}; "
             f"level 2: {s['degree']} correction from {s['n_gcp']} GCP measurements, residual "
             f"RMS E {s['gcp_rms_level2_m']['e']:.2f} N {s['gcp_rms_level2_m']['n']:.2f} m"
+        )
+        cv = s["leave_one_scene_out_rms_m"]
+        lines.append(
+            "level 2, GCP scenes left out in turn, RMS (m): "
+            + ", ".join(f"{d} {v:.2f}" for d, v in cv.items())
         )
         return "\n".join(lines)
 
@@ -157,6 +164,9 @@ def strip_report(strip, sol, ev, rows: dict, inp, unknowns: int, degree: str) ->
         "steps": int(s.num_steps),
         "converged": int(s.status) == 0,
         "gcp_rms_level2_m": {"e": _rms(g2[:, 0]), "n": _rms(g2[:, 1])},
+        "leave_one_scene_out_rms_m": dict(
+            zip(N_TERMS, map(float, np.asarray(sol.cv_rms_m)), strict=True)
+        ),
         **whole(errors, gaps),
     }
     return StripReport(

@@ -15,15 +15,18 @@ from __future__ import annotations
 
 import dataclasses
 import time
-from collections.abc import Sequence
+import warnings
+from collections.abc import Mapping, Sequence
 from typing import Any
 
+import equinox as eqx
 import jax
 import jax.numpy as jnp
 import numpy as np
 
 from ..adjust.setup import Setup, build
-from ..adjust.solve import AdjustResult, finish, with_bias
+from ..adjust.solve import AdjustResult, adjust, finish, with_bias
+from ..io.tables import GroundPoints, Observations
 from ..models.rpc import RPC
 from ..models.rpc_fit import RPCFitReport, fit_rpcs
 from .data import Strip
@@ -40,12 +43,23 @@ from .pipeline import (
     Evaluation,
     Level2Data,
     TwoLevelSolution,
+    en_error_m,
     evaluate_jit,
+    localize_in,
+    tie_gap,
     two_level_batch,
     two_level_jit,
 )
 from .report import StripReport, strip_report
 from .universal import N_TERMS, UniversalCorrection, UniversallyCorrected, check_design
+
+
+class UniversalCorrectionWarning(UserWarning):
+    """The chosen universal correction predicts GCP scenes left out worse than a simpler one."""
+
+
+N_BIAS_GCPS = {"shift": 1, "shift-drift": 2, "affine": 3}
+"""GCPs one sub-scene needs to be adjusted on its own with each bias."""
 
 
 @dataclasses.dataclass(frozen=True)
@@ -81,12 +95,15 @@ class StripResult:
         self,
         h_range: Sequence[float] | None = None,
         grid: tuple[int, int, int] = (21, 21, 7),
+        names: Sequence[str] | None = None,
     ) -> dict[str, tuple[RPC, RPCFitReport]]:
-        """RPCs refitted to every final sub-scene model (terrain-independent grid over the
-        image and ``h_range``, default the vendor RPC's height range), with fit reports."""
+        """RPCs refitted to the final sub-scene models (all, or ``names``): terrain-independent
+        grid over the image and ``h_range`` (default the vendor RPC's height range), with fit
+        reports."""
         out = {}
         scenes = {s.name: s for s in self.strip.scenes}
-        for name, model in self.models.items():
+        for name in names if names is not None else self.strip.names:
+            model = self.models[name]
             rpc = self.strip.rpcs[name]
             if h_range is None:
                 h0 = float(rpc.ground_offset[2]) - float(rpc.ground_scale[2])
@@ -116,10 +133,15 @@ def _level2_data(strip: Strip, inp: Level1Input, block_of: np.ndarray):
     def scenes(r):
         return jnp.asarray(block_of[[scene[o.images[i]] for i in r]].astype(np.int64))
 
+    gcp_scene = np.array([scene[o.images[i]] for i in rows["gcp"]], dtype=int)
+    groups = np.unique(gcp_scene)
+    group = (gcp_scene[None, :] == groups[:, None]).astype(float).reshape(len(groups), -1)
+
     return Level2Data(
         gcp_scene=scenes(rows["gcp"]),
         gcp_xy=jnp.asarray(o.xy[rows["gcp"]].reshape(-1, 2)),
         gcp_lonlath=lonlath(rows["gcp"]),
+        gcp_group=jnp.asarray(group),
         check_scene=scenes(rows["check"]),
         check_xy=jnp.asarray(o.xy[rows["check"]].reshape(-1, 2)),
         check_lonlath=lonlath(rows["check"]),
@@ -158,7 +180,11 @@ def adjust_strip(
             ``"shift"``); ``bias_prior_sigma`` optional priors on it (as in
             :func:`jaxgeo.adjust`); needed when ``level1_gcps=False``, where level 1 sees ties
             only (the paper's pure two-level flow) and the biases' common part has no datum.
-        degree: universal correction ``"quadratic"`` (eq. 12-13), ``"affine"`` or ``"shift"``.
+        degree: universal correction ``"quadratic"`` (eq. 12-13), ``"affine"``, ``"shift"``,
+            ``"none"``, or ``"auto"``: the degree that best predicts the GCPs of each GCP scene
+            left out in turn. A fixed degree whose leave-one-out error exceeds the best one's
+            by half warns (:class:`UniversalCorrectionWarning`): with few GCP scenes a
+            quadratic fits their noise and degrades the scenes between them.
         method, max_steps, tol: level-1 solver options (:func:`jaxgeo.adjust.core.solve`).
         check_distribution: warn (:class:`GCPDistributionWarning`) when the GCP scenes break the
             rule of section 9.
@@ -174,8 +200,8 @@ def adjust_strip(
             "level 1 with ties only (level1_gcps=False) needs bias priors (bias_prior_sigma): "
             "ties fix the biases' differences, not their common part"
         )
-    if degree not in N_TERMS:
-        raise ValueError(f"degree must be one of {list(N_TERMS)}, got {degree!r}")
+    if degree not in N_TERMS and degree != "auto":
+        raise ValueError(f"degree must be one of {[*N_TERMS, 'auto']}, got {degree!r}")
     inp = level1_input(
         strip,
         ties_per_pair,
@@ -196,7 +222,7 @@ def adjust_strip(
         )
     block_of = np.array([setup.image_index[n][1] for n in names])
     data, rows = _level2_data(strip, inp, block_of)
-    check_design(np.asarray(data.gcp_lonlath), degree)
+    check_design(np.asarray(data.gcp_lonlath), "shift" if degree in ("auto", "none") else degree)
     t1 = time.perf_counter()
     sol = two_level_jit(setup.problem, data, degree, method, max_steps, tol)
     sol = jax.block_until_ready(sol)
@@ -205,7 +231,18 @@ def adjust_strip(
     level1 = finish(setup, sol.level1, inp.observations, inp.ground)
     corr = jax.tree.map(np.asarray, sol.correction)
     final = {n: UniversallyCorrected(level1.models[n], corr) for n in names}
-    report = strip_report(strip, sol, ev, rows, inp, setup.problem.n_unknowns, degree)
+    used = list(N_TERMS)[int(sol.degree_index)]
+    cv = np.asarray(sol.cv_rms_m)
+    if degree != "auto" and cv[int(sol.degree_index)] > 1.5 * np.nanmin(cv):
+        best = list(N_TERMS)[int(np.nanargmin(cv))]
+        warnings.warn(
+            f"the {used} universal correction predicts the GCPs of a GCP scene left out to "
+            f"{cv[int(sol.degree_index)]:.2f} m RMS, the {best} one to {np.nanmin(cv):.2f} m: "
+            f"too few GCP scenes for {used}; consider degree='auto' or '{best}'",
+            UniversalCorrectionWarning,
+            stacklevel=2,
+        )
+    report = strip_report(strip, sol, ev, rows, inp, setup.problem.n_unknowns, used)
     options = dict(
         ties_per_pair=ties_per_pair, tie_margin_px=tie_margin_px, tie_sigma_px=tie_sigma_px,
         tie_height_sigma_m=tie_height_sigma_m, bias=bias, level1_gcps=level1_gcps,
@@ -240,15 +277,15 @@ def time_two_level(result: StripResult, repeat: int = 3) -> float:
     return best
 
 
-def monte_carlo(
+def monte_carlo_inputs(
     result: StripResult, n_runs: int, noise_px: float | None = None, seed: int = 0
-) -> tuple[TwoLevelSolution, Evaluation]:
-    """``n_runs`` Monte-Carlo repetitions of ``result``'s two-level adjustment in one vmapped,
-    jitted call: fresh image noise (``noise_px``, default each measurement's a priori sigma) on
-    the GCP and check measurements (formed ties stay exact). Returns the batched solution and
-    evaluation (leading axis ``n_runs``)."""
+) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Noisy measurement sets for :func:`~.pipeline.two_level_batch`: ``(xy (b, m, 2),
+    gcp_xy (b, g, 2), check_xy (b, c, 2))``. Fresh Gaussian noise (``noise_px``, default each
+    measurement's a priori sigma) on the GCP and check measurements, the same draw wherever a
+    measurement enters (level 1 and level 2); formed ties stay exact."""
     rng = np.random.default_rng(seed)
-    problem, data, inp = result.setup.problem, result.data, result.inputs
+    data, inp = result.data, result.inputs
     o = result.strip.observations
     rows = result.report.rows
     sigma = o.sigma_px if noise_px is None else np.full(len(o.sigma_px), float(noise_px))
@@ -263,9 +300,68 @@ def monte_carlo(
         xy.append(noisy[result.setup.obs_order])
         gcp_xy.append(np.asarray(data.gcp_xy) + e_gcp)
         check_xy.append(np.asarray(data.check_xy) + e_chk)
-    opt = result.options
+    return np.stack(xy), np.stack(gcp_xy), np.stack(check_xy)
+
+
+def monte_carlo(
+    result: StripResult, n_runs: int, noise_px: float | None = None, seed: int = 0
+) -> tuple[TwoLevelSolution, Evaluation]:
+    """``n_runs`` Monte-Carlo repetitions of ``result``'s two-level adjustment (noise as in
+    :func:`monte_carlo_inputs`) in one vmapped, jitted call. Returns the batched solution and
+    evaluation (leading axis ``n_runs``)."""
+    xy, gcp_xy, check_xy = monte_carlo_inputs(result, n_runs, noise_px, seed)
+    o = result.options
     return two_level_batch(
-        problem, data, jnp.asarray(np.stack(xy)), jnp.asarray(np.stack(gcp_xy)),
-        jnp.asarray(np.stack(check_xy)), opt["degree"], opt["method"], opt["max_steps"],
-        opt["tol"],
+        result.setup.problem, result.data, jnp.asarray(xy), jnp.asarray(gcp_xy),
+        jnp.asarray(check_xy), o["degree"], o["method"], o["max_steps"], o["tol"],
     )  # fmt: skip
+
+
+def evaluate_models(result: StripResult, models: Mapping[str, Any]) -> dict[str, np.ndarray]:
+    """Check-point errors ``(c, 2)`` and tie gaps ``(t, 2)`` (east, north m) of any set of
+    sub-scene models of one structure (e.g. scenes adjusted one by one), on ``result``'s check
+    points and ties: ``{"check_error_m": ..., "tie_gap_m": ...}``."""
+    names = result.strip.names
+    order = sorted(names, key=lambda n: result.setup.image_index[n][1])  # block order
+    blocks = jax.tree.map(lambda *x: jnp.stack(x), *(models[n] for n in order))
+    check, gap = _evaluate_blocks(blocks, result.data)
+    return {"check_error_m": np.asarray(check), "tie_gap_m": np.asarray(gap)}
+
+
+@eqx.filter_jit
+def _evaluate_blocks(blocks, d: Level2Data):
+    h = d.check_lonlath[:, 2]
+    check = en_error_m(localize_in(blocks, d.check_scene, d.check_xy, h), d.check_lonlath)
+    return check, tie_gap(blocks, d)
+
+
+def adjust_individually(
+    strip: Strip, bias: str = "affine", **options: Any
+) -> tuple[dict[str, Any], AdjustResult | None]:
+    """Each sub-scene adjusted on its own with its own GCPs (the practice that leaves the
+    discontinuities of 003_ figure 2). Returns ``(models, result)``: every sub-scene's model
+    (vendor RPC with a zero bias where the scene has too few GCPs for ``bias``) and the
+    :class:`~jaxgeo.adjust.AdjustResult` of the adjusted scenes (one block-diagonal bundle;
+    ``None`` if no scene has enough GCPs)."""
+    models = with_bias(dict(strip.rpcs), bias)
+    need = N_BIAS_GCPS[bias]
+    g = strip.ground
+    index = {p: i for i, p in enumerate(g.ids)}
+    o = strip.observations
+    rows: dict[str, list[int]] = {n: [] for n in strip.names}
+    for i, (p, img) in enumerate(zip(o.point_ids, o.images, strict=True)):
+        if p in index and g.role[index[p]] == "gcp":
+            rows[img].append(i)
+    todo = [n for n in strip.names if len(rows[n]) >= need]
+    if not todo:
+        return models, None
+    # one block-diagonal bundle == independent adjustments: a GCP seen in two sub-scenes gets
+    # one copy per sub-scene, so no scene sees another's measurements
+    sel = [i for n in todo for i in rows[n]]
+    ids = tuple(f"{o.point_ids[i]}@{o.images[i]}" for i in sel)
+    obs = Observations(ids, tuple(o.images[i] for i in sel), o.xy[sel], o.sigma_px[sel])
+    gi = [index[o.point_ids[i]] for i in sel]
+    ground = GroundPoints(ids, g.lonlath[gi], ("gcp",) * len(sel), g.sigma_m[gi])
+    res = adjust({n: models[n] for n in todo}, obs, ground, **options)
+    models.update(res.models)
+    return models, res

@@ -59,8 +59,9 @@ def strip_ties(
 ) -> StripTies:
     """Form ``per_pair`` tie points in the overlap of every adjacent pair of sub-scenes.
 
-    Ties lie on a regular grid (about ``per_pair`` nodes, as square as the overlap allows)
-    ``margin_px`` inside the overlap, or at uniform random positions when ``seed`` is given.
+    Ties lie on a regular grid (about ``per_pair`` nodes, as square as the overlap allows, at
+    least three rows along track from 9 ties on) ``margin_px`` inside the overlap, or at
+    uniform random positions when ``seed`` is given.
     Raises a ``ValueError`` naming the pair when two adjacent sub-scenes do not overlap.
     """
     if per_pair < 1:
@@ -83,7 +84,10 @@ def strip_ties(
         hi = np.array([col_hi - margin_px, last - margin_px])
         if rng is None:
             aspect = (hi[0] - lo[0]) / max(hi[1] - lo[1], 1e-9)
-            n_rows = max(1, min(per_pair, round(math.sqrt(per_pair / aspect))))
+            # at least three rows across the overlap (when there are enough ties): a single row
+            # leaves the along-track terms of the affine biases undetermined
+            min_rows = 3 if per_pair >= 9 else 2 if per_pair >= 4 else 1
+            n_rows = max(min_rows, min(per_pair, round(math.sqrt(per_pair / aspect))))
             n_cols = math.ceil(per_pair / n_rows)
             gx, gy = np.meshgrid(
                 np.linspace(lo[0], hi[0], n_cols), np.linspace(lo[1], hi[1], n_rows)

@@ -12,14 +12,16 @@ sub-scenes without GCPs are corrected too.
 from __future__ import annotations
 
 import equinox as eqx
+import jax
 import jax.numpy as jnp
 import numpy as np
 from jaxtyping import Array, ArrayLike, Float
 
 from ..models.base import AbstractSensorModel
 
-N_TERMS = {"shift": 1, "affine": 3, "quadratic": 6}
-"""Leading terms of eq. 12-13 kept by each degree (the paper uses ``quadratic``)."""
+N_TERMS = {"none": 0, "shift": 1, "affine": 3, "quadratic": 6}
+"""Leading terms of eq. 12-13 kept by each degree (the paper uses ``quadratic``; ``none`` is the
+identity, for comparison)."""
 
 
 def _terms(lat_n, lon_n):
@@ -74,8 +76,8 @@ def fit_universal_correction(
     Returns the correction and the residuals ``(n, 2)`` (dlon, dlat) in degrees after the fit.
     Needs at least as many GCPs as terms (6 for ``quadratic``); fewer raise a ``ValueError``.
     """
-    if degree not in N_TERMS:
-        raise ValueError(f"degree must be one of {list(N_TERMS)}, got {degree!r}")
+    if degree not in N_TERMS or degree == "none":
+        raise ValueError(f"degree must be one of {list(N_TERMS)[1:]}, got {degree!r}")
     level1 = np.asarray(level1, dtype=float).reshape(-1, 3)
     truth = np.asarray(truth, dtype=float).reshape(-1, 3)
     if not (np.all(np.isfinite(level1)) and np.all(np.isfinite(truth))):
@@ -93,7 +95,7 @@ def check_design(level1: np.ndarray, degree: str) -> None:
     if n < k:
         raise ValueError(
             f"the {degree} universal correction needs at least {k} GCPs, got {n} "
-            f"(use degree='affine' (3) or 'shift' (1))"
+            "(use the affine (3) or shift (1) degree)"
         )
     latlon = level1[:, [1, 0]]
     offset = latlon.mean(axis=0)
@@ -120,6 +122,8 @@ def fit_correction(
     """
     k = N_TERMS[degree]
     w = jnp.ones(level1.shape[0]) if weight is None else weight
+    if k == 0:
+        return UniversalCorrection(jnp.zeros((2, 6)), jnp.zeros(2), jnp.ones(2))
     latlon = level1[:, jnp.array([1, 0])]
     offset = jnp.sum(w[:, None] * latlon, axis=0) / jnp.sum(w)
     scale = jnp.maximum(jnp.max(w[:, None] * jnp.abs(latlon - offset), axis=0), 1e-9)
@@ -148,3 +152,28 @@ class UniversallyCorrected(AbstractSensorModel):
 
     def reference_ground(self) -> Float[Array, "3"]:
         return self.correction.apply(self.model.reference_ground())
+
+
+def cross_validate(
+    level1: Float[Array, "n 3"],
+    truth: Float[Array, "n 3"],
+    groups: Float[Array, "G n"],
+    metres_per_unit: Float[Array, "n 3"],
+) -> Float[Array, " d"]:
+    """Leave-one-group-out RMS (m, planimetric) of every degree of :data:`N_TERMS`, in order.
+
+    ``groups`` (G, n) 0/1: the GCPs of each sub-scene with GCPs; each group is predicted by the
+    correction fitted to all the others -- how well the correction carries to scenes without
+    GCPs, which is what level 2 is for. Pure jax.
+    """
+    n_left = jnp.maximum(jnp.sum(groups), 1.0)
+
+    def one(degree):
+        def left_out(g):
+            corr = fit_correction(level1, truth, degree, weight=1.0 - g)
+            err = (corr.apply(level1) - truth)[:, :2] * metres_per_unit[:, :2]
+            return jnp.sum(g * jnp.sum(err**2, axis=-1))
+
+        return jnp.sqrt(jnp.sum(jax.vmap(left_out)(groups)) / n_left)
+
+    return jnp.stack([one(d) for d in N_TERMS])
