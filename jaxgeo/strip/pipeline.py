@@ -99,10 +99,22 @@ def tie_gap(blocks, data: Level2Data, correction=None):
     return en_error_m(g[1], g[0])
 
 
+def degree_index(degree: str | Int[Array, ""]) -> Int[Array, ""]:
+    """Index of a universal-correction degree in ``universal.N_TERMS``; ``"auto"`` -> -1.
+
+    Passing the index (an array) rather than the name to the jitted functions lets one
+    compilation serve every degree."""
+    if isinstance(degree, str):
+        if degree != "auto" and degree not in N_TERMS:
+            raise ValueError(f"degree must be one of {[*N_TERMS, 'auto']}, got {degree!r}")
+        return jnp.asarray(-1 if degree == "auto" else list(N_TERMS).index(degree))
+    return jnp.asarray(degree)
+
+
 def two_level(
     problem: Problem,
     data: Level2Data,
-    degree: str = "quadratic",
+    degree: str | Int[Array, ""] = "quadratic",
     method: str = "lm",
     max_steps: int = 50,
     tol: float = 1e-6,
@@ -110,19 +122,16 @@ def two_level(
     """Level 1 (bundle adjustment of ``problem``, one model group of single-image blocks, one
     block per sub-scene in strip order) then level 2 (universal correction from the GCPs;
     ``degree`` one of ``universal.N_TERMS`` or ``"auto"``: the one with the lowest
-    leave-one-GCP-scene-out error)."""
+    leave-one-GCP-scene-out error; or its :func:`degree_index`)."""
     (group,) = problem.groups
     sol = core.solve(problem, method=method, max_steps=max_steps, tol=tol)
     adjusted = group.blocks(sol.theta[0])
     gcp1 = localize_in(adjusted, data.gcp_scene, data.gcp_xy, data.gcp_lonlath[:, 2])
     cv = cross_validate(gcp1, data.gcp_lonlath, data.gcp_group, metres_per_unit(gcp1))
-    if degree == "auto":  # the degree that best predicts GCP scenes left out
-        fits = [fit_correction(gcp1, data.gcp_lonlath, d) for d in N_TERMS]
-        index = jnp.argmin(jnp.where(jnp.isfinite(cv), cv, jnp.inf))
-        corr = jax.tree.map(lambda *c: jnp.stack(c)[index], *fits)
-    else:
-        index = jnp.asarray(list(N_TERMS).index(degree))
-        corr = fit_correction(gcp1, data.gcp_lonlath, degree)
+    wanted = degree_index(degree)  # -1: auto, the degree that best predicts GCP scenes left out
+    index = jnp.where(wanted < 0, jnp.argmin(jnp.where(jnp.isfinite(cv), cv, jnp.inf)), wanted)
+    fits = [fit_correction(gcp1, data.gcp_lonlath, d) for d in N_TERMS]
+    corr = jax.tree.map(lambda *c: jnp.stack(c)[index], *fits)
     return TwoLevelSolution(
         level1=sol,
         correction=corr,
@@ -164,7 +173,7 @@ def two_level_batch(
     xy: Float[Array, "b m 2"],
     gcp_xy: Float[Array, "b g 2"],
     check_xy: Float[Array, "b c 2"],
-    degree: str = "quadratic",
+    degree: str | Int[Array, ""] = "quadratic",
     method: str = "lm",
     max_steps: int = 50,
     tol: float = 1e-6,

@@ -43,6 +43,7 @@ from .pipeline import (
     Evaluation,
     Level2Data,
     TwoLevelSolution,
+    degree_index,
     en_error_m,
     evaluate_jit,
     localize_in,
@@ -224,7 +225,7 @@ def adjust_strip(
     data, rows = _level2_data(strip, inp, block_of)
     check_design(np.asarray(data.gcp_lonlath), "shift" if degree in ("auto", "none") else degree)
     t1 = time.perf_counter()
-    sol = two_level_jit(setup.problem, data, degree, method, max_steps, tol)
+    sol = two_level_jit(setup.problem, data, degree_index(degree), method, max_steps, tol)
     sol = jax.block_until_ready(sol)
     t2 = time.perf_counter()
     ev = evaluate_jit(setup.problem, data, sol)
@@ -267,7 +268,8 @@ def adjust_strip(
 def time_two_level(result: StripResult, repeat: int = 3) -> float:
     """Best wall time (s) of the compiled two-level call on ``result``'s problem."""
     o = result.options
-    args = (result.setup.problem, result.data, o["degree"], o["method"], o["max_steps"], o["tol"])
+    args = (result.setup.problem, result.data, degree_index(o["degree"]), o["method"],
+            o["max_steps"], o["tol"])  # fmt: skip
     jax.block_until_ready(two_level_jit(*args))
     best = np.inf
     for _ in range(repeat):
@@ -313,7 +315,7 @@ def monte_carlo(
     o = result.options
     return two_level_batch(
         result.setup.problem, result.data, jnp.asarray(xy), jnp.asarray(gcp_xy),
-        jnp.asarray(check_xy), o["degree"], o["method"], o["max_steps"], o["tol"],
+        jnp.asarray(check_xy), degree_index(o["degree"]), o["method"], o["max_steps"], o["tol"],
     )  # fmt: skip
 
 

@@ -19,10 +19,11 @@ from jaxgeo.strip import (
     GCPDistributionWarning,
     Strip,
     StripFormatError,
+    UniversalCorrectionWarning,
     adjust_strip,
     read_strip,
 )
-from jaxgeo.strip.pipeline import two_level_batch, two_level_jit
+from jaxgeo.strip.pipeline import degree_index, two_level_batch, two_level_jit
 from jaxgeo.strip.solve import adjust_individually, evaluate_models, monte_carlo_inputs
 
 N_SCENES = 12
@@ -53,7 +54,10 @@ def quarter(full):
 
 @pytest.fixture(scope="module")
 def result(quarter):
-    return adjust_strip(quarter, ties_per_pair=TIES)
+    # GCPs in level 1 already make it absolute: the quadratic of eq. 12-13 fitted to 4 GCP
+    # scenes mostly fits their noise, and says so
+    with pytest.warns(UniversalCorrectionWarning, match="quadratic universal correction"):
+        return adjust_strip(quarter, ties_per_pair=TIES)
 
 
 @pytest.fixture(scope="module")
@@ -107,21 +111,40 @@ def test_absolute_accuracy_level2_vs_individual(result, individual):
     assert worst < 3 * GSD_M
 
 
+def test_auto_degree_picks_the_best_cross_validated(quarter, result, individual):
+    res = adjust_strip(quarter, ties_per_pair=TIES, degree="auto")
+    s = res.report.strip
+    cv = s["leave_one_scene_out_rms_m"]
+    assert cv == pytest.approx(result.report.strip["leave_one_scene_out_rms_m"])
+    assert s["degree"] == min(cv, key=cv.get)
+    ind = _rms(np.hypot(*individual["check_error_m"].T))
+    print(cv, s["degree"], round(s["check_rms_m"]["level2"]["plan"], 3), f"one by one {ind:.3f}")
+    assert (
+        s["check_rms_m"]["level2"]["plan"] <= result.report.strip["check_rms_m"]["level2"]["plan"]
+    )
+    assert s["check_rms_m"]["level2"]["plan"] < 1.15 * ind
+
+
 def test_ties_only_level1_then_universal_correction(quarter):
     """The paper's pure flow: level 1 with ties only (relative), level 2 absolute."""
     with pytest.raises(ValueError, match="bias priors"):
         adjust_strip(quarter, ties_per_pair=TIES, level1_gcps=False)
-    res = adjust_strip(
-        quarter,
-        ties_per_pair=TIES,
-        level1_gcps=False,
-        bias_prior_sigma=np.array([50.0, 50.0, 1e-4, 1e-4, 1e-4, 1e-4]),
-    )
-    s = res.report.strip
+    prior = np.array([50.0, 50.0, 1e-4, 1e-4, 1e-4, 1e-4])
+    res = {
+        d: adjust_strip(
+            quarter, ties_per_pair=TIES, level1_gcps=False, bias_prior_sigma=prior, degree=d
+        )
+        for d in ("quadratic", "auto")
+    }
+    s = res["quadratic"].report.strip
     print({k: round(v["plan"], 3) for k, v in s["check_rms_m"].items()})
     assert s["tie_gap_m"]["level1"]["rms"] < 0.1 * NOISE_M
     assert s["check_rms_m"]["level1"]["plan"] > 0.5 * s["check_rms_m"]["direct"]["plan"]
     assert s["check_rms_m"]["level2"]["plan"] < 1.5 * GSD_M
+    a = res["auto"].report.strip
+    print(a["degree"], a["leave_one_scene_out_rms_m"], round(a["check_rms_m"]["level2"]["plan"], 3))
+    assert a["degree"] != "none"  # level 1 alone is not absolute: a correction is needed
+    assert a["check_rms_m"]["level2"]["plan"] < 1.5 * GSD_M
 
 
 def test_distribution_rule_warns_before_solving(full):
@@ -135,7 +158,7 @@ def test_monte_carlo_batch_equals_single_runs(result):
     """Monte-Carlo runs in one vmapped, jitted call == the same runs one by one."""
     xy, gcp_xy, check_xy = monte_carlo_inputs(result, 3, seed=2)
     o = result.options
-    args = (o["degree"], o["method"], o["max_steps"], o["tol"])
+    args = (degree_index(o["degree"]), o["method"], o["max_steps"], o["tol"])
     problem, data = result.setup.problem, result.data
     sols, evs = two_level_batch(problem, data, xy, gcp_xy, check_xy, *args)
     assert sols.level1.theta[0].shape == (3, N_SCENES, 6)
