@@ -109,6 +109,34 @@ def check_design(level1: np.ndarray, degree: str) -> None:
         )
 
 
+def _normal_solve(t: Float[Array, "n k"], d: Float[Array, "n 2"]) -> Float[Array, "k 2"]:
+    """Least squares by the normal equations with an unrolled Cholesky (``k <= 6``).
+
+    Pure arithmetic, no LAPACK call: many tiny batched SVD/LAPACK kernels inside one compiled
+    function were seen to deadlock XLA's CPU thread pool on a 2-core machine. The design is
+    normalised (terms in [-1, 1]), so squaring its condition number costs nothing here; a
+    1e-12 relative ridge keeps a rank-deficient (cross-validation) fit finite.
+    """
+    k = t.shape[1]
+    a = t.T @ t
+    a = a + 1e-12 * (jnp.trace(a) / k + 1e-300) * jnp.eye(k)
+    b = t.T @ d
+    low = [[None] * k for _ in range(k)]
+    for j in range(k):
+        diag = a[j, j] - sum((low[j][m] ** 2 for m in range(j)), 0.0)
+        low[j][j] = jnp.sqrt(jnp.maximum(diag, 1e-300))
+        for i in range(j + 1, k):
+            off = a[i, j] - sum((low[i][m] * low[j][m] for m in range(j)), 0.0)
+            low[i][j] = off / low[j][j]
+    y = [None] * k
+    for i in range(k):
+        y[i] = (b[i] - sum((low[i][m] * y[m] for m in range(i)), 0.0)) / low[i][i]
+    x = [None] * k
+    for i in reversed(range(k)):
+        x[i] = (y[i] - sum((low[m][i] * x[m] for m in range(i + 1, k)), 0.0)) / low[i][i]
+    return jnp.stack(x)
+
+
 def fit_correction(
     level1: Float[Array, "n 3"],
     truth: Float[Array, "n 3"],
@@ -129,7 +157,7 @@ def fit_correction(
     scale = jnp.maximum(jnp.max(w[:, None] * jnp.abs(latlon - offset), axis=0), 1e-9)
     t = _terms(*((latlon - offset) / scale).T)[:, :k] * w[:, None]
     d = (truth - level1)[:, jnp.array([1, 0])] * w[:, None]  # (dlat, dlon)
-    sol = jnp.linalg.lstsq(t, d)[0]
+    sol = _normal_solve(t, d)
     coeffs = jnp.zeros((2, 6)).at[:, :k].set(sol.T)
     return UniversalCorrection(coeffs, offset, scale)
 
