@@ -1,6 +1,6 @@
 """RPC projection speed: jitted jaxgeo against numpy and GDAL's RPC transformer, same run.
 
-    python benchmarks/projection.py [--sizes 1e6 1e7] [--repeats 3] [--rpcm]
+    python benchmarks/projection.py [--sizes 1e6 1e7] [--repeats 3]
 
 Prints one JSON object: for each size, points/s of each implementation (best of ``repeats``
 after a warm-up) and the ratios jaxgeo/numpy and jaxgeo/GDAL, plus the max disagreement in px.

@@ -1,9 +1,18 @@
-"""Test set-up: float64 on, a fixed path to the shared real data."""
+"""Test set-up: float64 on, single-threaded XLA CPU intra-op pool, the shared real data."""
 
 import os
 import pathlib
 
-import jax
+# One full-suite CI run hung for 90 min inside a vmapped, jitted strip call (Monte-Carlo batch)
+# on a 2-core machine; XLA CPU's multi-threaded Eigen pool is known to wedge on such vmap graphs
+# (https://github.com/PyAutoLabs/PyAutoFit/issues/1528). Single-threaded Eigen avoids it and cost
+# nothing measurable here (80-scene two-level call 0.30 s either way). Set before jax starts.
+if "xla_cpu_multi_thread_eigen" not in os.environ.get("XLA_FLAGS", ""):
+    os.environ["XLA_FLAGS"] = (
+        os.environ.get("XLA_FLAGS", "") + " --xla_cpu_multi_thread_eigen=false"
+    ).strip()
+
+import jax  # noqa: E402
 import pytest
 
 jax.config.update("jax_enable_x64", True)
