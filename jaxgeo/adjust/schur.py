@@ -401,8 +401,8 @@ class StructuredGaussNewton(optx.AbstractGaussNewton):
     systems, where the solve's rounding keeps it above ``tol**2``), or when ``max_rejections``
     steps in a row were rejected (the damping grew by 4^k without any decrease of the cost: the
     cost is at its floating-point floor). The Cauchy criterion of optimistix on the raw
-    parameters is off (``rtol = atol = 0``): parameters of very different
-    units (pixels, pixels per pixel, metres) make it meaningless.
+    parameters is off (``rtol = atol = 0``): parameters of very different units (pixels, pixels
+    per pixel, metres) make it meaningless.
     """
 
     rtol: float
