@@ -70,8 +70,10 @@ def run(n_scenes: int, ties: int, repeat: int) -> dict:
     import jax
     from strip_problem_synth import make_problem
 
-    from jaxgeo.adjust import adjust, build
-    from jaxgeo.adjust.core import solve
+    from jaxgeo.bundle import adjust
+    from jaxgeo.bundle.build import build
+    from jaxgeo.bundle.errors import describe
+    from jaxgeo.bundle.solve import solve
 
     problem = make_problem(n_scenes, ties)
     models, obs, ground, initial = to_jaxgeo(problem)
@@ -100,7 +102,7 @@ def run(n_scenes: int, ties: int, repeat: int) -> dict:
         "jaxgeo_s": round(float(best), 4),
         "adjust_total_s": round(t_adjust, 2),
         "steps": int(sol.num_steps),
-        "status": int(sol.status),
+        "status": describe(sol.result)[1],
         "cost": float(sol.cost) / 2.0,
         "s0": res.s0,
     }

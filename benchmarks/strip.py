@@ -63,14 +63,21 @@ def _log(*args) -> None:
     print(*args, file=sys.stderr, flush=True)
 
 
-def _only_group(setup):
-    prob = setup.problem
+def _only_group(res):
+    prob = res.setup.problem
     (group,) = prob.groups
     if any(ob.group != 0 or ob.slot != 0 for ob in prob.images):
         raise ValueError("problem_dict: expected one group of single-image blocks")
-    if prob.loss != "l2" or prob.prior_weight[0].shape[1]:
+    if res.config.solver.loss != "l2" or prob.prior_weight[0].shape[1]:
         raise ValueError("problem_dict: the peers have no robust loss and no bias priors")
     return group
+
+
+def _status(sol) -> str:
+    """The level-1 solve's outcome in words (``converged``, ``singular normal equations``...)."""
+    from jaxgeo.bundle.errors import describe
+
+    return describe(sol.result)[1]
 
 
 def problem_dict(res) -> dict:
@@ -86,7 +93,7 @@ def problem_dict(res) -> dict:
     """
     setup = res.setup
     prob = setup.problem
-    group = _only_group(setup)
+    group = _only_group(res)
     blocks = group.blocks(group.theta0)  # stacked Biased(RPC, Affine), one row per block
     rpc, bias = blocks.model, blocks.bias
     n = group.theta0.shape[0]
@@ -129,23 +136,25 @@ def problem_dict(res) -> dict:
 
 def jaxgeo_solution(res) -> tuple[np.ndarray, np.ndarray]:
     """jaxgeo's level-1 ``(bias (S,6), points (N,3))`` in the order of :func:`problem_dict`."""
-    _only_group(res.setup)
+    _only_group(res)
     sol = res.solution.level1
     return np.asarray(sol.theta[0], dtype=float), np.asarray(sol.ground, dtype=float)
 
 
 def jaxgeo_cost(res, bias, points) -> float:
-    """jaxgeo's own cost (sum of squared weighted residuals, ``adjust.core.residuals``) at any
+    """jaxgeo's own cost (sum of squared weighted residuals, ``bundle.solve.residuals``) at any
     ``bias`` (S,6) and ``points`` (N,3): ``Solution.cost`` at its solution."""
     import jax.numpy as jnp
 
-    from jaxgeo.adjust import core
+    from jaxgeo.bundle.solve import residuals
 
     prob = res.setup.problem
-    group = _only_group(res.setup)
+    group = _only_group(res)
+    s = res.config.solver
     z = (jnp.asarray(bias) - group.theta0,)
     u = (jnp.asarray(points) - prob.origin) * prob.metres_per_unit
-    img, gnd, prior = core.residuals((z, u), (prob, (jnp.ones_like(group.theta0),)))
+    args = (prob, (jnp.ones_like(group.theta0),), s.loss, s.loss_scale)
+    img, gnd, prior = residuals((z, u), args)
     return float(sum(jnp.sum(x**2) for x in (*img, gnd, *prior)))
 
 
@@ -171,10 +180,10 @@ def simulate(n_scenes: int, seed: int, **options):
 
 def run_jaxgeo(strip, ties: int, repeat: int):
     """``adjust_strip`` once (compilation), then the best of ``repeat`` compiled calls."""
-    from jaxgeo.strip import adjust_strip, time_two_level
+    from jaxgeo.strip import StripConfig, TieConfig, adjust_strip, time_two_level
 
     t0 = time.perf_counter()
-    res = adjust_strip(strip, ties_per_pair=ties)
+    res = adjust_strip(strip, StripConfig(ties=TieConfig(per_pair=ties)))
     _log(f"jaxgeo: adjust_strip (compilation included) {time.perf_counter() - t0:.1f} s")
     best = time_two_level(res, repeat=repeat)
     _log(f"jaxgeo: two-level call {best:.3f} s")
@@ -275,15 +284,13 @@ def check_costs(res, problem: dict) -> dict:
 
 def memory_point(res, jaxgeo_s: float | None = None) -> dict:
     """XLA's memory analysis of the compiled two-level call of ``res`` (bytes)."""
-    from jaxgeo.strip import pipeline
+    from jaxgeo.strip import solve
 
-    o = res.options
-    degree = o["degree"]
-    if hasattr(pipeline, "degree_index"):  # what time_two_level passes: one compilation
-        degree = pipeline.degree_index(degree)
-    args = (res.setup.problem, res.data, degree, o["method"], o["max_steps"], o["tol"])
+    c = res.config
+    degree = solve.degree_index(c.level2.degree)  # what time_two_level passes
+    args = (res.setup.problem, res.data, degree, c.solver)
     t0 = time.perf_counter()
-    stats = pipeline.two_level_jit.lower(*args).compile().compiled.memory_analysis()
+    stats = solve.two_level_jit.lower(*args).compile().compiled.memory_analysis()
     compile_s = time.perf_counter() - t0
     n_scenes = len(res.strip.names)
     ties = len(res.inputs.tie_ids)
@@ -306,7 +313,7 @@ def memory_point(res, jaxgeo_s: float | None = None) -> dict:
         "compile_s": compile_s,
         "jaxgeo_s": jaxgeo_s,
         "jaxgeo_steps": int(res.solution.level1.num_steps),
-        "jaxgeo_status": int(res.solution.level1.status),
+        "jaxgeo_status": _status(res.solution.level1),
     }
 
 
@@ -381,7 +388,7 @@ def main(argv=None) -> dict:
         "jaxgeo_setup_s": res.timings_s["setup"],
         "jaxgeo_first_call_s": res.timings_s["first_call"],
         "jaxgeo_steps": int(res.solution.level1.num_steps),
-        "jaxgeo_status": int(res.solution.level1.status),
+        "jaxgeo_status": _status(res.solution.level1),
         "jaxgeo_s0": rep["s0"],
     }
     out["peer_settings"] = {

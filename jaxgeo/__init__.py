@@ -2,37 +2,53 @@
 
 Conventions: ground ``(lon_deg, lat_deg, h_m)`` on WGS84 (ellipsoidal height), ECEF in metres,
 image ``(x, y) = (col, row)`` px with integer values at pixel centres, float64 everywhere.
+
+The public names below are imported on first use (PEP 562), so that ``jaxgeo --help`` and
+``jaxgeo --version`` start without importing jax.
 """
 
-import jax as _jax
+import importlib
+import importlib.metadata
+import os
+import sys
 
-_jax.config.update("jax_enable_x64", True)
+# float64 everywhere: jax reads JAX_ENABLE_X64 when it is first imported; if it already is,
+# switch the flag on now
+if "jax" in sys.modules:
+    sys.modules["jax"].config.update("jax_enable_x64", True)
+else:
+    os.environ["JAX_ENABLE_X64"] = "1"
 
-from . import geodesy as geodesy  # noqa: E402
-from . import rotations as rotations  # noqa: E402
-from . import simulate as simulate  # noqa: E402
-from .adjust import AccuracyReport as AccuracyReport  # noqa: E402
-from .adjust import AdjustResult as AdjustResult  # noqa: E402
-from .adjust import adjust as adjust  # noqa: E402
-from .intersect import IntersectResult as IntersectResult  # noqa: E402
-from .intersect import intersect as intersect  # noqa: E402
-from .io import SceneMetadata as SceneMetadata  # noqa: E402
-from .io import read_metadata as read_metadata  # noqa: E402
-from .io import read_rpc as read_rpc  # noqa: E402
-from .io import write_geotiff_rpc as write_geotiff_rpc  # noqa: E402
-from .io import write_rpb as write_rpb  # noqa: E402
-from .io import write_rpc_text as write_rpc_text  # noqa: E402
-from .models import RPC as RPC  # noqa: E402
-from .models import AbstractSensorModel as AbstractSensorModel  # noqa: E402
-from .models import Affine as Affine  # noqa: E402
-from .models import Affine3D as Affine3D  # noqa: E402
-from .models import Biased as Biased  # noqa: E402
-from .models import EphemerisModel as EphemerisModel  # noqa: E402
-from .models import GenericPushbroom as GenericPushbroom  # noqa: E402
-from .models import KeplerSequence as KeplerSequence  # noqa: E402
-from .models import Shift as Shift  # noqa: E402
-from .models import ShiftDrift as ShiftDrift  # noqa: E402
-from .models import Spline as Spline  # noqa: E402
-from .models import fit_rpc as fit_rpc  # noqa: E402
+__version__ = importlib.metadata.version("jaxgeo")
 
-__version__ = "0.1.0"
+_EXPORTS = {
+    "jaxgeo.bundle": ("AccuracyReport", "AdjustResult", "SolverConfig", "adjust"),
+    "jaxgeo.intersect": ("IntersectResult",),
+    "jaxgeo.io": ("read_metadata", "read_rpc", "write_geotiff_rpc", "write_rpb",
+                  "write_rpc_text"),
+    "jaxgeo.models": ("RPC", "AbstractSensorModel", "AbstractMultiImageModel", "Affine",
+                      "Affine3D", "Biased", "EphemerisModel", "GenericPushbroom", "SceneMetadata",
+                      "KeplerSequence", "Shift", "ShiftDrift", "Spline", "fit_rpc"),
+}  # fmt: skip
+_WHERE = {name: module for module, names in _EXPORTS.items() for name in names}
+# ``jaxgeo.intersect`` is the intersection module (``jaxgeo.intersect.intersect`` the function):
+# no function shadows a module of the package
+_SUBMODULES = (
+    "geodesy", "rotations", "errors", "models", "intersect", "io", "bundle", "strip", "simulate",
+    "cli",
+)  # fmt: skip
+
+
+def __getattr__(name: str):
+    if name in _WHERE:
+        value = getattr(importlib.import_module(_WHERE[name]), name)
+    elif name in _SUBMODULES:
+        value = importlib.import_module(f"{__name__}.{name}")
+    else:
+        raise AttributeError(f"module {__name__!r} has no attribute {name!r}")
+    globals()[name] = value
+    return value
+
+
+def __dir__():
+    return sorted({*globals(), *_WHERE, *_SUBMODULES})

@@ -12,6 +12,8 @@ float64 (jaxgeo switches ``jax_enable_x64`` on when imported).
 
 from __future__ import annotations
 
+from typing import Any
+
 import jax.numpy as jnp
 from jaxtyping import Array, ArrayLike, Float
 
@@ -121,6 +123,28 @@ def enu_to_geodetic(
 ) -> Float[Array, "*batch 3"]:
     """Local ENU metres about ``origin`` -> geodetic ``(lon_deg, lat_deg, h_m)``."""
     return ecef_to_geodetic(enu_to_ecef(enu, origin))
+
+
+def metres_per_unit(
+    lonlath: Float[ArrayLike, "*batch 3"], *, xp: Any = jnp
+) -> Float[Array, "*batch 3"]:
+    """Metres per degree of longitude, per degree of latitude, and per metre of height.
+
+    At ``(lon_deg, lat_deg, h_m)``: ``(pi/180) (N + h) cos(lat)``, ``(pi/180) (M + h)`` and 1,
+    with ``N``, ``M`` the WGS84 prime-vertical and meridian radii of curvature (m). Multiplying a
+    small geodetic difference by it gives east, north, up metres. ``xp=numpy`` evaluates the same
+    formula in numpy (host-side set-up without XLA dispatch; same numbers).
+    """
+    lonlath = xp.asarray(lonlath, dtype=float)
+    lat = xp.deg2rad(lonlath[..., 1])
+    h = lonlath[..., 2]
+    w = xp.sqrt(1.0 - WGS84_E2 * xp.sin(lat) ** 2)
+    n_radius = WGS84_A_M / w
+    m_radius = WGS84_A_M * (1.0 - WGS84_E2) / w**3
+    k = xp.pi / 180.0
+    return xp.stack(
+        [k * (n_radius + h) * xp.cos(lat), k * (m_radius + h), xp.ones_like(h)], axis=-1
+    )
 
 
 # --- transverse Mercator: Krueger series to order n^6 (Karney 2011, J. Geodesy 85:475) ------

@@ -8,6 +8,10 @@ Initial values follow method III of section 5.5: the first-order (linear) terms 
 taken at its reference ground point, give a linear least-squares system in the three ground
 coordinates, whose solution starts the iteration. For RPCs that is the first-order part of the
 rational functions; for any model, its Jacobian at the scene centre.
+
+This is jaxgeo's one forward intersection: :func:`intersect` (arrays in, arrays out; jittable,
+vmapped over points, differentiable) for results, :func:`intersect_linear` for initial values
+(e.g. the tie points of a bundle adjustment). Nothing else re-implements it.
 """
 
 from __future__ import annotations
@@ -21,17 +25,11 @@ import numpy as np
 import optimistix as optx
 from jaxtyping import Array, ArrayLike, Bool, Float, Int
 
+from .geodesy import metres_per_unit
 from .models.base import AbstractSensorModel
 
 INTERSECT_ATOL_M = 1e-9
 INTERSECT_MAX_STEPS = 20
-
-
-def metres_per_unit(lonlath: Float[ArrayLike, "*batch 3"]) -> Float[Array, "*batch 3"]:
-    """Metres per degree of lon, per degree of lat, and 1 per metre of h (WGS84 radii)."""
-    from .adjust.problem import metres_per_unit as mpu
-
-    return mpu(lonlath)
 
 
 class IntersectResult(eqx.Module):

@@ -74,3 +74,37 @@ def orbit_frame(
     y = y / jnp.linalg.norm(y, axis=-1, keepdims=True)
     x = jnp.cross(y, z)
     return jnp.stack([x, y, z], axis=-1)
+
+
+def angles_from_matrix(r: Float[ArrayLike, "*batch 3 3"]) -> Float[Array, "*batch 3"]:
+    """Inverse of :func:`omega_phi_kappa`: ``(..., 3, 3) -> (omega, phi, kappa)`` radians
+    (``phi`` in ``[-pi/2, pi/2]``)."""
+    r = jnp.asarray(r, dtype=float)
+    omega = jnp.arctan2(-r[..., 1, 2], r[..., 2, 2])
+    phi = jnp.arcsin(jnp.clip(r[..., 0, 2], -1.0, 1.0))
+    kappa = jnp.arctan2(-r[..., 0, 1], r[..., 0, 0])
+    return jnp.stack([omega, phi, kappa], axis=-1)
+
+
+def mounting_rotation(
+    along_track_angle_rad: Float[ArrayLike, "*batch"],
+    across_track_angle_rad: Float[ArrayLike, "*batch"],
+) -> Float[Array, "*batch 3 3"]:
+    """Camera -> platform rotation ``R_M = [X_M, Y_M, Z_M]`` of eq. 4 of 000_5aba1cb50921f3c6.txt.
+
+    The paper's ``Z_0 = (tan alpha, -tan beta, -1)`` is the viewing direction in the platform
+    frame (x along track, y left, z up): forward for ``alpha > 0``, right for ``beta > 0``.
+    Two deliberate departures from the printed equation: the camera z axis is *minus* the
+    viewing direction (it points from the ground to the sensor, so ``lambda > 0`` in eq. 3 and
+    ``x`` grows towards ``+X_M``, the left of the flight: the image as seen from above, not
+    mirrored), and ``X_M = (0, cos beta, -sin beta)``: the printed ``cos alpha`` is a typo, that
+    vector is neither unit nor orthogonal to ``Z_0`` unless ``alpha = 0``. ``Y_M = Z_M x X_M``.
+    """
+    a = jnp.asarray(along_track_angle_rad, dtype=float)
+    b = jnp.asarray(across_track_angle_rad, dtype=float)
+    a, b = jnp.broadcast_arrays(a, b)
+    view = jnp.stack([jnp.tan(a), -jnp.tan(b), -jnp.ones_like(a)], axis=-1)
+    z = -view / jnp.linalg.norm(view, axis=-1, keepdims=True)
+    x = jnp.stack([jnp.zeros_like(b), jnp.cos(b), -jnp.sin(b)], axis=-1)
+    y = jnp.cross(z, x)
+    return jnp.stack([x, y, z], axis=-1)

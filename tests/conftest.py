@@ -1,4 +1,9 @@
-"""Test set-up: float64 on, single-threaded XLA CPU intra-op pool, the shared real data."""
+"""Test set-up: float64 on, single-threaded XLA CPU intra-op pool, the real test data.
+
+Real files under permissive licences are vendored in ``tests/data/real`` (see its README), so the
+suite passes on a bare clone; data that cannot be vendored (the AGPL s2p triplet) is read from
+``../shared/data/real`` through the ``shared_data`` fixture, which skips with a reason when absent.
+"""
 
 import os
 import pathlib
@@ -18,18 +23,26 @@ import pytest
 jax.config.update("jax_enable_x64", True)
 
 REPO = pathlib.Path(__file__).resolve().parents[1]
-REAL_DATA = pathlib.Path(
-    os.environ.get("JAXGEO_REAL_DATA", REPO.parent / "shared" / "data" / "real")
+REAL_DATA = pathlib.Path(os.environ.get("JAXGEO_REAL_DATA", REPO / "tests" / "data" / "real"))
+SHARED_DATA = pathlib.Path(
+    os.environ.get("JAXGEO_SHARED_DATA", REPO.parent / "shared" / "data" / "real")
 )
 
 
 @pytest.fixture(scope="session")
 def real_data() -> pathlib.Path:
+    """The vendored real files (``tests/data/real``, permissive licences)."""
     if not REAL_DATA.is_dir():
-        raise FileNotFoundError(
-            f"real test data not found at {REAL_DATA}; set JAXGEO_REAL_DATA to ../shared/data/real"
-        )
+        raise FileNotFoundError(f"vendored real test data not found at {REAL_DATA}")
     return REAL_DATA
+
+
+@pytest.fixture(scope="session")
+def shared_data() -> pathlib.Path:
+    """``../shared/data/real`` (data that may not be vendored, e.g. the AGPL s2p triplet)."""
+    if not SHARED_DATA.is_dir():
+        pytest.skip(f"shared data not found at {SHARED_DATA} (a bare clone has no ../shared)")
+    return SHARED_DATA
 
 
 def rpc_from_rasterio(path):

@@ -131,3 +131,46 @@ def test_jit_and_gradients():
     # the round trip is the identity: its Jacobian too
     jac = jax.jacfwd(lambda x: geodesy.utm_to_geodetic(geodesy.geodetic_to_utm(x, 32), 32))(g[0])
     np.testing.assert_allclose(jac, np.eye(3), atol=1e-10)
+
+
+# ------------------------------------------------------------------------ metres per unit
+
+
+def test_metres_per_unit_equals_ecef_derivatives_from_pyproj():
+    """Metres per degree lon/lat and per metre h: the lengths of the ECEF displacements of a
+    small step, with ECEF from pyproj (central differences) and from autodiff of our ECEF."""
+    g = _random_geodetic(np.random.default_rng(7), 200, lat=(-85.0, 85.0), h=(-500.0, 9.0e5))
+    ours = np.asarray(geodesy.metres_per_unit(g))
+    assert ours.shape == (200, 3)
+    to_ecef = Transformer.from_crs("EPSG:4979", "EPSG:4978", always_xy=True)
+    steps = np.array([1e-5, 1e-5, 1.0])  # deg, deg, m
+    for k in range(3):
+        plus, minus = g.copy(), g.copy()
+        plus[:, k] += steps[k]
+        minus[:, k] -= steps[k]
+        diff = np.array(to_ecef.transform(*plus.T)).T - np.array(to_ecef.transform(*minus.T)).T
+        numeric = np.linalg.norm(diff, axis=-1) / (2 * steps[k])
+        np.testing.assert_allclose(ours[:, k], numeric, rtol=1e-8)
+    jac = jax.vmap(jax.jacfwd(geodesy.geodetic_to_ecef))(jnp.asarray(g))  # (n, 3 xyz, 3 llh)
+    np.testing.assert_allclose(ours, np.linalg.norm(np.asarray(jac), axis=-2), rtol=1e-12)
+
+
+@pytest.mark.parametrize("batch", [(), (1,), (3, 1, 2)])
+def test_metres_per_unit_batches_and_numpy_twin(batch):
+    rng = np.random.default_rng(8)
+    g = _random_geodetic(rng, int(np.prod(batch, dtype=int)), h=(-500.0, 9000.0))
+    g = g.reshape(*batch, 3)
+    ours = geodesy.metres_per_unit(g)
+    assert ours.shape == (*batch, 3) and ours.dtype == jnp.float64
+    host = geodesy.metres_per_unit(g, xp=np)
+    assert isinstance(host, np.ndarray) and host.shape == (*batch, 3)
+    np.testing.assert_allclose(host, np.asarray(ours), rtol=1e-15, atol=0.0)
+    np.testing.assert_allclose(np.asarray(jax.jit(geodesy.metres_per_unit)(g)), np.asarray(ours))
+    # at the equator and h = 0: a * pi / 180 per degree of longitude
+    eq = np.asarray(geodesy.metres_per_unit(np.array([10.0, 0.0, 0.0])))
+    np.testing.assert_allclose(eq[0], geodesy.WGS84_A_M * np.pi / 180.0, rtol=1e-15)
+
+
+def test_metres_per_unit_gradients():
+    g = jnp.array([[7.2, 44.1, 1500.0], [-70.0, -33.5, 20.0]])
+    check_grads(geodesy.metres_per_unit, (g,), order=2, modes=("fwd", "rev"), eps=1e-3)

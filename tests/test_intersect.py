@@ -102,3 +102,27 @@ def test_bad_input_is_rejected(pair):
         intersect(pair[:1], np.zeros((1, 2)))
     with pytest.raises(ValueError, match=r"shape \(\.\.\., 2, 2\)"):
         intersect(pair, np.zeros((4, 3, 2)))
+
+
+def test_intersection_runs_under_jit_and_vmap_with_the_same_numbers(pair):
+    """The one forward intersection is an array function: the same under jit and under vmap."""
+    truth = cube_points(pair[0], 8, seed=4, fraction=0.5)
+    xy = jnp.asarray(_project(pair, truth))
+    eager = intersect(pair, xy)
+    jitted = jax.jit(lambda p: intersect(pair, p).ground)(xy)
+    mapped = jax.vmap(lambda p: intersect(pair, p).ground)(xy)  # one point per call
+    for ground in (jitted, mapped):
+        assert np.abs(_enu_error(ground, eager.ground)).max() < 1e-6  # metres
+    start = jax.jit(lambda p: intersect_linear(pair, p))(xy)
+    assert np.abs(_enu_error(start, intersect_linear(pair, np.asarray(xy)))).max() < 1e-6
+
+
+def test_intersect_imports_nothing_from_the_adjustment():
+    import ast
+    import inspect
+
+    import jaxgeo.intersect as module
+
+    tree = ast.parse(inspect.getsource(module))
+    imported = [n.module or "" for n in ast.walk(tree) if isinstance(n, ast.ImportFrom)]
+    assert not [m for m in imported if m.split(".")[0] in ("adjust", "bundle", "io", "strip")]

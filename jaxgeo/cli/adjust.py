@@ -17,10 +17,11 @@ from __future__ import annotations
 
 import argparse
 
-BIASES = ("none", "shift", "shift-drift", "affine")
-
 
 def register(sub) -> None:
+    from ..bundle.adjustment import BIAS_CHOICES
+    from ..bundle.config import LOSSES
+
     parser = sub.add_parser(
         "adjust",
         help="bundle block adjustment of RPC images (bias compensation)",
@@ -39,7 +40,7 @@ def register(sub) -> None:
     )
     parser.add_argument(
         "--bias",
-        choices=BIASES,
+        choices=BIAS_CHOICES,
         default="affine",
         help="image-space bias model adjusted per image (default affine)",
     )
@@ -51,7 +52,7 @@ def register(sub) -> None:
     )
     parser.add_argument(
         "--loss",
-        choices=("l2", "huber", "cauchy"),
+        choices=LOSSES,
         default="l2",
         help="robust loss on image observations (default l2)",
     )
@@ -80,119 +81,30 @@ def _images(specs: list[str]) -> dict[str, str]:
     return out
 
 
-def summary(result, direct, bias: str) -> dict:
-    """The JSON object of ``jaxgeo adjust --json`` (and ``report.json``)."""
-    rep = result.report.to_dict() if result.report is not None else None
-    empty = {"n": 0, "rms_m": [None] * 3, "min_m": [None] * 3, "max_m": [None] * 3}
-    images = {}
-    for name in result.models:
-        rms = rep["images"].get(name, {}).get("rms_px", [None, None]) if rep else [None, None]
-        own = result.parameters(name)
-        images[name] = {
-            "rms_px": rms,
-            "params": {k: v for k, (v, _) in own.items()},
-            "sigmas": {k: s for k, (_, s) in own.items()},
-        }
-    s0 = result.s0 if result.s0 == result.s0 else None
-    blunders = [
-        {"id": p, "image": img, "w": [float(x) for x in w]}
-        for p, img, w, b in zip(
-            result.observation_ids,
-            result.observation_images,
-            result.standardized,
-            result.blunders,
-            strict=True,
-        )
-        if b
-    ]
-    return {
-        "bias": bias,
-        "s0": s0,
-        "redundancy": result.redundancy,
-        "converged": result.converged,
-        "message": result.message,
-        "num_steps": result.num_steps,
-        "checkpoints": rep["checkpoints"] if rep else empty,
-        "images": images,
-        "blunders": blunders,
-        "direct": direct.to_dict() if direct is not None else None,
-    }
-
-
-def text_report(result, direct, bias: str) -> str:
-    from ..adjust import format_reports
-
-    lines = [
-        f"bundle adjustment ({bias} bias): {result.message} in {result.num_steps} steps, "
-        f"s0 = {result.s0:.3f}, redundancy {result.redundancy}"
-    ]
-    reports = [r for r in (direct, result.report) if r is not None]
-    if reports:
-        lines += ["", format_reports(reports)]
-    lines += ["", "adjusted parameters (a posteriori sigma):"]
-    for name, value, sigma in zip(
-        result.param_names, result.params, result.param_sigma, strict=True
-    ):
-        lines.append(f"  {name:<32} {value: .6g} +- {sigma:.2g}")
-    flagged = [
-        f"{p}@{img}"
-        for p, img, b in zip(
-            result.observation_ids, result.observation_images, result.blunders, strict=True
-        )
-        if b
-    ]
-    if flagged:
-        lines.append(f"possible blunders (|w| > k): {', '.join(flagged)}")
-    return "\n".join(lines)
-
-
 def run(args: argparse.Namespace) -> int:
     import json
     import sys
     import warnings
 
-    from ..adjust import AdjustmentError, NotConvergedWarning, adjust, direct_georeferencing
-    from ..adjust.export import write_outputs
-    from ..io import read_rpc
-    from ..io.tables import read_ground, read_observations
-    from . import CommandError
+    from ..bundle import NotConvergedWarning, SolverConfig
+    from ..bundle.adjustment import adjust_files
 
-    paths = _images(args.image)
-    models = {name: read_rpc(path) for name, path in paths.items()}
-    obs = read_observations(args.observations)
-    ground = read_ground(args.ground) if args.ground else None
-    if args.max_steps < 1:
-        raise CommandError(f"--max-steps must be >= 1, got {args.max_steps}")
+    solver = SolverConfig(method=args.method, loss=args.loss, max_steps=args.max_steps)
     with warnings.catch_warnings(record=True) as caught:
         warnings.simplefilter("always")
-        try:
-            result = adjust(
-                models,
-                obs,
-                ground,
-                bias=args.bias,
-                method=args.method,
-                loss=args.loss,
-                max_steps=args.max_steps,
-            )
-        except AdjustmentError as err:
-            raise CommandError(str(err)) from None
-    direct = None
-    if ground is not None and len(models) >= 2:
-        direct = direct_georeferencing(models, obs, ground)
+        run = adjust_files(
+            _images(args.image), args.observations, args.ground, bias=args.bias, solver=solver
+        )
     for w in caught:
         prefix = "warning" if issubclass(w.category, NotConvergedWarning) else "note"
         print(f"jaxgeo adjust: {prefix}: {w.message}", file=sys.stderr)
-    data = summary(result, direct, args.bias)
-    text = text_report(result, direct, args.bias)
+    data = run.summary()
     if args.out:
-        inputs = [*paths.values(), args.observations] + ([args.ground] if args.ground else [])
-        written = write_outputs(args.out, result, text, data, inputs, overwrite=args.overwrite)
-        data["written"] = [str(p) for p in written]
+        data["written"] = [str(p) for p in run.write(args.out, overwrite=args.overwrite)]
     if args.json:
         print(json.dumps(data, indent=1))
     else:
-        print(text)
+        print(run.format())
         if args.out:
             print(f"\nwrote {len(data['written'])} files to {args.out}")
-    return 0 if result.converged else 1
+    return 0 if run.result.converged else 1

@@ -10,9 +10,12 @@ the GCPs (table 4), and prints both reports side by side.
 from __future__ import annotations
 
 import argparse
+import dataclasses
 
 
 def register(sub) -> None:
+    from ..models.bias import BIAS_KINDS
+
     parser = sub.add_parser(
         "demo",
         help="direct georeferencing vs bias-corrected adjustment on the embedded scene",
@@ -20,7 +23,7 @@ def register(sub) -> None:
     )
     parser.add_argument(
         "--bias",
-        choices=("shift", "shift-drift", "affine"),
+        choices=tuple(BIAS_KINDS),
         default="affine",
         help="bias model of the adjustment (default affine)",
     )
@@ -32,49 +35,36 @@ def run(args: argparse.Namespace) -> int:
     import json
     import time
 
-    from ..adjust import adjust, direct_georeferencing, format_reports
-    from ..io import read_rpc
-    from ..io.tables import read_ground, read_observations
+    from ..bundle import format_reports
+    from ..bundle.adjustment import adjust_files
     from ..simulate import demo_dir
-    from . import CommandError
-    from .adjust import summary
 
     folder = demo_dir()
-    files = {
-        n: folder / f
-        for n, f in (
-            ("fore", "fore.txt"),
-            ("aft", "aft.txt"),
-            ("ground", "ground.csv"),
-            ("obs", "observations.csv"),
-        )
-    }
-    missing = [str(p) for p in files.values() if not p.is_file()]
-    if missing:
-        raise CommandError(f"embedded demo data missing: {', '.join(missing)}")
-    models = {"fore": read_rpc(files["fore"]), "aft": read_rpc(files["aft"])}
-    ground = read_ground(files["ground"])
-    obs = read_observations(files["obs"])
     t0 = time.perf_counter()
-    direct = direct_georeferencing(models, obs, ground, roles=("check",))
-    result = adjust(models, obs, ground, bias=args.bias)
+    run = adjust_files(
+        {"fore": folder / "fore.txt", "aft": folder / "aft.txt"},
+        folder / "observations.csv",
+        folder / "ground.csv",
+        bias=args.bias,
+        direct_roles=("check",),
+    )
     seconds = time.perf_counter() - t0
+    result, d, a = run.result, run.direct, run.result.report
     if args.json:
-        data = summary(result, direct, args.bias)
+        data = run.summary()
         data["seconds"] = seconds
         print(json.dumps(data, indent=1))
         return 0 if result.converged else 1
-    n_gcp = sum(r == "gcp" for r in ground.role)
-    n_chk = sum(r == "check" for r in ground.role)
-    d, a = direct, result.report
+    roles = result.point_role
+    n_gcp, n_chk = roles.count("gcp"), roles.count("check")
     plan = lambda r: float((r.rms_m[0] ** 2 + r.rms_m[1] ** 2) ** 0.5)  # noqa: E731
     print(
         f"Simulated Cartosat-1 stereo pair (fore/aft, 2.5 m GSD), {n_gcp} GCPs, "
         f"{n_chk} check points; data in {folder}"
     )
     print()
-    d = type(d)(**{**d.__dict__, "title": "direct (vendor RPCs)"})
-    a = type(a)(**{**a.__dict__, "title": f"adjusted ({args.bias} bias)"})
+    d = dataclasses.replace(d, title="direct (vendor RPCs)")
+    a = dataclasses.replace(a, title=f"adjusted ({args.bias} bias)")
     print(format_reports([d, a]))
     print()
     print(

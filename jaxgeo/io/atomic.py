@@ -1,10 +1,68 @@
-"""Atomic, non-destructive file output: write beside the target, then rename over it."""
+"""Atomic, non-destructive file output: write beside the target, then rename over it.
+
+Every file jaxgeo writes goes through this module: :func:`atomic_write_text` /
+:func:`atomic_write_bytes` for content in memory, :func:`atomic_output` for writers that need a
+path (GDAL/rasterio). A reader never sees a half-written file, a crash leaves the previous content
+intact, and an existing file is replaced only when the caller passes ``overwrite=True``.
+"""
 
 from __future__ import annotations
 
+import contextlib
 import os
 import pathlib
-import tempfile
+import secrets
+from collections.abc import Iterator, Sequence
+
+
+def refuse_existing(path: str | os.PathLike, overwrite: bool = False) -> pathlib.Path:
+    """``path`` as a Path; ``FileExistsError`` naming it if it exists and not ``overwrite``."""
+    path = pathlib.Path(path)
+    if path.exists() and not overwrite:
+        raise FileExistsError(
+            f"{path}: refusing to overwrite an existing file (pass overwrite=True)"
+        )
+    return path
+
+
+def _temp_beside(path: pathlib.Path, suffix: str) -> pathlib.Path:
+    """A new empty file beside ``path`` with the permissions a plain create gives (0666 less the
+    umask; ``tempfile.mkstemp`` would make it 0600, which would become the output's mode)."""
+    for _ in range(100):
+        tmp = path.with_name(f".{path.name}.{secrets.token_hex(6)}{suffix}")
+        try:
+            os.close(os.open(tmp, os.O_CREAT | os.O_EXCL | os.O_WRONLY, 0o666))
+            return tmp
+        except FileExistsError:
+            continue
+    raise FileExistsError(f"{path}: could not create a temporary file beside it")
+
+
+@contextlib.contextmanager
+def atomic_output(
+    path: str | os.PathLike,
+    overwrite: bool = False,
+    *,
+    suffix: str = ".tmp",
+    leftovers: Sequence[str] = (),
+) -> Iterator[pathlib.Path]:
+    """Context giving a temporary path beside ``path`` that is renamed onto it on success.
+
+    Refuses an existing ``path`` unless ``overwrite`` (checked before anything is written). The
+    temporary file exists (empty) when the block starts; on an exception it is removed and
+    ``path`` is untouched. ``leftovers`` are suffixes of files a writer may leave beside the
+    temporary one (GDAL's ``.aux.xml``), removed either way. ``os.replace`` is atomic on POSIX.
+    """
+    path = refuse_existing(path, overwrite)
+    path.parent.mkdir(parents=True, exist_ok=True)
+    tmp = _temp_beside(path, suffix)
+    try:
+        yield tmp
+        os.replace(tmp, path)
+    finally:
+        for leftover in (tmp, *(tmp.with_name(tmp.name + s) for s in leftovers)):
+            if os.path.lexists(leftover):
+                os.unlink(leftover)
 
 
 def atomic_write_bytes(
@@ -13,30 +71,13 @@ def atomic_write_bytes(
     """Write ``data`` to ``path`` atomically; refuse to replace an existing file by default.
 
     The data goes to a temporary file in the same directory, is flushed and fsynced, then renamed
-    onto ``path`` (``os.replace`` is atomic on POSIX): a reader never sees a half-written file, and
-    a crash leaves the previous content intact.
+    onto ``path`` (see :func:`atomic_output`).
     """
     path = pathlib.Path(path)
-    if path.exists() and not overwrite:
-        raise FileExistsError(
-            f"{path}: refusing to overwrite an existing file (pass overwrite=True)"
-        )
-    path.parent.mkdir(parents=True, exist_ok=True)
-    fd, tmp = tempfile.mkstemp(prefix=f".{path.name}.", suffix=".tmp", dir=path.parent)
-    try:
-        # mkstemp makes 0600 files; outputs get the usual permissions (0666 less the umask)
-        umask = os.umask(0)
-        os.umask(umask)
-        os.fchmod(fd, 0o666 & ~umask)
-        with os.fdopen(fd, "wb") as f:
-            f.write(data)
-            f.flush()
-            os.fsync(f.fileno())
-        os.replace(tmp, path)
-    except BaseException:
-        if os.path.exists(tmp):
-            os.unlink(tmp)
-        raise
+    with atomic_output(path, overwrite) as tmp, open(tmp, "wb") as f:
+        f.write(data)
+        f.flush()
+        os.fsync(f.fileno())
     return path
 
 

@@ -1,10 +1,13 @@
-"""Shared pieces of the RPC readers and writers: the error type, number parsing, assembly.
+"""Shared pieces of the RPC readers and writers: the error type, number parsing, the
+table-driven reader of :mod:`jaxgeo.io.rpc_keys`, assembly.
 
 Every reader turns a file into the 10 offsets/scales and 4 x 20 coefficients under the vendor
 names of :meth:`jaxgeo.models.RPC.from_vendor` (``line_off`` ... ``samp_den``), already in
 jaxgeo's pixel convention (integer values at pixel centres, ``(0, 0)`` the centre of the first
-pixel), and hands them to :func:`assemble`. Nothing is ever defaulted: a missing or malformed
-value raises :class:`RPCFormatError` naming the file and the key or line at fault.
+pixel), and hands them to :func:`assemble`. A reader only says how to find a vendor key in its
+file (a ``lookup``); :func:`read_scalars` and :func:`read_coeffs` walk the key table. Nothing is
+ever defaulted: a missing or malformed value raises :class:`RPCFormatError` naming the file and
+the key or line at fault.
 """
 
 from __future__ import annotations
@@ -12,20 +15,16 @@ from __future__ import annotations
 import math
 import os
 import re
-from collections.abc import Mapping, Sequence
+from collections.abc import Callable, Mapping, Sequence
 
 import numpy as np
 
 from ..models.rpc import RPC, TermOrder, check_rpc
+from .rpc_keys import COEFFS, N_TERMS, SCALARS, KeyStyle
 
-SCALARS = (
-    "line_off", "samp_off", "lat_off", "lon_off", "height_off",
-    "line_scale", "samp_scale", "lat_scale", "lon_scale", "height_scale",
-)  # fmt: skip
-"""The 10 normalisation constants, in the order of the RPC00B record."""
-COEFFS = ("line_num", "line_den", "samp_num", "samp_den")
-"""The 4 polynomials of 20 coefficients, in the order of the RPC00B record."""
-N_TERMS = 20
+Lookup = Callable[[str], tuple[str, str] | None]
+"""A reader's access to its file: vendor key -> ``(where, value text)``, or None if absent.
+``where`` names the key (and line) for error messages."""
 
 # A plain decimal number: optional sign, digits with an optional point, optional exponent
 # (E, or Fortran's D). No "nan", "inf", hex or underscores, which float() would accept.
@@ -67,6 +66,69 @@ def parse_numbers(
     if len(tokens) != count:
         raise RPCFormatError(f"{source}: {where}: {len(tokens)} values, expected {count}")
     return [parse_number(t, source, f"{where} value {i + 1}") for i, t in enumerate(tokens)]
+
+
+def parse_value(text: str, source: str, where: str, units: bool = False) -> float:
+    """One number; with ``units`` a trailing unit word is allowed (``11469.5 pixels``)."""
+    if not units:
+        return parse_number(text, source, where)
+    tokens = text.split()
+    if not tokens:
+        raise RPCFormatError(f"{source}: {where}: no value")
+    if len(tokens) > 1 and is_number(tokens[1]):
+        raise RPCFormatError(f"{source}: {where}: expected one value, got {text.strip()!r}")
+    return parse_number(tokens[0], source, where)
+
+
+def _missing_key(key: str) -> str:
+    return f"missing key {key}"
+
+
+def read_scalars(
+    style: KeyStyle,
+    lookup: Lookup,
+    source: str,
+    missing: Callable[[str], str] = _missing_key,
+) -> dict[str, float]:
+    """The 10 scalars of :data:`~jaxgeo.io.rpc_keys.RPC_KEYS`, looked up under ``style``'s names.
+
+    ``missing(key)`` words the error for an absent key (after ``"<source>: "``).
+    """
+    out = {}
+    for key, name in style.scalar_names().items():
+        found = lookup(key)
+        if found is None:
+            raise RPCFormatError(f"{source}: {missing(key)}")
+        out[name] = parse_value(found[1], source, found[0], style.units)
+    return out
+
+
+def read_coeffs(
+    style: KeyStyle,
+    lookup: Lookup,
+    source: str,
+    missing: Callable[[str], str] = _missing_key,
+) -> dict[str, list[float]]:
+    """The 4 x 20 coefficients, looked up under ``style``'s names (indexed keys or lists)."""
+    out: dict[str, list[float]] = {}
+    for stem, name in style.coeff_names().items():
+        indexed = style.first_index is not None
+        if indexed and style.list_fallback and lookup(stem) is not None:
+            indexed = lookup(style.indexed(stem, 0)) is not None
+        if not indexed:
+            found = lookup(stem)
+            if found is None:
+                raise RPCFormatError(f"{source}: {missing(stem)}")
+            out[name] = parse_numbers(found[1], source, found[0], sep=style.list_sep)
+            continue
+        out[name] = []
+        for i in range(N_TERMS):
+            key = style.indexed(stem, i)
+            found = lookup(key)
+            if found is None:
+                raise RPCFormatError(f"{source}: {missing(key)}")
+            out[name].append(parse_value(found[1], source, found[0], style.units))
+    return out
 
 
 def parse_order(text: str | None, source: str, where: str) -> TermOrder:

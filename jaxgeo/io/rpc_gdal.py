@@ -14,7 +14,6 @@ from __future__ import annotations
 import math
 import os
 import pathlib
-import secrets
 import shutil
 import struct
 import warnings
@@ -23,17 +22,14 @@ import numpy as np
 from jaxtyping import ArrayLike
 
 from ..models.rpc import RPC
-from .rpc_common import COEFFS, N_TERMS, SCALARS, RPCFormatError, assemble, vendor_values
+from .atomic import atomic_output, refuse_existing
+from .rpc_common import RPCFormatError, assemble, vendor_values
+from .rpc_keys import COEFFS, GEOTIFF_TAG_ORDER, N_TERMS, STYLES, vendor_items
 
 TIFFTAG_RPCCOEFFICIENT = 50844
 _TIFF_DOUBLE = 12
-_RASTERIO_NAMES = {
-    "line_off": "line_off", "samp_off": "samp_off", "lat_off": "lat_off",
-    "lon_off": "long_off", "height_off": "height_off", "line_scale": "line_scale",
-    "samp_scale": "samp_scale", "lat_scale": "lat_scale", "lon_scale": "long_scale",
-    "height_scale": "height_scale", "line_num": "line_num_coeff", "line_den": "line_den_coeff",
-    "samp_num": "samp_num_coeff", "samp_den": "samp_den_coeff",
-}  # fmt: skip
+_RASTERIO = STYLES["rasterio"]
+_TAG_LENGTH = sum(N_TERMS if name in COEFFS else 1 for name in GEOTIFF_TAG_ORDER)  # 92
 
 
 def read_tiff_rpc_tag(path: str | os.PathLike, source: str | None = None) -> np.ndarray | None:
@@ -64,7 +60,7 @@ def read_tiff_rpc_tag(path: str | os.PathLike, source: str | None = None) -> np.
                     endian + entry_fmt, table, k * entry_size
                 )
                 if tag == TIFFTAG_RPCCOEFFICIENT:
-                    if typ != _TIFF_DOUBLE or count != 12 + 4 * N_TERMS:
+                    if typ != _TIFF_DOUBLE or count != _TAG_LENGTH:
                         return None
                     f.seek(offset)
                     raw = f.read(8 * count)
@@ -81,9 +77,8 @@ def read_tiff_rpc_tag(path: str | os.PathLike, source: str | None = None) -> np.
 
 def from_rasterio_rpc(rpcs, source: str = "rasterio RPC") -> RPC:
     """A :class:`jaxgeo.models.RPC` from a :class:`rasterio.rpc.RPC` (same pixel convention)."""
-    values = {ours: getattr(rpcs, theirs) for ours, theirs in _RASTERIO_NAMES.items()}
-    scalars = {k: values[k] for k in SCALARS}
-    coeffs = {k: list(values[k]) for k in COEFFS}
+    scalars = {ours: getattr(rpcs, theirs) for theirs, ours in _RASTERIO.scalar_names().items()}
+    coeffs = {ours: list(getattr(rpcs, theirs)) for theirs, ours in _RASTERIO.coeff_names().items()}
     return assemble(scalars, coeffs, source)
 
 
@@ -91,8 +86,19 @@ def to_rasterio_rpc(rpc: RPC):
     """A :class:`rasterio.rpc.RPC` holding ``rpc`` (RPC00B, full precision, err_* unknown)."""
     from rasterio.rpc import RPC as RasterioRPC
 
-    values = vendor_values(rpc)
-    return RasterioRPC(**{theirs: values[ours] for ours, theirs in _RASTERIO_NAMES.items()})
+    items = vendor_items(_RASTERIO, vendor_values(rpc))
+    return RasterioRPC(**{theirs: value for _, theirs, value in items})
+
+
+def _tag_values(tag: np.ndarray) -> tuple[dict[str, float], dict[str, np.ndarray]]:
+    """Scalars and coefficients of the 92 doubles of the RPCCoefficientTag."""
+    scalars, coeffs, at = {}, {}, 0
+    for name in GEOTIFF_TAG_ORDER:
+        if name in COEFFS:
+            coeffs[name], at = tag[at : at + N_TERMS], at + N_TERMS
+        else:
+            scalars[name], at = tag[at], at + 1
+    return scalars, coeffs
 
 
 def read_raster_rpc(path: str | os.PathLike, source: str) -> RPC:
@@ -100,8 +106,7 @@ def read_raster_rpc(path: str | os.PathLike, source: str) -> RPC:
     metadata (NITF TREs, sidecars, PAM)."""
     tag = read_tiff_rpc_tag(path, source)
     if tag is not None:
-        scalars = dict(zip(SCALARS, tag[2:12], strict=True))
-        coeffs = {k: tag[12 + N_TERMS * i : 12 + N_TERMS * (i + 1)] for i, k in enumerate(COEFFS)}
+        scalars, coeffs = _tag_values(tag)
         return assemble(scalars, coeffs, f"{source} (RPCCoefficientTag)")
 
     import rasterio
@@ -127,27 +132,6 @@ def _image_shape(rpc: RPC) -> tuple[int, int]:
     rows = math.ceil(values["line_off"] + abs(values["line_scale"])) + 1
     cols = math.ceil(values["samp_off"] + abs(values["samp_scale"])) + 1
     return max(rows, 1), max(cols, 1)
-
-
-def _temp_beside(path: pathlib.Path) -> pathlib.Path:
-    """A new empty file beside ``path``, with the permissions a plain create would give.
-
-    (``tempfile.mkstemp`` makes files 0600, which would then become the output's mode.)
-    """
-    for _ in range(100):
-        tmp = path.with_name(f".{path.name}.{secrets.token_hex(6)}.tmp.tif")
-        try:
-            os.close(os.open(tmp, os.O_CREAT | os.O_EXCL | os.O_WRONLY, 0o666))
-            return tmp
-        except FileExistsError:
-            continue
-    raise FileExistsError(f"{path}: could not create a temporary file beside it")
-
-
-def _remove(tmp: pathlib.Path) -> None:
-    for leftover in (tmp, tmp.with_name(tmp.name + ".aux.xml")):
-        if leftover.exists():
-            leftover.unlink()
 
 
 def write_geotiff_rpc(
@@ -195,8 +179,8 @@ def write_geotiff_rpc(
             raise FileExistsError(
                 f"{path}: already holds RPC metadata; pass overwrite=True to replace it"
             )
-    elif path.exists() and not overwrite:
-        raise FileExistsError(f"{path}: refusing to overwrite an existing file (overwrite=True)")
+    else:
+        refuse_existing(path, overwrite)
 
     if not update:
         if data is None:
@@ -213,23 +197,21 @@ def write_geotiff_rpc(
             sparse = False
             profile = dict(count=array.shape[0], dtype=array.dtype, height=array.shape[1],
                            width=array.shape[2])  # fmt: skip
-    path.parent.mkdir(parents=True, exist_ok=True)
-    tmp = _temp_beside(path)
-    try:
-        with warnings.catch_warnings():
-            warnings.simplefilter("ignore", NotGeoreferencedWarning)
-            if update:
-                shutil.copy2(path, tmp)
-                with rasterio.open(tmp, "r+") as dst:
-                    dst.rpcs = rpcs
-            else:
-                with rasterio.open(
-                    tmp, "w", driver="GTiff", tiled=True, blockxsize=256, blockysize=256,
-                    sparse_ok=sparse, rpcs=rpcs, **profile,
-                ) as dst:  # fmt: skip
-                    if array is not None:
-                        dst.write(array)
-        os.replace(tmp, path)
-    finally:
-        _remove(tmp)
+    # update: the existing file was checked above and is rewritten as a whole
+    with (
+        atomic_output(path, overwrite or update, suffix=".tmp.tif", leftovers=[".aux.xml"]) as tmp,
+        warnings.catch_warnings(),
+    ):
+        warnings.simplefilter("ignore", NotGeoreferencedWarning)
+        if update:
+            shutil.copy2(path, tmp)
+            with rasterio.open(tmp, "r+") as dst:
+                dst.rpcs = rpcs
+        else:
+            with rasterio.open(
+                tmp, "w", driver="GTiff", tiled=True, blockxsize=256, blockysize=256,
+                sparse_ok=sparse, rpcs=rpcs, **profile,
+            ) as dst:  # fmt: skip
+                if array is not None:
+                    dst.write(array)
     return path

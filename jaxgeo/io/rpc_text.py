@@ -34,40 +34,23 @@ from collections.abc import Callable
 from ..models.rpc import RPC
 from .atomic import atomic_write_text
 from .rpc_common import (
-    COEFFS,
-    N_TERMS,
-    SCALARS,
     RPCFormatError,
     assemble,
     fmt,
-    is_number,
     parse_number,
-    parse_numbers,
     parse_order,
+    read_coeffs,
+    read_scalars,
     vendor_values,
 )
+from .rpc_keys import COEFFS, N_TERMS, NITF_ALIASES, SCALARS, STYLES, vendor_items
 
 # ---------------------------------------------------------------- _RPC.TXT (key: value)
 
-TXT_SCALARS = {
-    "LINE_OFF": "line_off", "SAMP_OFF": "samp_off", "LAT_OFF": "lat_off",
-    "LONG_OFF": "lon_off", "HEIGHT_OFF": "height_off", "LINE_SCALE": "line_scale",
-    "SAMP_SCALE": "samp_scale", "LAT_SCALE": "lat_scale", "LONG_SCALE": "lon_scale",
-    "HEIGHT_SCALE": "height_scale",
-}  # fmt: skip
-TXT_COEFFS = {
-    "LINE_NUM_COEFF": "line_num", "LINE_DEN_COEFF": "line_den",
-    "SAMP_NUM_COEFF": "samp_num", "SAMP_DEN_COEFF": "samp_den",
-}  # fmt: skip
-_TXT_ALIASES = {"LON_OFF": "LONG_OFF", "LON_SCALE": "LONG_SCALE"}
-_UNIT = {
-    "LINE": "pixels",
-    "SAMP": "pixels",
-    "LAT": "degrees",
-    "LONG": "degrees",
-    "HEIGHT": "meters",
-}
-_INDEXED = re.compile(r"(LINE_NUM_COEFF|LINE_DEN_COEFF|SAMP_NUM_COEFF|SAMP_DEN_COEFF)_(\d+)")
+_TXT = STYLES["rpc_txt"]
+_INDEXED = re.compile(
+    rf"({'|'.join(_TXT.coeff_names())})_(\d+)"
+)  # a 1-based coefficient key, whatever its index
 
 
 def _key_value_lines(
@@ -89,7 +72,7 @@ def _key_value_lines(
         key = key.strip()
         if upper:
             key = key.upper()
-            key = _TXT_ALIASES.get(key, key)
+            key = NITF_ALIASES.get(key, key)
         if key in entries:
             if relevant(key):
                 raise RPCFormatError(
@@ -100,21 +83,24 @@ def _key_value_lines(
     return entries
 
 
-def _scalar(entries: dict[str, tuple[int, str]], key: str, source: str) -> float:
-    if key not in entries:
-        raise RPCFormatError(f"{source}: missing key {key}")
-    lineno, value = entries[key]
-    tokens = value.split()
-    where = f"line {lineno} ({key})"
-    if not tokens:
-        raise RPCFormatError(f"{source}: {where}: no value")
-    if len(tokens) > 1 and is_number(tokens[1]):
-        raise RPCFormatError(f"{source}: {where}: expected one value, got {value!r}")
-    return parse_number(tokens[0], source, where)  # a trailing unit word is allowed
+def _line_lookup(entries: dict[str, tuple[int, str]]):
+    """The ``lookup`` of :func:`~jaxgeo.io.rpc_common.read_scalars` over key: value lines."""
+
+    def lookup(key: str) -> tuple[str, str] | None:
+        if key not in entries:
+            return None
+        lineno, value = entries[key]
+        return f"line {lineno} ({key})", value
+
+    return lookup
 
 
 def _txt_relevant(key: str) -> bool:
-    return key in TXT_SCALARS or key in TXT_COEFFS or _INDEXED.fullmatch(key) is not None
+    return (
+        key in _TXT.scalar_names()
+        or key in _TXT.coeff_names()
+        or _INDEXED.fullmatch(key) is not None
+    )
 
 
 def read_rpc_txt(text: str, source: str) -> RPC:
@@ -126,26 +112,17 @@ def read_rpc_txt(text: str, source: str) -> RPC:
             raise RPCFormatError(
                 f"{source}: line {lineno}: {key}: coefficient index out of range 1..{N_TERMS}"
             )
-    scalars = {name: _scalar(entries, key, source) for key, name in TXT_SCALARS.items()}
-    coeffs: dict[str, list[float]] = {}
-    for key, name in TXT_COEFFS.items():
-        if key in entries and f"{key}_1" not in entries:  # GDAL metadata style: 20 on one line
-            lineno, value = entries[key]
-            coeffs[name] = parse_numbers(value, source, f"line {lineno} ({key})")
-        else:
-            coeffs[name] = [_scalar(entries, f"{key}_{i}", source) for i in range(1, N_TERMS + 1)]
-    return assemble(scalars, coeffs, source)
+    lookup = _line_lookup(entries)
+    scalars = read_scalars(_TXT, lookup, source)
+    return assemble(scalars, read_coeffs(_TXT, lookup, source), source)
 
 
 def format_rpc_txt(rpc: RPC, units: bool = False) -> str:
     """The ``_RPC.TXT`` text of ``rpc`` (RPC00B, full float64 precision)."""
-    values = vendor_values(rpc)
     lines = ["ERR_BIAS: -1", "ERR_RAND: -1"]  # unknown (the NITF RPC00B convention)
-    for key, name in TXT_SCALARS.items():
-        unit = f" {_UNIT[key.split('_')[0]]}" if units else ""
-        lines.append(f"{key}: {fmt(values[name])}{unit}")
-    for key, name in TXT_COEFFS.items():
-        lines += [f"{key}_{i + 1}: {fmt(c)}" for i, c in enumerate(values[name])]
+    for key, name, value in vendor_items(_TXT, vendor_values(rpc)):
+        unit = f" {key.unit}" if units and key.unit else ""
+        lines.append(f"{name}: {fmt(value)}{unit}")
     return "\n".join(lines) + "\n"
 
 
@@ -165,23 +142,8 @@ def write_rpc_text(
 
 # ------------------------------------------------------------------------ .RPB (ODL groups)
 
-RPB_SCALARS = {
-    "LINEOFFSET": "line_off", "SAMPOFFSET": "samp_off", "LATOFFSET": "lat_off",
-    "LONGOFFSET": "lon_off", "HEIGHTOFFSET": "height_off", "LINESCALE": "line_scale",
-    "SAMPSCALE": "samp_scale", "LATSCALE": "lat_scale", "LONGSCALE": "lon_scale",
-    "HEIGHTSCALE": "height_scale",
-}  # fmt: skip
-RPB_COEFFS = {
-    "LINENUMCOEF": "line_num", "LINEDENCOEF": "line_den",
-    "SAMPNUMCOEF": "samp_num", "SAMPDENCOEF": "samp_den",
-}  # fmt: skip
-_RPB_NAMES = {
-    "LINEOFFSET": "lineOffset", "SAMPOFFSET": "sampOffset", "LATOFFSET": "latOffset",
-    "LONGOFFSET": "longOffset", "HEIGHTOFFSET": "heightOffset", "LINESCALE": "lineScale",
-    "SAMPSCALE": "sampScale", "LATSCALE": "latScale", "LONGSCALE": "longScale",
-    "HEIGHTSCALE": "heightScale", "LINENUMCOEF": "lineNumCoef", "LINEDENCOEF": "lineDenCoef",
-    "SAMPNUMCOEF": "sampNumCoef", "SAMPDENCOEF": "sampDenCoef",
-}  # fmt: skip
+_RPB = STYLES["rpb"]
+_RPB_READ = {name.upper() for name in (*_RPB.scalar_names(), *_RPB.coeff_names(), "SpecId")}
 _ASSIGN = re.compile(r"([A-Za-z_]\w*)[ \t]*=[ \t]*")
 
 
@@ -201,36 +163,28 @@ def read_rpb(text: str, source: str) -> RPC:
             value = raw[raw.index("(") + 1 : raw.index(")")]
         else:
             value = raw.split(";", 1)[0].strip()
-        if key in items and key in {**RPB_SCALARS, **RPB_COEFFS, "SPECID": None}:
+        if key in items and key in _RPB_READ:
             raise RPCFormatError(
                 f"{source}: line {lineno}: {m.group(1)} repeats line {items[key][0]}"
             )
         items[key] = (lineno, m.group(1), value)
 
-    def get(key: str) -> tuple[str, str]:
-        if key not in items:
-            raise RPCFormatError(f"{source}: missing key {_RPB_NAMES[key]}")
-        lineno, name, value = items[key]
+    def lookup(key: str) -> tuple[str, str] | None:
+        if key.upper() not in items:
+            return None
+        lineno, name, value = items[key.upper()]
         return f"line {lineno} ({name})", value
 
     spec = items.get("SPECID")
     order = parse_order(
         spec[2] if spec else None, source, f"line {spec[0]} (SpecId)" if spec else ""
     )
-    scalars = {}
-    for key, name in RPB_SCALARS.items():
-        where, value = get(key)
-        scalars[name] = parse_number(value, source, where)
-    coeffs = {}
-    for key, name in RPB_COEFFS.items():
-        where, value = get(key)
-        coeffs[name] = parse_numbers(value, source, where, sep=",")
-    return assemble(scalars, coeffs, source, order=order)
+    scalars = read_scalars(_RPB, lookup, source)
+    return assemble(scalars, read_coeffs(_RPB, lookup, source), source, order=order)
 
 
 def format_rpb(rpc: RPC, sat_id: str = "UNKNOWN", band_id: str = "UNKNOWN") -> str:
     """The ``.RPB`` text of ``rpc`` in GDAL's layout (RPC00B, full float64 precision)."""
-    values = vendor_values(rpc)
     lines = [
         f'satId = "{sat_id}";',
         f'bandId = "{band_id}";',
@@ -239,10 +193,12 @@ def format_rpb(rpc: RPC, sat_id: str = "UNKNOWN", band_id: str = "UNKNOWN") -> s
         "\terrBias = -1;",
         "\terrRand = -1;",
     ]
-    lines += [f"\t{_RPB_NAMES[k]} = {fmt(values[n])};" for k, n in RPB_SCALARS.items()]
-    for key, name in RPB_COEFFS.items():
-        body = ",\n".join(f"\t\t\t{fmt(c)}" for c in values[name])
-        lines.append(f"\t{_RPB_NAMES[key]} = (\n{body});")
+    for key, name, value in vendor_items(_RPB, vendor_values(rpc)):
+        if key.field in COEFFS:
+            body = ",\n".join(f"\t\t\t{fmt(c)}" for c in value)
+            lines.append(f"\t{name} = (\n{body});")
+        else:
+            lines.append(f"\t{name} = {fmt(value)};")
     lines += ["END_GROUP = IMAGE", "END;"]
     return "\n".join(lines) + "\n"
 
@@ -267,16 +223,7 @@ def write_rpb(
 
 # ----------------------------------------------------------------- OSSIM .geom keyword list
 
-GEOM_SCALARS = {
-    "line_off": "line_off", "samp_off": "samp_off", "lat_off": "lat_off",
-    "long_off": "lon_off", "height_off": "height_off", "line_scale": "line_scale",
-    "samp_scale": "samp_scale", "lat_scale": "lat_scale", "long_scale": "lon_scale",
-    "height_scale": "height_scale",
-}  # fmt: skip
-GEOM_COEFFS = {
-    "line_num_coeff_": "line_num", "line_den_coeff_": "line_den",
-    "samp_num_coeff_": "samp_num", "samp_den_coeff_": "samp_den",
-}  # fmt: skip
+_GEOM = STYLES["ossim_geom"]
 GEOM_MARKER = re.compile(
     r"^[ \t]*([\w.]*?)(?:line|samp)_(?:num|den)_coeff_\d\d[ \t]*:", re.MULTILINE
 )
@@ -295,17 +242,9 @@ def read_ossim_geom(text: str, source: str) -> RPC:
 
     def relevant(key: str) -> bool:
         name = key.removeprefix(prefix)
-        return name in GEOM_SCALARS or name == "polynomial_format" or "_coeff_" in name
+        return name in _GEOM.scalar_names() or name == "polynomial_format" or "_coeff_" in name
 
     entries = _key_value_lines(text, source, upper=False, relevant=relevant)
-
-    def get(key: str) -> tuple[str, str]:
-        full = prefix + key
-        if full not in entries:
-            raise RPCFormatError(f"{source}: missing key {full}")
-        lineno, value = entries[full]
-        return f"line {lineno} ({full})", value
-
     fmt_entry = entries.get(prefix + "polynomial_format")
     order = parse_order(
         fmt_entry[1] if fmt_entry else None,
@@ -313,16 +252,16 @@ def read_ossim_geom(text: str, source: str) -> RPC:
         f"line {fmt_entry[0]} ({prefix}polynomial_format)" if fmt_entry else "",
     )
     _refuse_ossim_adjustment(entries, prefix, source)
-    scalars = {}
-    for key, name in GEOM_SCALARS.items():
-        where, value = get(key)
-        scalars[name] = parse_number(value, source, where)
-    coeffs = {}
-    for key, name in GEOM_COEFFS.items():
-        coeffs[name] = []
-        for i in range(N_TERMS):
-            where, value = get(f"{key}{i:02d}")
-            coeffs[name].append(parse_number(value, source, where))
+    lines = _line_lookup(entries)
+
+    def lookup(key: str) -> tuple[str, str] | None:
+        return lines(prefix + key)
+
+    def missing(key: str) -> str:
+        return f"missing key {prefix}{key}"
+
+    scalars = read_scalars(_GEOM, lookup, source, missing)
+    coeffs = read_coeffs(_GEOM, lookup, source, missing)
     return assemble(scalars, coeffs, source, order=order)
 
 

@@ -23,28 +23,18 @@ from __future__ import annotations
 import xml.etree.ElementTree as ET
 
 from ..models.rpc import RPC
-from .rpc_common import N_TERMS, RPCFormatError, assemble, parse_number, parse_numbers, parse_order
+from .rpc_common import (
+    RPCFormatError,
+    assemble,
+    parse_number,
+    parse_order,
+    read_coeffs,
+    read_scalars,
+)
+from .rpc_keys import STYLES
 
-DIMAP_SCALARS = {
-    "LINE_OFF": "line_off", "SAMP_OFF": "samp_off", "LAT_OFF": "lat_off",
-    "LONG_OFF": "lon_off", "HEIGHT_OFF": "height_off", "LINE_SCALE": "line_scale",
-    "SAMP_SCALE": "samp_scale", "LAT_SCALE": "lat_scale", "LONG_SCALE": "lon_scale",
-    "HEIGHT_SCALE": "height_scale",
-}  # fmt: skip
-DIMAP_COEFFS = {
-    "LINE_NUM_COEFF": "line_num", "LINE_DEN_COEFF": "line_den",
-    "SAMP_NUM_COEFF": "samp_num", "SAMP_DEN_COEFF": "samp_den",
-}  # fmt: skip
-MAXAR_SCALARS = {
-    "LINEOFFSET": "line_off", "SAMPOFFSET": "samp_off", "LATOFFSET": "lat_off",
-    "LONGOFFSET": "lon_off", "HEIGHTOFFSET": "height_off", "LINESCALE": "line_scale",
-    "SAMPSCALE": "samp_scale", "LATSCALE": "lat_scale", "LONGSCALE": "lon_scale",
-    "HEIGHTSCALE": "height_scale",
-}  # fmt: skip
-MAXAR_COEFFS = {
-    "LINENUMCOEF": "line_num", "LINEDENCOEF": "line_den",
-    "SAMPNUMCOEF": "samp_num", "SAMPDENCOEF": "samp_den",
-}  # fmt: skip
+_DIMAP = STYLES["dimap"]
+_MAXAR = STYLES["maxar_xml"]
 
 
 def parse_xml(text: str, source: str) -> ET.Element:
@@ -81,10 +71,18 @@ def xml_kind(root: ET.Element) -> str | None:
     return None
 
 
-def _text(node: ET.Element | None, tag: str, source: str, context: str) -> str:
-    if node is None:
-        raise RPCFormatError(f"{source}: missing <{tag}> in {context}")
-    return node.text or ""
+def _element_lookup(elements: dict[str, ET.Element]):
+    """The ``lookup`` of :func:`~jaxgeo.io.rpc_common.read_scalars` over child elements."""
+
+    def lookup(tag: str) -> tuple[str, str] | None:
+        node = elements.get(tag)
+        return None if node is None else (f"<{tag}>", node.text or "")
+
+    return lookup
+
+
+def _missing_in(context: str):
+    return lambda tag: f"missing <{tag}> in {context}"
 
 
 def read_dimap(root: ET.Element, source: str) -> RPC:
@@ -115,22 +113,17 @@ def read_dimap(root: ET.Element, source: str) -> RPC:
     if first_col is not None:
         origin = parse_number(first_col.text or "", source, "<FIRST_COL>")
 
-    values = _children(validity)
-    scalars = {}
-    for tag, name in DIMAP_SCALARS.items():
-        text = _text(values.get(tag), tag, source, f"<{_local(validity.tag)}>")
-        scalars[name] = parse_number(text, source, f"<{tag}>")
+    scalars = read_scalars(
+        _DIMAP,
+        _element_lookup(_children(validity)),
+        source,
+        _missing_in(f"<{_local(validity.tag)}>"),
+    )
     scalars["line_off"] -= origin
     scalars["samp_off"] -= origin
-
-    terms = _children(model)
-    coeffs = {}
-    for prefix, name in DIMAP_COEFFS.items():
-        coeffs[name] = []
-        for i in range(1, N_TERMS + 1):
-            tag = f"{prefix}_{i}"
-            text = _text(terms.get(tag), tag, source, f"<{_local(model.tag)}>")
-            coeffs[name].append(parse_number(text, source, f"<{tag}>"))
+    coeffs = read_coeffs(
+        _DIMAP, _element_lookup(_children(model)), source, _missing_in(f"<{_local(model.tag)}>")
+    )
     return assemble(scalars, coeffs, source, order=order)
 
 
@@ -142,17 +135,13 @@ def read_maxar_xml(root: ET.Element, source: str) -> RPC:
         raise RPCFormatError(f"{source}: missing <RPB><IMAGE>")
     spec = _children(rpb).get("SPECID")
     order = parse_order(spec.text if spec is not None else None, source, "<SPECID>")
-    values = _children(image)
-    scalars = {}
-    for tag, name in MAXAR_SCALARS.items():
-        scalars[name] = parse_number(
-            _text(values.get(tag), tag, source, "<RPB><IMAGE>"), source, f"<{tag}>"
-        )
-    coeffs = {}
-    for tag, name in MAXAR_COEFFS.items():
+    missing = _missing_in("<RPB><IMAGE>")
+    scalars = read_scalars(_MAXAR, _element_lookup(_children(image)), source, missing)
+
+    def polynomial(tag: str) -> tuple[str, str] | None:
         nodes = [e for e in image.iter() if _local(e.tag).upper() == tag]
-        if not nodes:
-            raise RPCFormatError(f"{source}: missing <{tag}> in <RPB><IMAGE>")
-        text = " ".join(n.text or "" for n in nodes)  # one list, or one element per coefficient
-        coeffs[name] = parse_numbers(text, source, f"<{tag}>")
+        # one list, or one element per coefficient
+        return (f"<{tag}>", " ".join(n.text or "" for n in nodes)) if nodes else None
+
+    coeffs = read_coeffs(_MAXAR, polynomial, source, missing)
     return assemble(scalars, coeffs, source, order=order)

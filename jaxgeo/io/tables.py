@@ -17,13 +17,14 @@ empty cell takes the default (0.3 m, as in 000_5aba1cb50921f3c6.txt section 4).
 pixel. ``sigma_px`` a priori standard deviation (default 0.5 px). A point id that appears in OBS
 but not in GROUND is a tie point.
 
-Errors name the file, the line and the column at fault; nothing is silently skipped.
+Errors name the file, the line and the column at fault; nothing is silently skipped. The data
+types read and written here (:class:`GroundPoints`, :class:`Observations`) live in
+:mod:`jaxgeo.io.observations` and are re-exported under their old names.
 """
 
 from __future__ import annotations
 
 import csv
-import dataclasses
 import io
 import math
 import os
@@ -32,71 +33,16 @@ import pathlib
 import numpy as np
 
 from .atomic import atomic_write_text
+from .observations import ROLES as ROLES
+from .observations import GroundPoints as GroundPoints
+from .observations import Observations as Observations
 
-ROLES = ("gcp", "check")
 DEFAULT_GROUND_SIGMA_M = 0.3
 DEFAULT_IMAGE_SIGMA_PX = 0.5
 
 
 class TableError(ValueError):
     """A GROUND/OBS table that cannot be read; the message names file, line and column."""
-
-
-@dataclasses.dataclass(frozen=True)
-class GroundPoints:
-    """Ground points: ``ids``, ``lonlath`` (n, 3) deg/deg/m, ``role``, ``sigma_m`` (n, 3) ENU m."""
-
-    ids: tuple[str, ...]
-    lonlath: np.ndarray
-    role: tuple[str, ...]
-    sigma_m: np.ndarray
-
-    def __post_init__(self):
-        n = len(self.ids)
-        if self.lonlath.shape != (n, 3) or self.sigma_m.shape != (n, 3) or len(self.role) != n:
-            raise ValueError("GroundPoints: ids, lonlath (n,3), role and sigma_m (n,3) disagree")
-
-    def __len__(self) -> int:
-        return len(self.ids)
-
-    def select(self, role: str) -> GroundPoints:
-        """The points with this role (``gcp`` or ``check``)."""
-        keep = [i for i, r in enumerate(self.role) if r == role]
-        return GroundPoints(
-            tuple(self.ids[i] for i in keep),
-            self.lonlath[keep],
-            tuple(self.role[i] for i in keep),
-            self.sigma_m[keep],
-        )
-
-    def with_roles(self, roles: dict[str, str]) -> GroundPoints:
-        """A copy with the role of some points changed (``{id: role}``)."""
-        for pid, r in roles.items():
-            if r not in ROLES:
-                raise ValueError(f"role of point {pid!r} must be one of {ROLES}, got {r!r}")
-            if pid not in self.ids:
-                raise KeyError(f"no ground point {pid!r}")
-        return dataclasses.replace(
-            self, role=tuple(roles.get(i, r) for i, r in zip(self.ids, self.role, strict=True))
-        )
-
-
-@dataclasses.dataclass(frozen=True)
-class Observations:
-    """Image measurements: ``point_ids``, ``images``, ``xy`` (m, 2) px, ``sigma_px`` (m,)."""
-
-    point_ids: tuple[str, ...]
-    images: tuple[str, ...]
-    xy: np.ndarray
-    sigma_px: np.ndarray
-
-    def __post_init__(self):
-        m = len(self.point_ids)
-        if self.xy.shape != (m, 2) or self.sigma_px.shape != (m,) or len(self.images) != m:
-            raise ValueError("Observations: point_ids, images, xy (m,2) and sigma_px (m,) disagree")
-
-    def __len__(self) -> int:
-        return len(self.point_ids)
 
 
 def _float(value: str, where: str, column: str, allow_empty: bool = False) -> float:

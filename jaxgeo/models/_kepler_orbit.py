@@ -23,7 +23,9 @@ import numpy as np
 from jaxtyping import Array, ArrayLike, Float
 
 from .. import geodesy
-from ..io.metadata import SceneMetadata
+from ..rotations import orbit_frame, rot_x, rot_y, rot_z
+from .metadata import SceneMetadata
+from .newton import newton_root
 
 GM_M3_S2 = geodesy.GM_EARTH_M3_S2
 OMEGA_RAD_S = geodesy.OMEGA_EARTH_RAD_S
@@ -46,34 +48,21 @@ def _stumpff(z):
     return c, s
 
 
-def _kepler_equation(chi, r0n, vr0_mu, alpha, mu_dt):
-    """Universal Kepler equation (Curtis eq. 3.49) as ``(F(chi) - sqrt(mu) dt, F'(chi))``."""
+def _kepler_equation(chi, args):
+    """Universal Kepler equation (Curtis eq. 3.49) as ``F(chi) - sqrt(mu) dt``."""
+    r0n, vr0_mu, alpha, mu_dt = args
     z = alpha * chi**2
     c, s = _stumpff(z)
     value = r0n * vr0_mu * chi**2 * c + (1.0 - alpha * r0n) * chi**3 * s + r0n * chi
-    slope = r0n * vr0_mu * chi * (1.0 - z * s) + (1.0 - alpha * r0n) * chi**2 * c + r0n
-    return value - mu_dt, slope
+    return value - mu_dt
 
 
-@jax.custom_jvp
 def _universal_anomaly(r0n, vr0_mu, alpha, mu_dt):
-    """Root ``chi`` of the universal Kepler equation, Newton from ``alpha sqrt(mu) dt``;
-    differentiated implicitly (custom JVP): exact derivatives of every order."""
-    args = jax.lax.stop_gradient((r0n, vr0_mu, alpha, mu_dt))
-
-    def step(_, chi):
-        value, slope = _kepler_equation(chi, *args)
-        return chi - value / slope
-
-    return jax.lax.fori_loop(0, _KEPLER_ITERATIONS, step, args[2] * args[3])
-
-
-@_universal_anomaly.defjvp
-def _universal_anomaly_jvp(primals, tangents):
-    chi = _universal_anomaly(*primals)
-    _, slope = _kepler_equation(chi, *primals)
-    _, dvalue = jax.jvp(lambda *a: _kepler_equation(chi, *a)[0], primals, tangents)
-    return chi, -dvalue / slope
+    """Root ``chi`` of the universal Kepler equation, ``_KEPLER_ITERATIONS`` Newton steps from
+    ``alpha sqrt(mu) dt`` (:func:`~jaxgeo.models.newton.newton_root`: implicit derivatives of
+    every order)."""
+    args = (r0n, vr0_mu, alpha, mu_dt)
+    return newton_root(_kepler_equation, alpha * mu_dt, args, max_steps=_KEPLER_ITERATIONS).value
 
 
 def propagate(
@@ -168,12 +157,10 @@ def inertial_to_ecef(vector: Float[ArrayLike, "*batch 3"], tau_s) -> Float[Array
     return _spin(jnp.asarray(vector, dtype=float), -OMEGA_RAD_S * jnp.asarray(tau_s))
 
 
-def mounting(along_track_angle_deg: float, across_track_angle_deg: float) -> np.ndarray:
-    """Camera-to-platform rotation ``R_M = R_y(-alpha) R_x(-beta)`` (numpy constant)."""
+def mounting(along_track_angle_deg: float, across_track_angle_deg: float) -> Float[Array, "3 3"]:
+    """Camera-to-platform rotation ``R_M = R_y(-alpha) R_x(-beta)``."""
     a, b = np.deg2rad(along_track_angle_deg), np.deg2rad(across_track_angle_deg)
-    ry = np.array([[np.cos(a), 0.0, -np.sin(a)], [0.0, 1.0, 0.0], [np.sin(a), 0.0, np.cos(a)]])
-    rx = np.array([[1.0, 0.0, 0.0], [0.0, np.cos(b), np.sin(b)], [0.0, -np.sin(b), np.cos(b)]])
-    return ry @ rx
+    return rot_y(-a) @ rot_x(-b)
 
 
 def _rotate(vector, axis, angle, transpose=False):
@@ -190,17 +177,12 @@ def _rotate(vector, axis, angle, transpose=False):
 _propagate_jit = jax.jit(propagate)
 
 
-def _rz(angle):
-    c, s = np.cos(angle), np.sin(angle)
-    return np.array([[c, -s, 0.0], [s, c, 0.0], [0.0, 0.0, 1.0]])
+def _rot_z_host(angle) -> np.ndarray:
+    return np.asarray(rot_z(angle))
 
 
-def _frame(position, velocity):
-    """Orbit frame columns (along, across, radial), as :func:`jaxgeo.rotations.orbit_frame`."""
-    z = position / np.linalg.norm(position)
-    y = np.cross(z, velocity)
-    y = y / np.linalg.norm(y)
-    return np.stack([np.cross(y, z), y, z], axis=1)
+def _orbit_frame_host(position, velocity) -> np.ndarray:
+    return np.asarray(orbit_frame(position, velocity))
 
 
 def _ground_track(scene: SceneMetadata) -> tuple[np.ndarray, np.ndarray]:
@@ -234,9 +216,9 @@ def _circular_state_over(scene, cam, delta_m, iterations):
         w = np.cross(omega, sat)  # Earth-fixed velocity at the satellite: v_inertial = s t + w
         tw = np.dot(t, w)
         vel = (-tw + np.sqrt(tw**2 - np.dot(w, w) + speed**2)) * t + w
-        frame = _frame(sat, vel)
+        frame = _orbit_frame_host(sat, vel)
         kappa = _yaw(frame[:, 0], frame[:, 2], t)
-        look = frame @ _rz(kappa) @ mount @ np.array([0.0, 0.0, -1.0])
+        look = frame @ _rot_z_host(kappa) @ mount @ np.array([0.0, 0.0, -1.0])
         cb = np.dot(centre, look)
         rho = cb + np.sqrt(cb**2 - np.dot(centre, centre) + radius**2)
         sat = centre - rho * look
@@ -246,7 +228,7 @@ def _circular_state_over(scene, cam, delta_m, iterations):
 def _epoch_state(scene, cam, delta_m, iterations):
     """The scene's circular state carried back to the sequence epoch (inertial frame)."""
     pos, vel = _circular_state_over(scene, cam, delta_m, iterations)
-    rot = _rz(OMEGA_RAD_S * cam.centre_time_s)
+    rot = _rot_z_host(OMEGA_RAD_S * cam.centre_time_s)
     pos, vel = _propagate_jit(rot @ pos, rot @ vel, -cam.centre_time_s)
     return np.asarray(pos), np.asarray(vel)
 
@@ -284,5 +266,5 @@ def _yaw_along_track(scene, cam, pos0, vel0) -> float:
     tau = cam.centre_time_s
     pos, vel = (np.asarray(v) for v in _propagate_jit(pos0, vel0, tau))
     _, track = _ground_track(scene)
-    frame = _frame(pos, vel)
-    return _yaw(frame[:, 0], frame[:, 2], _rz(OMEGA_RAD_S * tau) @ track)
+    frame = _orbit_frame_host(pos, vel)
+    return _yaw(frame[:, 0], frame[:, 2], _rot_z_host(OMEGA_RAD_S * tau) @ track)

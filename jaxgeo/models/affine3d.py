@@ -22,7 +22,7 @@ object-space units are :meth:`Affine3D.raw_parameters`; :meth:`Affine3D.from_raw
 ``project`` takes geodetic ground ``(lon_deg, lat_deg, h_m)`` whatever the object space (the
 conversion uses :mod:`jaxgeo.geodesy`, so everything stays differentiable). ``localize`` at a
 fixed height is closed form in the geographic and UTM spaces (a 2 x 2 linear system) and the
-inherited Newton iteration in the geocentric space.
+shared Newton iteration in the geocentric space.
 """
 
 from __future__ import annotations
@@ -30,12 +30,13 @@ from __future__ import annotations
 from typing import Literal
 
 import equinox as eqx
+import jax
 import jax.numpy as jnp
 import numpy as np
-from jaxtyping import Array, ArrayLike, Float
+from jaxtyping import Array, ArrayLike, Float, PyTree
 
 from .. import geodesy
-from .base import AbstractSensorModel
+from .base import AbstractSensorModel, all_inexact
 
 ObjectSpace = Literal["geocentric", "geographic", "utm"]
 SPACES = ("geocentric", "geographic", "utm")
@@ -145,26 +146,11 @@ class Affine3D(AbstractSensorModel):
     def reference_ground(self) -> Float[Array, "3"]:
         return jnp.asarray(self.ground_reference)
 
-    def localize(
-        self,
-        image: Float[ArrayLike, "*batch 2"],
-        h: Float[ArrayLike, "*batch"],
-        guess: Float[ArrayLike, "*batch 2"] | None = None,
-    ) -> Float[Array, "*batch 3"]:
-        """Image ``(x, y)`` px at height ``h`` m -> ground ``(lon_deg, lat_deg, h_m)``.
-
-        Closed form (2 x 2 linear system) in the geographic and UTM spaces, where ``h`` is an
-        object coordinate; Newton (the inherited default, ``guess`` used) in geocentric space.
-        """
+    def _localize_point(self, image, h, guess):
+        """Closed form (a 2 x 2 linear system) in the geographic and UTM spaces, where ``h`` is
+        an object coordinate; the shared Newton (``guess`` used) in geocentric space."""
         if self.space == "geocentric":
-            return super().localize(image, h, guess)
-        image = jnp.asarray(image, dtype=float)
-        if image.shape[-1:] != (2,):
-            raise ValueError(f"image coordinates need a last axis of size 2, got {image.shape}")
-        h = jnp.asarray(h, dtype=float)
-        batch = jnp.broadcast_shapes(image.shape[:-1], h.shape)
-        image = jnp.broadcast_to(image, (*batch, 2))
-        h = jnp.broadcast_to(h, batch)
+            return super()._localize_point(image, h, guess)
         off, scale = jnp.asarray(self.object_offset), jnp.asarray(self.object_scale)
         xn = (image - jnp.asarray(self.image_offset)) / jnp.asarray(self.image_scale)
         hn = (h - off[2]) / scale[2]
@@ -177,6 +163,16 @@ class Affine3D(AbstractSensorModel):
         if self.space == "utm":
             return geodesy.utm_to_geodetic(obj, self.zone, self.north)
         return obj
+
+    def adjustable_filter(self) -> PyTree[bool]:
+        """The eight parameters (every floating-point leaf)."""
+        return all_inexact(self)
+
+    def required_gcps(self, dynamic: PyTree) -> tuple[int, str] | None:
+        """Four non-coplanar GCPs when the parameters are adjusted."""
+        if jax.tree.leaves(dynamic):
+            return 4, "the 3D affine model (8 parameters, non-coplanar GCPs)"
+        return None
 
     # --- the paper's parameters --------------------------------------------------------
 

@@ -19,10 +19,13 @@ from __future__ import annotations
 import abc
 
 import equinox as eqx
+import jax
 import jax.numpy as jnp
-from jaxtyping import Array, ArrayLike, Float
+import numpy as np
+from jaxtyping import Array, ArrayLike, Float, PyTree
 
-from .base import AbstractSensorModel
+from .base import AbstractSensorModel, all_inexact, nothing
+from .rpc import RPC
 
 
 class AbstractBias(eqx.Module):
@@ -137,12 +140,9 @@ class Biased(AbstractSensorModel):
     def project(self, ground: Float[ArrayLike, "*batch 3"]) -> Float[Array, "*batch 2"]:
         return self.bias.from_model(self.model.project(ground))
 
-    def localize(
-        self,
-        image: Float[ArrayLike, "*batch 2"],
-        h: Float[ArrayLike, "*batch"],
-        guess: Float[ArrayLike, "*batch 2"] | None = None,
-    ) -> Float[Array, "*batch 3"]:
+    def _localize_point(self, image, h, guess):
+        # exact inverse of project: undo the bias (closed form), then the wrapped model's own
+        # localisation (direct where it has one), not a Newton solve on the biased projection
         return self.model.localize(self.bias.to_model(image), h, guess)
 
     def reference_ground(self) -> Float[Array, "3"]:
@@ -151,6 +151,41 @@ class Biased(AbstractSensorModel):
     def prior_residuals(self) -> Float[Array, " n"]:
         """The wrapped model's soft constraints (the bias itself has none)."""
         return self.model.prior_residuals()
+
+    def adjustable_filter(self) -> PyTree[bool]:
+        """The bias's floating-point leaves; the wrapped model stays fixed."""
+        return eqx.tree_at(lambda m: m.bias, nothing(self), all_inexact(self.bias))
+
+    def required_gcps(self, dynamic: PyTree) -> tuple[int, str] | None:
+        """Half the bias parameters in GCPs when the bias is adjusted."""
+        if jax.tree.leaves(dynamic.bias):
+            n = self.bias.n_params
+            return n // 2, f"the {type(self.bias).__name__} bias ({n} parameters)"
+        return None
+
+    def exact_rpc(self) -> RPC | None:
+        """The wrapped model's exact RPC with a pure shift (``Shift``, or zero drift / matrix)
+        folded into its image offsets; ``None`` for other biases (they mix sample and line,
+        whose denominators differ: the exporter refits)."""
+        inner = self.model.exact_rpc()
+        if inner is None:
+            return None
+        a0, m = (np.asarray(x) for x in _coefficients(self.bias))
+        if not (isinstance(self.bias, Shift) or not np.any(m)):
+            return None
+        return RPC(
+            inner.num,
+            inner.den,
+            inner.ground_offset,
+            inner.ground_scale,
+            np.asarray(inner.image_offset) - a0,
+            inner.image_scale,
+        )
+
+
+@eqx.filter_jit
+def _coefficients(bias):
+    return bias.coefficients()
 
 
 BIAS_KINDS = {"shift": Shift, "shift-drift": ShiftDrift, "affine": Affine}

@@ -43,16 +43,12 @@ import equinox as eqx
 import jax
 import jax.numpy as jnp
 import numpy as np
-from jaxtyping import Array, ArrayLike, Float, Int
+from jaxtyping import Array, ArrayLike, Float, Int, PyTree
 
 from .. import geodesy
 from ..rotations import omega_phi_kappa, orbit_frame, rot_x, rot_y, rot_z
-from .base import AbstractSensorModel
-
-J2 = 1.08262668e-3
-"""Earth's second zonal harmonic (sun-synchronous inclination)."""
-SUN_SYNC_RATE_RAD_S = 2.0 * math.pi / (365.2421897 * 86400.0)
-"""Required nodal precession of a sun-synchronous orbit (rad/s)."""
+from .base import AbstractSensorModel, all_inexact
+from .newton import newton_root
 
 
 def polyval(coeffs: Float[Array, "m k"], tau: Float[Array, "*batch"]) -> Float[Array, "*batch m"]:
@@ -63,48 +59,29 @@ def polyval(coeffs: Float[Array, "m k"], tau: Float[Array, "*batch"]) -> Float[A
     return out
 
 
-def _offset(model, ecef, t):
+def _offset(t, args):
+    model, ecef = args
     return model._scan_plane_offset(t, ecef)
 
 
-@jax.custom_jvp
 def scan_time(model: EphemerisModel, ecef: Float[Array, "*batch 3"]) -> Float[Array, "*batch"]:
-    """Scan time (s) at which ``model`` images the ECEF points: Newton's method in ``t`` from
-    the centre line (``model.newton_steps`` steps, in a loop). Derivatives come from the implicit
-    function theorem (``dt = -dg / g_t`` on the scan-plane offset ``g``), to any order, so the
-    loop itself is never differentiated."""
-    t = jnp.broadcast_to(model.centre_time_s(), ecef.shape[:-1])
+    """Scan time (s) at which ``model`` images the ECEF points: ``model.newton_steps`` Newton
+    steps in ``t`` from the centre line (:func:`~jaxgeo.models.newton.newton_root`), with
+    derivatives of every order from the implicit function theorem (``dt = -dg / g_t`` on the
+    scan-plane offset ``g``)."""
+    t0 = model.centre_time_s()
+    flat = ecef.reshape(-1, 3)
 
-    def newton(_, t):
-        g, dg = jax.jvp(lambda s: _offset(model, ecef, s), (t,), (jnp.ones_like(t),))
-        return t - g / dg
+    def one(point):
+        return newton_root(_offset, t0, (model, point), max_steps=model.newton_steps).value
 
-    return jax.lax.fori_loop(0, model.newton_steps, newton, t)
-
-
-@scan_time.defjvp
-def _scan_time_jvp(primals, tangents):
-    model, ecef = primals
-    d_model, d_ecef = tangents
-    t = scan_time(model, ecef)
-    _, g_dot = jax.jvp(lambda m, x: _offset(m, x, t), (model, ecef), (d_model, d_ecef))
-    _, g_t = jax.jvp(lambda s: _offset(model, ecef, s), (t,), (jnp.ones_like(t),))
-    return t, -g_dot / g_t
+    return jax.vmap(one)(flat).reshape(ecef.shape[:-1])
 
 
 def mounting(view_angles_rad: Float[ArrayLike, "3"]) -> Float[Array, "3 3"]:
     """``Q_BP = R_y(-alpha) R_x(-beta) R_z(gamma)`` from ``(alpha, beta, gamma)`` in radians."""
     a = jnp.asarray(view_angles_rad, dtype=float)
     return rot_y(-a[..., 0]) @ rot_x(-a[..., 1]) @ rot_z(a[..., 2])
-
-
-def angles_from_matrix(r: np.ndarray) -> np.ndarray:
-    """Inverse of :func:`jaxgeo.rotations.omega_phi_kappa`: ``(..., 3, 3) -> (..., 3)`` radians."""
-    r = np.asarray(r, dtype=float)
-    omega = np.arctan2(-r[..., 1, 2], r[..., 2, 2])
-    phi = np.arcsin(np.clip(r[..., 0, 2], -1.0, 1.0))
-    kappa = np.arctan2(-r[..., 0, 1], r[..., 0, 0])
-    return np.stack([omega, phi, kappa], axis=-1)
 
 
 class EphemerisModel(AbstractSensorModel):
@@ -252,31 +229,13 @@ class EphemerisModel(AbstractSensorModel):
         d = jnp.einsum("...ij,...j->...i", q_gi @ self.camera_to_eci(t), u)
         return centre, d / jnp.linalg.norm(d, axis=-1, keepdims=True)
 
-    def localize(
-        self,
-        image: Float[ArrayLike, "*batch 2"],
-        h: Float[ArrayLike, "*batch"],
-        guess: Float[ArrayLike, "*batch 2"] | None = None,
-    ) -> Float[Array, "*batch 3"]:
-        """Image ``(x, y)`` px at ellipsoidal height ``h`` m -> ``(lon_deg, lat_deg, h_m)``.
-
-        Direct intersection of the image ray with the ellipsoid inflated by ``h``, then Newton
-        steps along the ray on the exact geodetic height. ``guess`` is ignored. Rays that miss
-        the ellipsoid give NaN.
-        """
-        image = jnp.asarray(image, dtype=float)
-        if image.shape[-1:] != (2,):
-            raise ValueError(
-                f"image coordinates must have a last axis of size 2, got {image.shape}"
-            )
-        h = jnp.asarray(h, dtype=float)
-        batch = jnp.broadcast_shapes(image.shape[:-1], h.shape)
-        image = jnp.broadcast_to(image, (*batch, 2))
-        h = jnp.broadcast_to(h, batch)
+    def _localize_point(self, image, h, guess):
+        """Direct, not the shared Newton on ``project``: the image ray meets the ellipsoid
+        inflated by ``h``, then Newton steps along the ray on the exact geodetic height.
+        ``guess`` is ignored. A ray that misses the ellipsoid gives NaN."""
+        del guess
         centre, d = self.image_ray(image)
-        axes = jnp.stack(
-            [geodesy.WGS84_A_M + h, geodesy.WGS84_A_M + h, geodesy.WGS84_B_M + h], axis=-1
-        )
+        axes = jnp.stack([geodesy.WGS84_A_M + h, geodesy.WGS84_A_M + h, geodesy.WGS84_B_M + h])
         p, q = centre / axes, d / axes
         qa, qb, qc = jnp.sum(q * q, -1), jnp.sum(p * q, -1), jnp.sum(p * p, -1) - 1.0
         disc = qb * qb - qa * qc
@@ -284,18 +243,26 @@ class EphemerisModel(AbstractSensorModel):
         s = (-qb - jnp.sqrt(jnp.where(ok, disc, 1.0))) / qa
 
         def refine(_, s):
-            geo = geodesy.ecef_to_geodetic(centre + s[..., None] * d)
-            up = geodesy.enu_rotation(geo[..., 0], geo[..., 1])[..., 2, :]
-            return s - (geo[..., 2] - h) / jnp.sum(up * d, -1)
+            geo = geodesy.ecef_to_geodetic(centre + s * d)
+            up = geodesy.enu_rotation(geo[0], geo[1])[2, :]
+            return s - (geo[2] - h) / jnp.sum(up * d, -1)
 
         s = jax.lax.fori_loop(0, 3, refine, s)
-        geo = geodesy.ecef_to_geodetic(centre + s[..., None] * d)
-        out = jnp.concatenate([geo[..., :2], h[..., None]], axis=-1)
-        return jnp.where(ok[..., None], out, jnp.nan)
+        geo = geodesy.ecef_to_geodetic(centre + s * d)
+        out = jnp.concatenate([geo[:2], h[None]])
+        return jnp.where(ok, out, jnp.nan)
 
     def reference_ground(self) -> Float[Array, "3"]:
         centre = jnp.array([self.principal_col_px, 0.5 * (self.n_rows - 1)])
         return self.localize(centre, self.h_ref_m)
+
+    def adjustable_filter(self) -> PyTree[bool]:
+        """Every floating-point leaf (orbit, attitude, mounting, timing, interior orientation):
+        give an explicit filter to free fewer."""
+        return all_inexact(self)
+
+    def required_gcps(self, dynamic: PyTree) -> None:
+        return None
 
     # ------------------------------------------------------------------------ construction
 
@@ -322,19 +289,7 @@ class EphemerisModel(AbstractSensorModel):
         return cls(**kw)
 
 
-# ---------------------------------------------------------------------- orbits and missions
-
-
-def sun_synchronous_inclination_deg(altitude_m: float) -> float:
-    """Inclination (deg) of a circular sun-synchronous orbit ``altitude_m`` above the equator."""
-    a = geodesy.WGS84_A_M + altitude_m
-    cos_i = (
-        -2.0
-        * SUN_SYNC_RATE_RAD_S
-        * a**3.5
-        / (3.0 * J2 * geodesy.WGS84_A_M**2 * math.sqrt(geodesy.GM_EARTH_M3_S2))
-    )
-    return math.degrees(math.acos(cos_i))
+# ---------------------------------------------------------------------------- time
 
 
 def gmst_rad(utc: str | _dt.datetime) -> float:
@@ -348,146 +303,3 @@ def gmst_rad(utc: str | _dt.datetime) -> float:
     c = d / 36525.0
     deg = 280.46061837 + 360.98564736629 * d + 0.000387933 * c**2 - c**3 / 38710000.0
     return math.radians(deg % 360.0)
-
-
-@dataclasses.dataclass(frozen=True)
-class CircularOrbit:
-    """Circular Kepler orbit: radius ``WGS84_A + altitude_m``, ascending node ``raan_rad`` and
-    argument of latitude ``arg_lat0_rad`` at ``t = 0`` (ECI of the model)."""
-
-    altitude_m: float
-    inclination_deg: float
-    raan_rad: float
-    arg_lat0_rad: float
-
-    @property
-    def radius_m(self) -> float:
-        return geodesy.WGS84_A_M + self.altitude_m
-
-    @property
-    def mean_motion_rad_s(self) -> float:
-        return math.sqrt(geodesy.GM_EARTH_M3_S2 / self.radius_m**3)
-
-    def state(self, t_s: ArrayLike) -> tuple[np.ndarray, np.ndarray]:
-        """ECI position (m) and velocity (m/s), each ``(n, 3)``, at times ``t_s``."""
-        t = np.atleast_1d(np.asarray(t_s, dtype=float))
-        u = self.arg_lat0_rad + self.mean_motion_rad_s * t
-        i, o = math.radians(self.inclination_deg), self.raan_rad
-        cu, su, ci, si, co, so = (
-            np.cos(u),
-            np.sin(u),
-            math.cos(i),
-            math.sin(i),
-            math.cos(o),
-            math.sin(o),
-        )
-        r, v = self.radius_m, self.radius_m * self.mean_motion_rad_s
-        pos = r * np.stack([co * cu - so * su * ci, so * cu + co * su * ci, su * si], -1)
-        vel = v * np.stack([-co * su - so * cu * ci, -so * su + co * cu * ci, cu * si], -1)
-        return pos, vel
-
-    @classmethod
-    def over(
-        cls,
-        lon_deg: float,
-        lat_deg: float,
-        altitude_m: float,
-        inclination_deg: float,
-        sidereal_angle_rad: float,
-        t_over_s: float = 0.0,
-        descending: bool = True,
-    ) -> CircularOrbit:
-        """The orbit whose radius vector passes through ``(lon, lat, 0)`` at ``t_over_s``."""
-        ecef = np.asarray(geodesy.geodetic_to_ecef(jnp.array([lon_deg, lat_deg, 0.0])))
-        lat_gc = math.asin(ecef[2] / np.linalg.norm(ecef))
-        i = math.radians(inclination_deg)
-        ratio = math.sin(lat_gc) / math.sin(i)
-        if abs(ratio) > 1.0:
-            raise ValueError(
-                f"an orbit of inclination {inclination_deg} deg never reaches lat {lat_deg}"
-            )
-        u = math.pi - math.asin(ratio) if descending else math.asin(ratio)
-        theta = sidereal_angle_rad + geodesy.OMEGA_EARTH_RAD_S * t_over_s
-        raan = math.radians(lon_deg) + theta - math.atan2(math.sin(u) * math.cos(i), math.cos(u))
-        orbit = cls(altitude_m, inclination_deg, raan, 0.0)
-        return dataclasses.replace(orbit, arg_lat0_rad=u - orbit.mean_motion_rad_s * t_over_s)
-
-
-def ground_track_attitude(pos_eci: np.ndarray, vel_eci: np.ndarray) -> np.ndarray:
-    """Yaw-steering attitude ``(n, 3)`` (omega, phi, kappa rad): the body x axis follows the
-    ground-relative (ECEF) velocity, so tilted cameras sweep the same ground track (the Earth
-    rotation compensation of Cartosat-1)."""
-    pos, vel = np.asarray(pos_eci, float), np.asarray(vel_eci, float)
-    w = np.array([0.0, 0.0, geodesy.OMEGA_EARTH_RAD_S])
-    q_io = _orbit_frame_np(pos, vel)
-    q_ib = _orbit_frame_np(pos, vel - np.cross(w, pos))
-    return angles_from_matrix(np.swapaxes(q_io, -1, -2) @ q_ib)
-
-
-def _orbit_frame_np(p: np.ndarray, v: np.ndarray) -> np.ndarray:
-    """numpy twin of :func:`jaxgeo.rotations.orbit_frame` (no dispatch cost in set-up code)."""
-    z = p / np.linalg.norm(p, axis=-1, keepdims=True)
-    y = np.cross(z, v)
-    y = y / np.linalg.norm(y, axis=-1, keepdims=True)
-    return np.stack([np.cross(y, z), y, z], axis=-1)
-
-
-def fit_polynomial(tau: np.ndarray, values: np.ndarray, order: int) -> np.ndarray:
-    """Least-squares coefficients ``(m, order + 1)`` of ``values (n, m)`` in powers of ``tau``."""
-    vander = np.asarray(tau, float)[:, None] ** np.arange(order + 1)
-    coeffs, *_ = np.linalg.lstsq(vander, np.asarray(values, float), rcond=None)
-    return coeffs.T
-
-
-def ephemeris_from_orbit(
-    orbit: CircularOrbit,
-    t_span_s: tuple[float, float],
-    *,
-    sidereal_angle_rad: float,
-    first_line_time_s: float,
-    line_time_s: float,
-    n_rows: int,
-    n_cols: int,
-    focal_length_m: float,
-    pixel_size_m: float,
-    view_angles_deg: tuple[float, float, float] = (0.0, 0.0, 0.0),
-    position_order: int = 3,
-    velocity_order: int | None = None,
-    attitude_order: int = 5,
-    attitude_offsets_rad: ArrayLike | None = None,
-    h_ref_m: float = 0.0,
-    n_samples: int = 201,
-) -> EphemerisModel:
-    """A model from physical mission parameters: the polynomials are fitted to the circular
-    orbit and its yaw-steering attitude over ``t_span_s``; ``attitude_offsets_rad`` ``(3, k)``
-    adds polynomial pointing deviations (of ``tau``) to the steering law."""
-    t0, t1 = (float(v) for v in t_span_s)
-    if not t1 > t0:
-        raise ValueError(f"empty time span {t_span_s}")
-    t_ref, t_scale = 0.5 * (t0 + t1), 0.5 * (t1 - t0)
-    t = np.linspace(t0, t1, n_samples)
-    tau = (t - t_ref) / t_scale
-    pos, vel = orbit.state(t)
-    att = fit_polynomial(tau, ground_track_attitude(pos, vel), attitude_order)
-    if attitude_offsets_rad is not None:
-        off = np.asarray(attitude_offsets_rad, float)
-        att[:, : off.shape[1]] += off[:, : att.shape[1]]
-    f = lambda v: jnp.asarray(v, dtype=float)  # noqa: E731
-    return EphemerisModel(
-        position_coeffs=f(fit_polynomial(tau, pos, position_order)),
-        velocity_coeffs=f(fit_polynomial(tau, vel, velocity_order or position_order)),
-        attitude_coeffs=f(att),
-        view_angles_rad=f(np.radians(view_angles_deg)),
-        t_ref_s=f(t_ref),
-        t_scale_s=f(t_scale),
-        first_line_time_s=f(first_line_time_s),
-        line_time_s=f(line_time_s),
-        sidereal_angle_rad=f(sidereal_angle_rad),
-        focal_length_m=f(focal_length_m),
-        pixel_size_m=f(pixel_size_m),
-        principal_col_px=f(0.5 * (n_cols - 1)),
-        ccd_offset_m=f(0.0),
-        h_ref_m=f(h_ref_m),
-        n_rows=int(n_rows),
-        n_cols=int(n_cols),
-    )

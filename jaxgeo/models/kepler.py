@@ -51,10 +51,9 @@ import equinox as eqx
 import jax
 import jax.numpy as jnp
 import numpy as np
-from jaxtyping import Array, ArrayLike, Float
+from jaxtyping import Array, ArrayLike, Float, PyTree
 
 from .. import geodesy
-from ..io.metadata import SceneMetadata
 from ..rotations import orbit_frame
 from ._kepler_orbit import (
     GM_M3_S2,
@@ -72,7 +71,9 @@ from ._kepler_orbit import (
     taylor_coefficients,
     taylor_state,
 )
-from .base import AbstractSensorModel
+from .base import AbstractMultiImageModel, AbstractSensorModel, all_inexact
+from .metadata import SceneMetadata
+from .newton import newton_root
 
 __all__ = [
     "KeplerCamera",
@@ -89,6 +90,7 @@ __all__ = [
 
 _TIME_ITERATIONS = 20  # exposure-time Newton from the centre line (4 within the image)
 _TIME_TOL_S = 1e-13
+_TIME_CONVERGED_S = 1e-6  # last step of a converged exposure time (s)
 _HEIGHT_ITERATIONS = 3  # ray / height-surface Newton from the (a+h, b+h) ellipsoid
 _SERIES_SPAN_S = 120.0  # images within this of the epoch share one series about the epoch
 
@@ -172,7 +174,7 @@ def _check_orders(orders) -> tuple[int, int, int]:
 # --- the sequence ---------------------------------------------------------------------------
 
 
-class KeplerSequence(eqx.Module):
+class KeplerSequence(AbstractMultiImageModel):
     """One orbit ``(X0, u)`` shared by the images of an along-track sequence, per-image attitude.
 
     Fields:
@@ -336,19 +338,7 @@ class KeplerSequence(eqx.Module):
     ) -> Float[Array, "*batch 3"]:
         """Image ``(x, y)`` px of image ``i`` at height ``h`` m -> ground ``(lon_deg, lat_deg,
         h_m)``, directly: the ray of the pixel intersected with the height surface."""
-        image = jnp.asarray(image, dtype=float)
-        if image.shape[-1:] != (2,):
-            raise ValueError(
-                f"image coordinates must have a last axis of size 2, got {image.shape}"
-            )
-        self._check_index(i)
-        h = jnp.asarray(h, dtype=float)
-        batch = jnp.broadcast_shapes(image.shape[:-1], h.shape)
-        image = jnp.broadcast_to(image, (*batch, 2)).reshape(-1, 2)
-        h = jnp.broadcast_to(h, batch).reshape(-1)
-        anchor = self._anchor(i)
-        out = jax.vmap(lambda x, hh: self._localize_one(i, anchor, x, hh))(image, h)
-        return out.reshape(*batch, 3)
+        return self.image(i).localize(image, h)
 
     def _check_index(self, i: int):
         if not 0 <= i < self.n_images:
@@ -361,6 +351,13 @@ class KeplerSequence(eqx.Module):
 
     def images(self) -> tuple[KeplerImage, ...]:
         return tuple(self.image(i) for i in range(self.n_images))
+
+    def adjustable_filter(self) -> PyTree[bool]:
+        """The orbit ``(X0, u)`` and every image's attitude (every floating-point leaf)."""
+        return all_inexact(self)
+
+    def required_gcps(self, dynamic: PyTree) -> None:
+        return None
 
     def with_orders(self, orders: Sequence[Sequence[int]]) -> KeplerSequence:
         """The same sequence with other rotation orders: constants kept, rates kept or zero."""
@@ -426,40 +423,27 @@ class KeplerSequence(eqx.Module):
         return cls(pos, vel, attitude, cameras, orders, propagator)
 
 
-def _along_track(i, sequence, anchor, ground_ecef, tau):
+def _along_track(i, tau, args):
     """Along-track focal-plane coordinate ``d_x / -d_z`` of the ground point at ``tau``."""
+    sequence, anchor, ground_ecef = args
     d = sequence._ray(i, anchor, ground_ecef, tau)
     return d[0] / -d[2]
 
 
-@functools.partial(jax.custom_jvp, nondiff_argnums=(0,))
 def _exposure_time(i, sequence, anchor, ground_ecef):
     """Time at which image ``i`` sees the ground point: Newton on ``_along_track = 0`` from the
-    centre line; differentiated implicitly (custom JVP), exact to every order at convergence."""
-    args = jax.lax.stop_gradient((sequence, anchor, ground_ecef))
-
-    def step(carry):
-        k, tau, _ = carry
-        f = functools.partial(_along_track, i, *args)
-        value, slope = jax.jvp(f, (tau,), (jnp.ones_like(tau),))
-        return k + 1, tau - value / slope, value / slope
-
-    def cond(carry):
-        k, _, delta = carry
-        return (k < _TIME_ITERATIONS) & (jnp.abs(delta) > _TIME_TOL_S)
-
-    tau0 = jnp.asarray(sequence.cameras[i].centre_time_s, dtype=float)
-    _, tau, delta = jax.lax.while_loop(cond, step, (0, tau0, jnp.ones_like(tau0)))
-    return jnp.where(jnp.abs(delta) < 1e-6, tau, jnp.nan)  # not converged: NaN
-
-
-@_exposure_time.defjvp
-def _exposure_time_jvp(i, primals, tangents):
-    tau = _exposure_time(i, *primals)
-    f = functools.partial(_along_track, i, *primals)
-    _, slope = jax.jvp(f, (tau,), (jnp.ones_like(tau),))
-    _, dvalue = jax.jvp(lambda *a: _along_track(i, *a, tau), primals, tangents)
-    return tau, -dvalue / slope
+    centre line (:func:`~jaxgeo.models.newton.newton_root`, implicit derivatives of every
+    order); NaN where it does not converge."""
+    tau0 = sequence.cameras[i].centre_time_s
+    sol = newton_root(
+        functools.partial(_along_track, i),
+        tau0,
+        (sequence, anchor, ground_ecef),
+        max_steps=_TIME_ITERATIONS,
+        tol=_TIME_TOL_S,
+        converged_tol=_TIME_CONVERGED_S,
+    )
+    return jnp.where(sol.converged, sol.value, jnp.nan)
 
 
 class KeplerImage(AbstractSensorModel):
@@ -472,14 +456,19 @@ class KeplerImage(AbstractSensorModel):
         """Ground ``(lon_deg, lat_deg, h_m)`` -> image ``(x, y)`` px."""
         return self.sequence.project(self.index, ground)
 
-    def localize(
-        self,
-        image: Float[ArrayLike, "*batch 2"],
-        h: Float[ArrayLike, "*batch"],
-        guess: Float[ArrayLike, "*batch 2"] | None = None,
-    ) -> Float[Array, "*batch 3"]:
-        """Image ``(x, y)`` px at height ``h`` m -> ground, directly (``guess`` is not needed)."""
-        return self.sequence.localize(self.index, image, h)
+    def _localize_point(self, image, h, guess):
+        # direct, not the shared Newton: the row gives the time, the column the ray, which
+        # meets the height surface (``guess`` is not needed)
+        del guess
+        anchor = self.sequence._anchor(self.index)
+        return self.sequence._localize_one(self.index, anchor, image, h)
+
+    def adjustable_filter(self) -> PyTree[bool]:
+        """Every floating-point leaf of the sequence it views."""
+        return all_inexact(self)
+
+    def required_gcps(self, dynamic: PyTree) -> None:
+        return None
 
     def reference_ground(self) -> Float[Array, "3"]:
         return jnp.asarray(self.sequence.cameras[self.index].reference)

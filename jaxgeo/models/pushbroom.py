@@ -25,9 +25,6 @@ implicit-function derivatives (a custom JVP), so they differentiate to any order
 
 from __future__ import annotations
 
-import functools
-from typing import TYPE_CHECKING
-
 import equinox as eqx
 import jax
 import jax.numpy as jnp
@@ -35,18 +32,20 @@ import numpy as np
 from jaxtyping import Array, ArrayLike, Float, PyTree
 
 from ..geodesy import (
-    GM_EARTH_M3_S2,
     WGS84_A_M,
     WGS84_B_M,
     ecef_to_geodetic,
     geodetic_to_ecef,
 )
-from ..rotations import orbit_frame, roll_pitch_yaw
+from ..rotations import mounting_rotation, roll_pitch_yaw
 from .base import AbstractSensorModel
+from .metadata import SceneMetadata
+from .newton import newton_root
+from .pushbroom_init import initial_geometry
 from .spline import Spline, SplineObservations
 
-if TYPE_CHECKING:  # io sits below models in the layering: only the type is imported
-    from ..io.metadata import SceneMetadata
+__all__ = ["GenericPushbroom", "mounting_rotation"]
+
 
 LOCALIZE_NEWTON_STEPS = 3
 """Newton steps on ``(lon, lat)`` in :meth:`GenericPushbroom.localize`: the start, on the
@@ -55,69 +54,6 @@ ellipsoid with both semi-axes raised by ``h``, is right to first order in ``h`` 
 
 def _f64(x) -> Array:
     return jnp.asarray(x, dtype=float)
-
-
-def mounting_rotation(
-    along_track_angle_rad: Float[ArrayLike, "*batch"],
-    across_track_angle_rad: Float[ArrayLike, "*batch"],
-) -> Float[Array, "*batch 3 3"]:
-    """Camera -> platform rotation ``R_M = [X_M, Y_M, Z_M]`` of eq. 4.
-
-    The paper's ``Z_0 = (tan alpha, -tan beta, -1)`` is the viewing direction in the platform
-    frame (x along track, y left, z up): forward for ``alpha > 0``, right for ``beta > 0``.
-    Two deliberate departures from the printed equation: the camera z axis is *minus* the
-    viewing direction (it points from the ground to the sensor, so ``lambda > 0`` in eq. 3 and
-    ``x`` grows towards ``+X_M``, the left of the flight: the image as seen from above, not
-    mirrored), and ``X_M = (0, cos beta, -sin beta)``: the printed ``cos alpha`` is a typo, that
-    vector is neither unit nor orthogonal to ``Z_0`` unless ``alpha = 0``. ``Y_M = Z_M x X_M``.
-    """
-    a = _f64(along_track_angle_rad)
-    b = _f64(across_track_angle_rad)
-    a, b = jnp.broadcast_arrays(a, b)
-    view = jnp.stack([jnp.tan(a), -jnp.tan(b), -jnp.ones_like(a)], axis=-1)
-    z = -view / jnp.linalg.norm(view, axis=-1, keepdims=True)
-    x = jnp.stack([jnp.zeros_like(b), jnp.cos(b), -jnp.sin(b)], axis=-1)
-    y = jnp.cross(z, x)
-    return jnp.stack([x, y, z], axis=-1)
-
-
-def _solve_small(jac, rhs):
-    """``jac^-1 rhs`` for a scalar or a 2 x 2 ``jac``, written out (cheap to differentiate)."""
-    if jac.ndim == 0:
-        return rhs / jac
-    (a, b), (c, d) = jac[0], jac[1]
-    return jnp.stack([d * rhs[0] - b * rhs[1], a * rhs[1] - c * rhs[0]]) / (a * d - b * c)
-
-
-def _value_and_jacobian(fun, x, args):
-    """``fun(x, args)`` and its Jacobian in ``x`` from one forward-mode pass."""
-    jac, value = jax.jacfwd(lambda y: (fun(y, args),) * 2, has_aux=True)(x)
-    return value, jac
-
-
-@functools.partial(jax.custom_jvp, nondiff_argnums=(0, 3))
-def _newton_root(fun, x0, args, steps: int):
-    """Root of ``fun(x, args)`` (``x`` a scalar or 2-vector) by ``steps`` Newton steps from ``x0``.
-
-    Derivatives of any order are those of the implicit function (``dx = -f_x^-1 f_a da``),
-    exact once the iteration has converged; nothing is differentiated through the loop, and
-    the start ``x0`` gets no gradient (the root does not depend on it).
-    """
-
-    def step(_, x):
-        f, jac = _value_and_jacobian(fun, x, args)
-        return x - _solve_small(jac, f)
-
-    return jax.lax.fori_loop(0, steps, step, x0)
-
-
-@_newton_root.defjvp
-def _newton_root_jvp(fun, steps, primals, tangents):
-    x0, args = primals
-    _, d_args = tangents
-    x = _newton_root(fun, x0, args, steps)
-    f_a = jax.jvp(lambda a: fun(x, a), (args,), (d_args,))[1]
-    return x, -_solve_small(jax.jacfwd(fun)(x, args), f_a)
 
 
 def _rotate_vector(v, angle, axis: int):
@@ -241,9 +177,9 @@ class GenericPushbroom(AbstractSensorModel):
     def _project_one(self, ecef):
         t_centre = self.time_of_row(0.5 * (self.n_rows - 1))
         r_m = self.mounting_rotation()
-        t = _newton_root(
-            _scan_offset, jax.lax.stop_gradient(t_centre), (self, ecef, r_m), self.newton_steps
-        )
+        t = newton_root(
+            _scan_offset, t_centre, (self, ecef, r_m), max_steps=self.newton_steps
+        ).value
         return jnp.stack([self._focal_plane(ecef, t, r_m)[0], self.row_of_time(t)])
 
     def project(self, ground: Float[ArrayLike, "*batch 3"]) -> Float[Array, "*batch 2"]:
@@ -263,7 +199,13 @@ class GenericPushbroom(AbstractSensorModel):
         out = jax.vmap(self._project_one)(ecef)
         return out.reshape(*ground.shape[:-1], 2)
 
-    def _localize_one(self, image, h):
+    def _localize_point(self, image, h, guess):
+        """Direct, not the shared Newton on ``project``: the ray of the pixel at ``t(y)`` (no
+        search over time) meets the surface at height ``h`` where a few Newton steps on
+        ``(lon, lat)`` put ``(lon, lat, h)`` on the ray, from its intersection with the
+        ellipsoid raised by ``h``; implicit derivatives. ``guess`` is ignored. A ray that
+        misses the Earth, or a NaN input, gives NaN for that point."""
+        del guess
         t = self.time_of_row(image[1])
         origin = (
             self.orbit(t) + self.rotation_orbit @ self.platform_rotation(t) @ self.camera_offset_m
@@ -287,34 +229,10 @@ class GenericPushbroom(AbstractSensorModel):
         mu0 = (-qb - jnp.sqrt(jnp.where(hit, disc, 1.0))) / (2.0 * qa)
         mu0 = jnp.where(hit, mu0, jnp.nan)
         start = jax.lax.stop_gradient(ecef_to_geodetic(origin + mu0 * d, iterations=1)[:2])
-        lonlat = _newton_root(_ray_offset, start, (origin, across, h), LOCALIZE_NEWTON_STEPS)
+        lonlat = newton_root(
+            _ray_offset, start, (origin, across, h), max_steps=LOCALIZE_NEWTON_STEPS
+        ).value
         return jnp.concatenate([lonlat, h[None]])
-
-    def localize(
-        self,
-        image: Float[ArrayLike, "*batch 2"],
-        h: Float[ArrayLike, "*batch"],
-        guess: Float[ArrayLike, "*batch 2"] | None = None,
-    ) -> Float[Array, "*batch 3"]:
-        """Image ``(x, y)`` px at ellipsoidal height ``h`` m -> ground ``(lon_deg, lat_deg, h_m)``.
-
-        Direct: the ray of the pixel at ``t(y)`` (no search over time) meets the surface at
-        height ``h`` where a few Newton steps on ``(lon, lat)`` put ``(lon, lat, h)`` on the ray,
-        from its intersection with the ellipsoid raised by ``h``; implicit derivatives.
-        ``guess`` is accepted for the common interface and ignored. A ray that misses the
-        Earth, or a NaN input, gives NaN for that point.
-        """
-        del guess
-        image = _f64(image)
-        if image.shape[-1:] != (2,):
-            raise ValueError(
-                f"image coordinates must have a last axis of size 2, got {image.shape}"
-            )
-        h = _f64(h)
-        batch = jnp.broadcast_shapes(image.shape[:-1], h.shape)
-        image = jnp.broadcast_to(image, (*batch, 2)).reshape(-1, 2)
-        h = jnp.broadcast_to(h, batch).reshape(-1)
-        return jax.vmap(self._localize_one)(image, h).reshape(*batch, 3)
 
     def reference_ground(self) -> Float[Array, "3"]:
         return self.centre_ground
@@ -362,6 +280,10 @@ class GenericPushbroom(AbstractSensorModel):
         spec = jax.tree.map(lambda _: False, self)
         return eqx.tree_at(lambda m: (m.orbit.coeffs, m.attitude.coeffs), spec, (orbit, attitude))
 
+    def required_gcps(self, dynamic: PyTree) -> None:
+        """None: the soft orbit constraints and tie points carry the adjustment."""
+        return None
+
     # -- initialisation (section 3.3.1) -------------------------------------------------------
 
     @classmethod
@@ -395,7 +317,7 @@ class GenericPushbroom(AbstractSensorModel):
         ``sigma_radial_velocity_m_s``, ``orbit_observations``, ``attitude_observations``,
         ``newton_steps``, ``camera_offset_m``).
         """
-        geo = _initial_geometry(scene, threshold_m, max_iterations, earth_radius_m)
+        geo = initial_geometry(scene, threshold_m, max_iterations, earth_radius_m)
         t_f = geo["first_line_time_s"]
         t_l = t_f + (scene.n_rows - 1) * geo["line_time_s"]
         n_fit = 4 * (int(n_segments) + int(degree)) + 1
@@ -417,116 +339,3 @@ class GenericPushbroom(AbstractSensorModel):
             first_line_time_s=t_f,
             **options,
         )
-
-
-def _mid_geodetic(a: np.ndarray, b: np.ndarray) -> np.ndarray:
-    dlon = (b[0] - a[0] + 180.0) % 360.0 - 180.0
-    return np.array([a[0] + dlon / 2.0, (a[1] + b[1]) / 2.0, (a[2] + b[2]) / 2.0])
-
-
-def _circle(s_f: np.ndarray, s_l: np.ndarray):
-    """Great circle about the Earth centre from ``s_f`` to ``s_l`` (both at radius ``R_s``).
-
-    Returns ``(at, theta, r_o)``: positions ``at(frac)`` at fractions of the arc (uniform
-    angular motion), the arc angle, and ``R_O``, the orbit frame at the arc's middle.
-    """
-    r_s = np.linalg.norm(s_f)
-    e1 = s_f / r_s
-    n = np.cross(s_f, s_l)
-    n = n / np.linalg.norm(n)
-    e2 = np.cross(n, e1)
-    theta = np.arctan2(s_l @ e2, s_l @ e1)
-
-    def at(frac):
-        phi = theta * np.asarray(frac, dtype=float)[..., None]
-        return r_s * (np.cos(phi) * e1 + np.sin(phi) * e2)
-
-    half = theta / 2.0
-    mid = r_s * (np.cos(half) * e1 + np.sin(half) * e2)
-    tangent = -np.sin(half) * e1 + np.cos(half) * e2
-    return at, theta, np.asarray(orbit_frame(mid, tangent))
-
-
-def _ray_sphere(point: np.ndarray, direction: np.ndarray, radius: float) -> np.ndarray:
-    """Where ``point + mu * direction`` (``mu > 0``, unit direction) meets the sphere ``radius``."""
-    pd = point @ direction
-    disc = pd * pd - point @ point + radius * radius
-    if not disc > 0.0:
-        raise ValueError("the viewing ray does not reach the orbit sphere")
-    return point + (-pd + np.sqrt(disc)) * direction
-
-
-def _initial_geometry(scene, threshold_m, max_iterations, earth_radius_m) -> dict:
-    """Numpy part of :meth:`GenericPushbroom.from_metadata` (section 3.3.1)."""
-    name = f"scene {getattr(scene, 'image_id', '?')!r}"
-    corners = np.asarray(scene.corners, dtype=float)
-    if corners.shape != (4, 3) or not np.all(np.isfinite(corners)):
-        raise ValueError(
-            f"{name}: corners must be a finite (4, 3) array of (lon_deg, lat_deg, h_m) in the "
-            f"order UL, UR, LR, LL, got {corners.tolist()}"
-        )
-    n_cols, n_rows = int(scene.n_cols), int(scene.n_rows)
-    if n_cols < 2 or n_rows < 2:
-        raise ValueError(f"{name}: n_cols and n_rows must be >= 2, got {n_cols} x {n_rows}")
-    height = float(scene.flying_height_m)
-    if not height > 0.0:
-        raise ValueError(f"{name}: flying_height_m must be > 0, got {height}")
-    alpha = np.deg2rad(float(scene.along_track_angle_deg))
-    beta = np.deg2rad(float(scene.across_track_angle_deg or 0.0))
-    ecef = lambda g: np.asarray(geodetic_to_ecef(g))
-    m_f = ecef(_mid_geodetic(corners[0], corners[1]))
-    m_l = ecef(_mid_geodetic(corners[3], corners[2]))
-    radius = float(earth_radius_m or 0.5 * (np.linalg.norm(m_f) + np.linalg.norm(m_l)))
-    r_s = radius + height
-    s_f, s_l = (m * (1.0 + height / radius) for m in (m_f, m_l))
-    s_f, s_l = (s * r_s / np.linalg.norm(s) for s in (s_f, s_l))
-    view = -np.asarray(mounting_rotation(alpha, beta))[:, 2]  # Z_0 / |Z_0|: towards the ground
-    for _ in range(int(max_iterations)):
-        _, _, r_o = _circle(s_f, s_l)
-        g = r_o @ view
-        new_f, new_l = (_ray_sphere(m, -g, r_s) for m in (m_f, m_l))
-        move = max(np.linalg.norm(new_f - s_f), np.linalg.norm(new_l - s_l))
-        s_f, s_l = new_f, new_l
-        if move < threshold_m:
-            break
-    else:
-        raise RuntimeError(
-            f"{name}: orbit initialisation did not converge to {threshold_m} m in "
-            f"{max_iterations} iterations (last move {move:.3g} m)"
-        )
-    at, theta, r_o = _circle(s_f, s_l)
-    c = ecef(corners)
-    if (c[1] - c[0]) @ r_o[:, 1] <= 0.0 or (c[2] - c[3]) @ r_o[:, 1] <= 0.0:
-        raise ValueError(
-            f"{name}: the corners put x = n_cols - 1 to the right of the flight direction (first "
-            "row -> last row); columns must grow to its left (the image seen from above). Check "
-            "the corner order UL, UR, LR, LL."
-        )
-    line_time = scene.line_time_s
-    if line_time is None:  # an attitude fixed in the orbit frame sweeps the ground at the orbit's
-        # angular rate: the row centres M_F, M_L are as many radians apart as the orbit travels
-        ground_angle = np.arccos(
-            np.clip(m_f @ m_l / np.linalg.norm(m_f) / np.linalg.norm(m_l), -1, 1)
-        )
-        line_time = ground_angle / np.sqrt(GM_EARTH_M3_S2 / r_s**3) / (n_rows - 1)
-    line_time = float(line_time)
-    if not line_time > 0.0:
-        raise ValueError(f"{name}: line_time_s must be > 0, got {line_time}")
-    if scene.focal_length_mm is not None and scene.pixel_size_um is not None:
-        focal_px = float(scene.focal_length_mm) * 1e3 / float(scene.pixel_size_um)
-    else:  # coarse: slant range over the ground size of one pixel across track
-        swath = 0.5 * (np.linalg.norm(c[1] - c[0]) + np.linalg.norm(c[2] - c[3]))
-        slant = 0.5 * (np.linalg.norm(s_f - m_f) + np.linalg.norm(s_l - m_l))
-        focal_px = slant * (n_cols - 1) / swath
-    lon = corners[0, 0] + (corners[:, 0] - corners[0, 0] + 180.0) % 360.0 - 180.0
-    centre = np.array([lon.mean(), corners[:, 1].mean(), corners[:, 2].mean()])
-    centre[0] = (centre[0] + 180.0) % 360.0 - 180.0
-    return {
-        "circle": at,
-        "rotation_orbit": r_o,
-        "view_angles_rad": np.array([alpha, beta]),
-        "focal_px": focal_px,
-        "line_time_s": line_time,
-        "first_line_time_s": float(scene.first_line_time_s or 0.0),
-        "centre_ground": centre,
-    }

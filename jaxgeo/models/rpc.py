@@ -14,9 +14,9 @@ from typing import Literal
 
 import jax.numpy as jnp
 import numpy as np
-from jaxtyping import Array, ArrayLike, Bool, Float
+from jaxtyping import Array, ArrayLike, Bool, Float, PyTree
 
-from .base import AbstractSensorModel
+from .base import AbstractSensorModel, nothing
 
 TermOrder = Literal["RPC00B", "RPC00A"]
 
@@ -205,6 +205,16 @@ class RPC(AbstractSensorModel):
 
     def reference_ground(self) -> Float[Array, "3"]:
         return self.ground_offset
+
+    def adjustable_filter(self) -> PyTree[bool]:
+        """Nothing: a bare RPC is adjusted through a :class:`~jaxgeo.models.Biased` wrapper."""
+        return nothing(self)
+
+    def required_gcps(self, dynamic: PyTree) -> None:
+        return None
+
+    def exact_rpc(self) -> RPC:
+        return self
 
     def in_domain(
         self, ground: Float[ArrayLike, "*batch 3"], margin: float = 0.0

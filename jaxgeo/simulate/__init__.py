@@ -14,5 +14,7 @@ from .demo import DEMO_SEED as DEMO_SEED
 from .demo import demo_dir as demo_dir
 from .demo import demo_scene as demo_scene
 from .demo import write_demo as write_demo
+from .orbit import CircularOrbit as CircularOrbit
+from .orbit import ephemeris_from_orbit as ephemeris_from_orbit
 from .scene import VendorErrors as VendorErrors
 from .terrain import Terrain as Terrain

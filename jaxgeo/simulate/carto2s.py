@@ -25,16 +25,11 @@ import pathlib
 import numpy as np
 
 from ..io.tables import GroundPoints, Observations, write_ground, write_observations
-from ..models.ephemeris import (
-    CircularOrbit,
-    EphemerisModel,
-    ephemeris_from_orbit,
-    gmst_rad,
-    sun_synchronous_inclination_deg,
-)
+from ..models.ephemeris import EphemerisModel, gmst_rad
 from ..models.rpc import RPC
 from ..models.rpc_fit import RPCFitReport, fit_rpcs
 from . import scene as sc
+from .orbit import CircularOrbit, ephemeris_from_orbit, sun_synchronous_inclination_deg
 from .terrain import Terrain
 
 STRIP_ERRORS = sc.VendorErrors(

@@ -21,16 +21,11 @@ import numpy as np
 
 from .. import geodesy
 from ..io.tables import GroundPoints, Observations, write_ground, write_observations
-from ..models.ephemeris import (
-    CircularOrbit,
-    EphemerisModel,
-    ephemeris_from_orbit,
-    gmst_rad,
-    sun_synchronous_inclination_deg,
-)
+from ..models.ephemeris import EphemerisModel, gmst_rad
 from ..models.rpc import RPC
 from ..models.rpc_fit import RPCFitReport, fit_rpcs
 from . import scene as sc
+from .orbit import CircularOrbit, ephemeris_from_orbit, sun_synchronous_inclination_deg
 from .terrain import Terrain
 
 SITES = {
@@ -86,10 +81,7 @@ class StereoScene:
             rx, ry = sc.rms(res)
             out["image_px"][name] = {"rms_x": rx, "rms_y": ry, "rms": math.hypot(rx, ry)}
         obs = np.stack([self._measured(name) for name in self.names])
-        guess = np.broadcast_to(
-            np.asarray(self.vendor[self.names[0]].ground_offset), (obs.shape[1], 3)
-        )
-        est = sc.forward_intersect([self.vendor[n] for n in self.names], obs, guess)
+        est = sc.forward_intersect([self.vendor[n] for n in self.names], obs)
         e, n, u = sc.rms(sc.enu_errors(est, self.ground_true))
         out["intersection_m"] = {"rms_e": e, "rms_n": n, "rms_plan": math.hypot(e, n), "rms_h": u}
         return sc.rounded(out)

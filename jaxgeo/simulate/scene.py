@@ -20,10 +20,12 @@ import jax.numpy as jnp
 import numpy as np
 
 from .. import geodesy
+from ..intersect import intersect
 from ..io.atomic import atomic_write_text
-from ..models.ephemeris import EphemerisModel, _orbit_frame_np
+from ..models.ephemeris import EphemerisModel
 from ..models.rpc import RPC
 from ..models.rpc_fit import localize_points, project_points
+from ..rotations import orbit_frame
 from .terrain import Terrain
 
 SIG_DIGITS = 12
@@ -111,7 +113,7 @@ def draw_common_errors(rng: np.random.Generator, errors: VendorErrors, model: Ep
     )
     local = rng.normal(0.0, 1.0, 3) * np.asarray(errors.position_m)
     pos, vel = np.asarray(model.position_coeffs)[:, 0], np.asarray(model.velocity_coeffs)[:, 0]
-    d_pos = _orbit_frame_np(pos, vel) @ local  # at t_ref (tau = 0)
+    d_pos = np.asarray(orbit_frame(pos, vel)) @ local  # at t_ref (tau = 0)
     return d_att, d_pos
 
 
@@ -188,28 +190,10 @@ def spread_selection(xy: np.ndarray, k: int) -> np.ndarray:
 # ------------------------------------------------------------------------------ accuracy
 
 
-@jax.jit
-def _intersect(rpcs: RPC, image: jax.Array, guess: jax.Array) -> jax.Array:
-    """Least-squares forward intersection: ``rpcs`` stacked ``(k,)``, ``image`` ``(k, n, 2)``."""
-
-    def resid(g, img):
-        return (jax.vmap(lambda r, x: r.project(g) - x)(rpcs, img)).ravel()
-
-    def one(g, img):
-        def step(_, g):
-            r = resid(g, img)
-            j = jax.jacfwd(resid)(g, img)
-            return g - jnp.linalg.solve(j.T @ j, j.T @ r)
-
-        return jax.lax.fori_loop(0, 8, step, g)
-
-    return jax.vmap(one, in_axes=(0, 1))(guess, image)
-
-
-def forward_intersect(rpcs: list[RPC], image: np.ndarray, guess: np.ndarray) -> np.ndarray:
-    """Intersect measurements ``image`` ``(k, n, 2)`` of ``n`` points in ``k`` images."""
-    stacked = jax.tree.map(lambda *xs: jnp.stack(xs), *rpcs)
-    return np.asarray(_intersect(stacked, jnp.asarray(image), jnp.asarray(guess)))
+def forward_intersect(rpcs: list[RPC], image: np.ndarray) -> np.ndarray:
+    """Intersect measurements ``image`` ``(k, n, 2)`` of ``n`` points in ``k`` images
+    (:func:`jaxgeo.intersect.intersect`, the one forward intersection of the package)."""
+    return np.asarray(intersect(rpcs, np.swapaxes(image, 0, 1), sigma_px=1.0).ground)
 
 
 def enu_errors(estimate: np.ndarray, truth: np.ndarray) -> np.ndarray:

@@ -11,8 +11,10 @@ import dataclasses
 import warnings
 from collections.abc import Sequence
 
+from ..errors import JaxgeoWarning
 
-class GCPDistributionWarning(UserWarning):
+
+class GCPDistributionWarning(JaxgeoWarning):
     """The strip's GCPs do not follow the distribution rule of 003_ section 9."""
 
 

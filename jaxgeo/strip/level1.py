@@ -10,23 +10,14 @@ wide sigma; the bias estimates barely depend on it, since both rays move togethe
 from __future__ import annotations
 
 import dataclasses
-from collections.abc import Callable
 
 import numpy as np
 
-from ..io.tables import GroundPoints, Observations
+from ..io import GroundPoints, Observations
 from ..models.rpc_fit import localize_points
-from .data import Strip
+from .config import TieConfig, TieHeight
+from .delivery import Strip
 from .ties import StripTies, strip_ties
-
-TIE_SIGMA_PX = 0.1
-"""Default a priori sigma of a formed tie (px): the pixel is exact, this is the model error."""
-TIE_HEIGHT_SIGMA_M = 500.0
-"""Default sigma of the tie height prior when no DEM is given (m)."""
-TIE_MARGIN_PX = 100.0
-"""Default distance of ties from the overlap edges (px): vendor RPC validity cubes end there."""
-
-TieHeight = float | Callable[[np.ndarray], np.ndarray] | None
 
 
 @dataclasses.dataclass(frozen=True)
@@ -76,19 +67,14 @@ def _localize_ties(strip: Strip, ties: StripTies, h: np.ndarray | float) -> np.n
 
 
 def level1_input(
-    strip: Strip,
-    ties_per_pair: int = 50,
-    *,
-    tie_margin_px: float = TIE_MARGIN_PX,
-    tie_sigma_px: float = TIE_SIGMA_PX,
-    tie_height: TieHeight = None,
-    tie_height_sigma_m: float = TIE_HEIGHT_SIGMA_M,
-    use_gcps: bool = True,
-    tie_seed: int | None = None,
+    strip: Strip, config: TieConfig | None = None, use_gcps: bool = True
 ) -> Level1Input:
-    """Form the ties and assemble the level-1 tables (check points are left out: they are
-    evaluated by mono-plotting afterwards)."""
-    ties = strip_ties(strip.scenes, ties_per_pair, margin_px=tie_margin_px, seed=tie_seed)
+    """Form the ties as ``config`` says and assemble the level-1 tables (GCPs only with
+    ``use_gcps``; check points are left out: they are evaluated by mono-plotting afterwards)."""
+    config = TieConfig() if config is None else config
+    seed = config.seed if config.layout == "random" else None
+    ties = strip_ties(strip.scenes, config.per_pair, margin_px=config.margin_px, seed=seed)
+    tie_height = config.height
     width = len(str(ties.n_ties))
     tie_ids = tuple(f"tie_{p:0{width}d}" for p in range(ties.n_ties))
     taken = set(tie_ids) & set(strip.ground.ids)
@@ -108,9 +94,9 @@ def level1_input(
         tuple(tie_ids[p] for p in ties.point) + tuple(o.point_ids[i] for i in keep),
         tuple(strip.names[s] for s in ties.scene) + tuple(o.images[i] for i in keep),
         np.concatenate([ties.xy, o.xy[keep]]),
-        np.concatenate([np.full(len(ties.point), float(tie_sigma_px)), o.sigma_px[keep]]),
+        np.concatenate([np.full(len(ties.point), float(config.sigma_px)), o.sigma_px[keep]]),
     )
-    prior = np.tile([np.inf, np.inf, float(tie_height_sigma_m)], (ties.n_ties, 1))
+    prior = np.tile([np.inf, np.inf, float(config.height_sigma_m)], (ties.n_ties, 1))
     ground = GroundPoints(
         gcps.ids + tie_ids,
         np.concatenate([gcps.lonlath, lonlath]),

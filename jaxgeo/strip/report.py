@@ -17,6 +17,7 @@ from collections.abc import Mapping, Sequence
 
 import numpy as np
 
+from ..bundle.errors import RESULTS
 from .universal import N_TERMS
 
 STAGES = ("direct", "level1", "level2")
@@ -135,7 +136,7 @@ def whole(errors: Mapping[str, np.ndarray], gaps: Mapping[str, np.ndarray]) -> d
 
 
 def strip_report(strip, sol, ev, rows: dict, inp, unknowns: int, degree: str) -> StripReport:
-    """The :class:`StripReport` of a :func:`~.pipeline.two_level` solution ``sol``; ``rows``:
+    """The :class:`StripReport` of a :func:`~.solve.two_level` solution ``sol``; ``rows``:
     the strip's observation rows of the GCP and check measurements (``{"gcp": [...], ...}``)."""
     o = strip.observations
     check_scene = np.array([strip.scene_index(o.images[i]) for i in rows["check"]], dtype=int)
@@ -162,7 +163,7 @@ def strip_report(strip, sol, ev, rows: dict, inp, unknowns: int, degree: str) ->
         "gcp_scenes": [strip.names[k] for k in gcp_scenes],
         "s0": float(s.s0),
         "steps": int(s.num_steps),
-        "converged": int(s.status) == 0,
+        "converged": bool(s.result == RESULTS.successful),
         "gcp_rms_level2_m": {"e": _rms(g2[:, 0]), "n": _rms(g2[:, 1])},
         "leave_one_scene_out_rms_m": dict(
             zip(N_TERMS, map(float, np.asarray(sol.cv_rms_m)), strict=True)

@@ -15,16 +15,7 @@ from collections.abc import Sequence
 
 import numpy as np
 
-
-@dataclasses.dataclass(frozen=True)
-class SubScene:
-    """One sub-scene of a strip: its name, first strip line, and size in pixels."""
-
-    name: str
-    line_offset: int
-    n_rows: int
-    n_cols: int
-    col_offset: int = 0
+from .delivery import SubScene
 
 
 @dataclasses.dataclass(frozen=True)

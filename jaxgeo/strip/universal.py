@@ -15,13 +15,16 @@ import equinox as eqx
 import jax
 import jax.numpy as jnp
 import numpy as np
-from jaxtyping import Array, ArrayLike, Float
+from jaxtyping import Array, ArrayLike, Float, PyTree
 
-from ..models.base import AbstractSensorModel
+from ..models.base import AbstractSensorModel, nothing
+from .errors import ConfigError, Setting
 
 N_TERMS = {"none": 0, "shift": 1, "affine": 3, "quadratic": 6}
 """Leading terms of eq. 12-13 kept by each degree (the paper uses ``quadratic``; ``none`` is the
 identity, for comparison)."""
+TERM_NAMES = ("1", "lat", "lon", "lat^2", "lon^2", "lat*lon")
+"""The terms of eq. 12-13 in coefficient order (of the normalised lat, lon)."""
 
 
 def _terms(lat_n, lon_n):
@@ -88,14 +91,18 @@ def fit_universal_correction(
     return corr, resid
 
 
-def check_design(level1: np.ndarray, degree: str) -> None:
-    """Raise a ``ValueError`` if GCPs at ``level1`` (n, 3) cannot determine the correction."""
+def check_design(level1: np.ndarray, degree: str, where: str = "") -> None:
+    """Raise a :class:`~.errors.ConfigError` (prefixed with ``where``, e.g. the GCP file) if
+    GCPs at ``level1`` (n, 3) cannot determine the correction."""
     level1 = np.asarray(level1, dtype=float).reshape(-1, 3)
     k, n = N_TERMS[degree], len(level1)
+    where = where.replace("{", "{{").replace("}", "}}")  # a template: settings named by format
     if n < k:
-        raise ValueError(
-            f"the {degree} universal correction needs at least {k} GCPs, got {n} "
-            "(use the affine (3) or shift (1) degree)"
+        raise ConfigError(
+            f"{where}the {degree} universal correction needs at least {k} GCPs, got {n} "
+            "(use {0} (3) or {1} (1))",
+            Setting("level2.degree", "affine"),
+            Setting("level2.degree", "shift"),
         )
     latlon = level1[:, [1, 0]]
     offset = latlon.mean(axis=0)
@@ -103,8 +110,8 @@ def check_design(level1: np.ndarray, degree: str) -> None:
     t = np.asarray(_terms(*((latlon - offset) / scale).T))[:, :k]
     rank = np.linalg.matrix_rank(t, tol=1e-8 * np.abs(t).max())
     if rank < k:
-        raise ValueError(
-            f"the {degree} universal correction is not determined by these {n} GCPs "
+        raise ConfigError(
+            f"{where}the {degree} universal correction is not determined by these {n} GCPs "
             f"(design rank {rank} < {k}: GCPs too few or aligned along the strip)"
         )
 
@@ -180,6 +187,14 @@ class UniversallyCorrected(AbstractSensorModel):
 
     def reference_ground(self) -> Float[Array, "3"]:
         return self.correction.apply(self.model.reference_ground())
+
+    def adjustable_filter(self) -> PyTree[bool]:
+        """The wrapped model's adjustable leaves; the correction stays fixed."""
+        return eqx.tree_at(lambda m: m.model, nothing(self), self.model.adjustable_filter())
+
+    def required_gcps(self, dynamic: PyTree) -> tuple[int, str] | None:
+        """What the wrapped model needs for its adjusted part."""
+        return self.model.required_gcps(dynamic.model)
 
 
 def cross_validate(

@@ -31,12 +31,12 @@ sb = _load_benchmark()
 @pytest.fixture(scope="module")
 def case():
     from jaxgeo.simulate import carto2s_strip
-    from jaxgeo.strip import Strip, adjust_strip
+    from jaxgeo.strip import Strip, StripConfig, TieConfig, adjust_strip
 
     strip = Strip.from_simulation(carto2s_strip(4, seed=1))
     with warnings.catch_warnings():  # level 2 (not compared here) on 2 GCP scenes
         warnings.filterwarnings("ignore", message=".*universal correction")
-        res = adjust_strip(strip, ties_per_pair=10)
+        res = adjust_strip(strip, StripConfig(ties=TieConfig(per_pair=10)))
     return res, sb.problem_dict(res)
 
 

@@ -12,8 +12,7 @@ import rasterio
 from affine import Affine as GeoTransform
 
 from jaxgeo.cli import main
-from jaxgeo.io import read_rpc
-from jaxgeo.io.tables import read_ground, read_observations
+from jaxgeo.io import read_ground, read_observations, read_rpc
 from jaxgeo.models import Affine, Biased
 from jaxgeo.simulate import carto2s_strip
 from jaxgeo.strip import UniversalCorrection, UniversallyCorrected

@@ -107,6 +107,12 @@ def test_biased_model_keeps_the_soft_constraints_of_the_model_it_wraps(pleiades)
         def reference_ground(self):
             return self.inner.reference_ground()
 
+        def adjustable_filter(self):
+            return False
+
+        def required_gcps(self, dynamic):
+            return None
+
         def prior_residuals(self):
             return jnp.array([1.5, -2.0])
 

@@ -12,17 +12,16 @@ from jax.test_util import check_grads
 
 from jaxgeo import geodesy
 from jaxgeo.models import EphemerisModel
-from jaxgeo.models.ephemeris import (
+from jaxgeo.models.ephemeris import gmst_rad
+from jaxgeo.models.rpc_fit import localize_points as localize
+from jaxgeo.models.rpc_fit import project_points as project
+from jaxgeo.rotations import angles_from_matrix, omega_phi_kappa
+from jaxgeo.simulate.orbit import (
     CircularOrbit,
-    angles_from_matrix,
     ephemeris_from_orbit,
-    gmst_rad,
     ground_track_attitude,
     sun_synchronous_inclination_deg,
 )
-from jaxgeo.models.rpc_fit import localize_points as localize
-from jaxgeo.models.rpc_fit import project_points as project
-from jaxgeo.rotations import omega_phi_kappa
 
 LON, LAT = 147.30, -42.88  # Hobart
 N = 12000

@@ -16,7 +16,6 @@ import pytest
 import scipy.integrate
 from jax.test_util import check_grads
 
-from jaxgeo.io.metadata import SceneMetadata
 from jaxgeo.models.kepler import (
     KeplerImage,
     KeplerSequence,
@@ -25,6 +24,7 @@ from jaxgeo.models.kepler import (
     taylor_coefficients,
     taylor_state,
 )
+from jaxgeo.models.metadata import SceneMetadata
 
 GM = 398600.4415e9
 OMEGA_E = 7.2921151467e-5

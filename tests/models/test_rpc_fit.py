@@ -5,13 +5,13 @@ import numpy as np
 import pytest
 
 from jaxgeo.models import AbstractSensorModel, EphemerisModel, fit_rpc, fit_rpcs
-from jaxgeo.models.ephemeris import (
+from jaxgeo.models.ephemeris import gmst_rad
+from jaxgeo.models.rpc_fit import localize_points, project_points
+from jaxgeo.simulate.orbit import (
     CircularOrbit,
     ephemeris_from_orbit,
-    gmst_rad,
     sun_synchronous_inclination_deg,
 )
-from jaxgeo.models.rpc_fit import localize_points, project_points
 
 N = 12000
 H_RANGE = (-100.0, 1400.0)
@@ -110,6 +110,12 @@ class _Nowhere(AbstractSensorModel):
 
     def reference_ground(self):
         return jnp.zeros(3)
+
+    def adjustable_filter(self):
+        return False
+
+    def required_gcps(self, dynamic):
+        return None
 
     def localize(self, image, h, guess=None):
         shape = jnp.broadcast_shapes(jnp.shape(image)[:-1], jnp.shape(h))

@@ -12,25 +12,38 @@ import jax.numpy as jnp
 import numpy as np
 import pytest
 
-from jaxgeo.io.tables import read_observations
+from jaxgeo.bundle.errors import RESULTS
+from jaxgeo.io import read_observations
 from jaxgeo.models.rpc_fit import project_points
 from jaxgeo.simulate import carto2s_strip
 from jaxgeo.strip import (
     GCPDistributionWarning,
+    Level1Config,
+    Level2Config,
     Strip,
+    StripConfig,
     StripFormatError,
+    TieConfig,
     UniversalCorrectionWarning,
     adjust_strip,
     read_strip,
 )
-from jaxgeo.strip.pipeline import degree_index, two_level_batch, two_level_jit
-from jaxgeo.strip.solve import adjust_individually, evaluate_models, monte_carlo_inputs
+from jaxgeo.strip.adjustment import adjust_individually, evaluate_models
+from jaxgeo.strip.batch import monte_carlo_inputs
+from jaxgeo.strip.solve import degree_index, two_level_batch, two_level_jit
 
 N_SCENES = 12
 QUARTER = (0, 4, 8, 11)
 TIES = 20
 GSD_M = 0.63
 NOISE_M = 0.3 * GSD_M  # image noise of the simulated measurements, on the ground
+
+
+def _config(degree="quadratic", **level1):
+    """The strip configuration of these tests: ``TIES`` ties per pair."""
+    return StripConfig(
+        ties=TieConfig(per_pair=TIES), level1=Level1Config(**level1), level2=Level2Config(degree)
+    )
 
 
 def _rms(x):
@@ -57,7 +70,7 @@ def result(quarter):
     # GCPs in level 1 already make it absolute: the quadratic of eq. 12-13 fitted to 4 GCP
     # scenes mostly fits their noise, and says so
     with pytest.warns(UniversalCorrectionWarning, match="quadratic universal correction"):
-        return adjust_strip(quarter, ties_per_pair=TIES)
+        return adjust_strip(quarter, _config())
 
 
 @pytest.fixture(scope="module")
@@ -112,7 +125,7 @@ def test_absolute_accuracy_level2_vs_individual(result, individual):
 
 
 def test_auto_degree_picks_the_best_cross_validated(quarter, result, individual):
-    res = adjust_strip(quarter, ties_per_pair=TIES, degree="auto")
+    res = adjust_strip(quarter, _config("auto"))
     s = res.report.strip
     cv = s["leave_one_scene_out_rms_m"]
     assert cv == pytest.approx(result.report.strip["leave_one_scene_out_rms_m"])
@@ -128,12 +141,10 @@ def test_auto_degree_picks_the_best_cross_validated(quarter, result, individual)
 def test_ties_only_level1_then_universal_correction(quarter):
     """The paper's pure flow: level 1 with ties only (relative), level 2 absolute."""
     with pytest.raises(ValueError, match="bias priors"):
-        adjust_strip(quarter, ties_per_pair=TIES, level1_gcps=False)
+        adjust_strip(quarter, _config(use_gcps=False))
     prior = np.array([50.0, 50.0, 1e-4, 1e-4, 1e-4, 1e-4])
     res = {
-        d: adjust_strip(
-            quarter, ties_per_pair=TIES, level1_gcps=False, bias_prior_sigma=prior, degree=d
-        )
+        d: adjust_strip(quarter, _config(d, use_gcps=False, bias_prior_sigma=prior))
         for d in ("quadratic", "auto")
     }
     s = res["quadratic"].report.strip
@@ -151,18 +162,18 @@ def test_distribution_rule_warns_before_solving(full):
     bad = full.with_gcp_scenes([0, 11])
     with pytest.warns(GCPDistributionWarning, match=r"scene_001\.\.scene_010"):
         with pytest.raises(ValueError, match="bias priors"):  # raised before any solving
-            adjust_strip(bad, level1_gcps=False)
+            adjust_strip(bad, StripConfig(level1=Level1Config(use_gcps=False)))
 
 
 def test_monte_carlo_batch_equals_single_runs(result):
     """Monte-Carlo runs in one vmapped, jitted call == the same runs one by one."""
     xy, gcp_xy, check_xy = monte_carlo_inputs(result, 3, seed=2)
-    o = result.options
-    args = (degree_index(o["degree"]), o["method"], o["max_steps"], o["tol"])
+    c = result.config
+    args = (degree_index(c.level2.degree), c.solver)
     problem, data = result.setup.problem, result.data
     sols, evs = two_level_batch(problem, data, xy, gcp_xy, check_xy, *args)
     assert sols.level1.theta[0].shape == (3, N_SCENES, 6)
-    assert np.all(np.asarray(sols.level1.status) == 0)
+    assert np.all(np.asarray(sols.level1.result == RESULTS.successful))
     for k in (0, 2):
         d = eqx.tree_at(lambda t: (t.gcp_xy, t.check_xy), data, (gcp_xy[k], check_xy[k]))
         one = two_level_jit(problem.with_xy(jnp.asarray(xy[k])), d, *args)

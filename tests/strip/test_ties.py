@@ -3,7 +3,8 @@
 import numpy as np
 import pytest
 
-from jaxgeo.strip.ties import SubScene, overlap_lines, strip_ties
+from jaxgeo.strip.delivery import SubScene
+from jaxgeo.strip.ties import overlap_lines, strip_ties
 
 
 def _strip(n=5, rows=1000, step=900, cols=800):

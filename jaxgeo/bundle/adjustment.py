@@ -1,0 +1,214 @@
+"""``jaxgeo.adjust``: bundle block adjustment of any set of sensor models, in one call.
+
+Input: sensor models keyed by image name, image observations with a priori sigmas (px), and
+ground points (GCPs as weighted observations with a sigma per east/north/up axis; check points
+adjusted as tie points, their coordinates only used in the report). Output: an
+:class:`~.result.AdjustResult` with the adjusted models, s0, parameter covariances, residuals
+per observation, ground points with sigmas, and the convergence status (a non-converged solve
+warns with :class:`~.errors.NotConvergedWarning` and returns the last state).
+
+The stages: :func:`~.build.build` (checks, groups, initial points, priors) ->
+:func:`~.solve.solve` (Schur LM, covariance, singularity test; jitted) ->
+:func:`~.result.finish` (names, statistics, report).
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import os
+import pathlib
+from collections.abc import Mapping, Sequence
+from typing import Any
+
+from ..io import read_rpc
+from ..io.tables import GroundPoints, Observations, read_ground, read_observations
+from ..models import AbstractSensorModel, Biased
+from ..models.bias import BIAS_KINDS, AbstractBias
+from .build import build
+from .config import DEFAULT_SOLVER, SolverConfig
+from .export import write_outputs
+from .report import AccuracyReport, direct_georeferencing, format_reports
+from .result import AdjustResult, finish
+from .solve import solve_jit
+
+BIAS_CHOICES = ("none", *BIAS_KINDS)
+"""Names accepted for ``bias``: ``"none"`` and the kinds of
+:data:`jaxgeo.models.bias.BIAS_KINDS` (defined there once)."""
+
+
+def with_bias(models: Mapping[str, Any], bias: str | type[AbstractBias] | None) -> dict[str, Any]:
+    """Wrap every single-image model in :class:`~jaxgeo.models.Biased` with a zero bias.
+
+    ``bias``: a name of :data:`BIAS_CHOICES` (``"shift"``, ``"shift-drift"``, ``"affine"``), a
+    bias class, or ``None``/``"none"`` (models unchanged). Models that are already
+    :class:`Biased` (and multi-image models) are kept as they are.
+    """
+    if bias is None or bias == "none":
+        return dict(models)
+    kind = BIAS_KINDS.get(bias) if isinstance(bias, str) else bias
+    if kind is None:
+        raise ValueError(f"unknown bias {bias!r}; expected one of {', '.join(BIAS_CHOICES)}")
+    return {
+        k: m
+        if isinstance(m, Biased) or not isinstance(m, AbstractSensorModel)
+        else Biased(m, kind())
+        for k, m in models.items()
+    }
+
+
+def adjust(
+    models: Mapping[Any, Any],
+    observations: Observations,
+    ground: GroundPoints | None = None,
+    *,
+    bias: str | type[AbstractBias] | None = None,
+    filters: Any = None,
+    prior_sigma: Any = None,
+    initial: Mapping[str, Any] | None = None,
+    solver: SolverConfig = DEFAULT_SOLVER,
+    check: bool = True,
+) -> AdjustResult:
+    """Bundle block adjustment.
+
+    Args:
+        models: image name -> sensor model; a multi-image model (``image(i)`` views sharing
+            parameters, e.g. a ``KeplerSequence``) under a tuple of image names.
+        observations: image measurements (``jaxgeo.io.read_observations``).
+        ground: GCPs and check points (``jaxgeo.io.read_ground``); points measured in images
+            but absent here are tie points.
+        bias: wrap every single model in ``Biased(model, bias())`` first (a name of
+            :data:`BIAS_CHOICES` or a bias class); the bias leaves are then adjusted.
+        filters: ``eqx.partition`` filter spec of the adjustable leaves, one for all models or a
+            mapping keyed like ``models``; default each model's ``adjustable_filter()``.
+        prior_sigma: optional parameter priors (``theta0 +- sigma``): scalar, raveled array or
+            a pytree like the model, one for all or per model key (``inf`` = no prior).
+        initial: optional initial ground points ``{id: (lon, lat, h)}`` (else intersection).
+        solver: method, loss, tolerances, blunder threshold (:class:`~.config.SolverConfig`).
+        check: check the GCP count of every image against its adjustable parameters before
+            solving (the models' ``required_gcps``: 1 shift, 2 shift+drift, 3 affine, 4
+            non-coplanar for the 3D affine model).
+
+    Raises :class:`~.errors.AdjustmentError` (bad input, too few GCPs) before solving, and
+    :class:`~.errors.SingularNormalEquations` naming the undetermined parameters or points.
+    """
+    if bias is not None:
+        models = with_bias(models, bias)
+    setup = build(
+        models,
+        observations,
+        ground,
+        filters=filters,
+        prior_sigma=prior_sigma,
+        initial=initial,
+        check_control=check,
+    )
+    sol = solve_jit(setup.problem, solver)
+    return finish(setup, sol, observations, ground, solver)
+
+
+@dataclasses.dataclass(frozen=True)
+class FileAdjustment:
+    """An adjustment of files (:func:`adjust_files`): the result, direct georeferencing with the
+    given models (``None`` without ground points or with one image), and what was read."""
+
+    result: AdjustResult
+    direct: AccuracyReport | None
+    bias: str
+    inputs: tuple[pathlib.Path, ...]
+
+    def summary(self) -> dict[str, Any]:
+        """JSON-ready: s0, redundancy, convergence, check points, per image RMS and parameters
+        with sigmas, blunders, and the direct-georeferencing report."""
+        result, direct = self.result, self.direct
+        rep = result.report.to_dict() if result.report is not None else None
+        empty = {"n": 0, "rms_m": [None] * 3, "min_m": [None] * 3, "max_m": [None] * 3}
+        images = {}
+        for name in result.models:
+            rms = rep["images"].get(name, {}).get("rms_px", [None, None]) if rep else [None] * 2
+            own = result.parameters(name)
+            images[name] = {
+                "rms_px": rms,
+                "params": {k: v for k, (v, _) in own.items()},
+                "sigmas": {k: s for k, (_, s) in own.items()},
+            }
+        blunders = [
+            {"id": p, "image": img, "w": [float(x) for x in w]}
+            for p, img, w, b in zip(
+                result.observation_ids,
+                result.observation_images,
+                result.standardized,
+                result.blunders,
+                strict=True,
+            )
+            if b
+        ]
+        return {
+            "bias": self.bias,
+            "s0": result.s0 if result.s0 == result.s0 else None,
+            "redundancy": result.redundancy,
+            "converged": result.converged,
+            "message": result.message,
+            "num_steps": result.num_steps,
+            "checkpoints": rep["checkpoints"] if rep else empty,
+            "images": images,
+            "blunders": blunders,
+            "direct": direct.to_dict() if direct is not None else None,
+        }
+
+    def format(self) -> str:
+        """The text report: status, tables 3-4 of 000_ side by side, parameters, blunders."""
+        result = self.result
+        lines = [
+            f"bundle adjustment ({self.bias} bias): {result.message} in {result.num_steps} "
+            f"steps, s0 = {result.s0:.3f}, redundancy {result.redundancy}"
+        ]
+        reports = [r for r in (self.direct, result.report) if r is not None]
+        if reports:
+            lines += ["", format_reports(reports)]
+        lines += ["", "adjusted parameters (a posteriori sigma):"]
+        for name, value, sigma in zip(
+            result.param_names, result.params, result.param_sigma, strict=True
+        ):
+            lines.append(f"  {name:<32} {value: .6g} +- {sigma:.2g}")
+        flagged = [
+            f"{p}@{img}"
+            for p, img, b in zip(
+                result.observation_ids, result.observation_images, result.blunders, strict=True
+            )
+            if b
+        ]
+        if flagged:
+            lines.append(f"possible blunders (|w| > k): {', '.join(flagged)}")
+        return "\n".join(lines)
+
+    def write(self, out_dir: os.PathLike, overwrite: bool = False) -> list[pathlib.Path]:
+        """Write the adjusted models, points, residuals and report (never over an input, nor
+        over an existing file unless ``overwrite``); returns the paths written."""
+        return write_outputs(
+            out_dir, self.result, self.format(), self.summary(), self.inputs, overwrite=overwrite
+        )
+
+
+def adjust_files(
+    images: Mapping[str, os.PathLike | str],
+    observations: os.PathLike | str,
+    ground: os.PathLike | str | None = None,
+    *,
+    bias: str = "affine",
+    solver: SolverConfig = DEFAULT_SOLVER,
+    direct_roles: Sequence[str] = ("gcp", "check"),
+) -> FileAdjustment:
+    """Read the RPC files (image name -> path), OBS.csv and GROUND.csv, adjust with an image
+    bias per image (a name of :data:`BIAS_CHOICES`), and intersect the ``direct_roles`` points
+    with the given RPCs for comparison (tables 3 and 4 of 000_)."""
+    if bias not in BIAS_CHOICES:
+        raise ValueError(f"unknown bias {bias!r}; expected one of {', '.join(BIAS_CHOICES)}")
+    models = {name: read_rpc(path) for name, path in images.items()}
+    obs = read_observations(observations)
+    points = read_ground(ground) if ground is not None else None
+    result = adjust(models, obs, points, bias=bias, solver=solver)
+    direct = None
+    if points is not None and len(models) >= 2:
+        direct = direct_georeferencing(models, obs, points, roles=tuple(direct_roles))
+    inputs = [*images.values(), observations] + ([ground] if ground is not None else [])
+    return FileAdjustment(result, direct, bias, tuple(pathlib.Path(p) for p in inputs))

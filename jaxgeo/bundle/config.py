@@ -1,0 +1,66 @@
+"""Solver configuration: a small frozen module instead of a list of keywords.
+
+``SolverConfig`` holds settings only (no arrays): every field is static, so a config is hashed
+into the compiled solve and may be passed to ``jax.jit`` / ``eqx.filter_jit`` as it is.
+"""
+
+from __future__ import annotations
+
+import math
+import numbers
+from typing import Literal
+
+import equinox as eqx
+
+METHODS = ("lm", "gn", "dense")
+"""``"lm"`` Levenberg-Marquardt (Schur), ``"gn"`` Gauss-Newton (Schur), ``"dense"`` optimistix'
+Levenberg-Marquardt with a dense QR (small problems and cross-checks only)."""
+LOSSES = ("l2", "huber", "cauchy")
+"""Losses on the image observations: least squares, Huber, Cauchy."""
+BLUNDER_K = 3.29
+"""Default threshold of the standardised residuals (Baarda's w-test at alpha = 0.001)."""
+
+Method = Literal["lm", "gn", "dense"]
+Loss = Literal["l2", "huber", "cauchy"]
+
+
+class SolverConfig(eqx.Module):
+    """How a bundle adjustment is solved.
+
+    Fields:
+        method: ``"lm"`` (Levenberg-Marquardt over the Schur complement, default), ``"gn"``
+            (Gauss-Newton, same descent) or ``"dense"`` (optimistix LM, dense QR).
+        loss: ``"l2"``, ``"huber"`` or ``"cauchy"`` on the image observations.
+        loss_scale: the robust loss' threshold in a priori sigmas (> 0).
+        tol: stop when the remaining Gauss-Newton step is below ``tol`` of its standard
+            deviation (``"dense"``: optimistix' rtol = atol = ``tol``); >= 0.
+        max_steps: solver steps at most (>= 1; a robust loss' least-squares start counts too).
+        blunder_k: flag observations whose standardised residual exceeds this (> 0).
+    """
+
+    method: Method = eqx.field(static=True, default="lm")
+    loss: Loss = eqx.field(static=True, default="l2")
+    loss_scale: float = eqx.field(static=True, default=3.0)
+    tol: float = eqx.field(static=True, default=1e-6)
+    max_steps: int = eqx.field(static=True, default=50)
+    blunder_k: float = eqx.field(static=True, default=BLUNDER_K)
+
+    def __check_init__(self):
+        if self.method not in METHODS:
+            raise ValueError(f"method must be one of {METHODS}, got {self.method!r}")
+        if self.loss not in LOSSES:
+            raise ValueError(f"loss must be one of {LOSSES}, got {self.loss!r}")
+        if not (isinstance(self.loss_scale, numbers.Real) and self.loss_scale > 0):
+            raise ValueError(f"loss_scale must be a positive number, got {self.loss_scale!r}")
+        if not (isinstance(self.tol, numbers.Real) and self.tol >= 0 and math.isfinite(self.tol)):
+            raise ValueError(f"tol must be a finite number >= 0, got {self.tol!r}")
+        if isinstance(self.max_steps, bool) or not isinstance(self.max_steps, numbers.Integral):
+            raise ValueError(f"max_steps must be an integer, got {self.max_steps!r}")
+        if self.max_steps < 1:
+            raise ValueError(f"max_steps must be >= 1, got {self.max_steps}")
+        if not (isinstance(self.blunder_k, numbers.Real) and self.blunder_k > 0):
+            raise ValueError(f"blunder_k must be a positive number, got {self.blunder_k!r}")
+
+
+DEFAULT_SOLVER = SolverConfig()
+"""The default settings: Levenberg-Marquardt, least squares, ``tol`` 1e-6, 50 steps."""

@@ -1,0 +1,162 @@
+"""Writing an adjustment: adjusted models (JSON and RPC files), points, residuals, report.
+
+Nothing the user gave is overwritten: every path is checked against the inputs and against
+existing files before anything is written, and each file is written atomically.
+"""
+
+from __future__ import annotations
+
+import csv
+import io
+import json
+import os
+import pathlib
+from collections.abc import Iterable
+from typing import Any
+
+import jax
+import numpy as np
+
+from ..io.atomic import atomic_write_text
+from ..io.rpc_common import vendor_values
+from ..io.rpc_text import format_rpc_txt
+from ..models import RPC, Biased, fit_rpc
+from .report import format_reports
+
+
+def adjusted_rpc(model: Any, domain: RPC | None = None) -> tuple[RPC, float, str]:
+    """An RPC equivalent to an adjusted model: ``(rpc, max_error_px, how)``.
+
+    The model's own :meth:`~jaxgeo.models.AbstractSensorModel.exact_rpc` when it has one (an
+    RPC, or an RPC with a shift folded into its image offsets: ``how = "exact"``). Otherwise
+    (a bias with drift or affine terms mixes the sample and line rational functions, whose
+    denominators differ) the RPC is re-fitted to the model over the validity cube and image of
+    ``domain`` (the delivered RPC; ``how = "refit"``, ``max_error_px`` the maximum error on the
+    independent check grid). Raises ``TypeError`` when neither is possible.
+    """
+    exact = model.exact_rpc()
+    if exact is not None:
+        return exact, 0.0, "exact"
+    if domain is None:
+        raise TypeError(f"no RPC form for a {type(model).__name__} model")
+    off, scale = np.asarray(domain.image_offset), np.asarray(domain.image_scale)
+    n_cols, n_rows = (int(round(o + s)) + 1 for o, s in zip(off, scale, strict=True))
+    go, gs = np.asarray(domain.ground_offset), np.asarray(domain.ground_scale)
+    refit, report = fit_rpc(model, n_cols, n_rows, (go[2] - gs[2], go[2] + gs[2]))
+    return refit, float(report.check_max_px), "refit"
+
+
+def delivered_rpcs(result) -> dict[str, RPC | None]:
+    """Image name -> the exact RPC of the model the adjustment started from (``None`` if it
+    has none): the validity domain of a refit, and the delivered RPC in the JSON."""
+    setup = result.setup
+    groups = setup.problem.groups
+    start = setup.image_models(groups, tuple(g.theta0 for g in groups))
+    return {name: model.exact_rpc() for name, model in start.items()}
+
+
+def _csv(header: list[str], rows: Iterable[Iterable[Any]]) -> str:
+    buf = io.StringIO()
+    w = csv.writer(buf, lineterminator="\n")
+    w.writerow(header)
+    w.writerows(rows)
+    return buf.getvalue()
+
+
+def _r(v: float) -> str:
+    return repr(float(v))
+
+
+def _leaves(tree) -> dict[str, Any]:
+    out = {}
+    for path, leaf in jax.tree_util.tree_flatten_with_path(tree)[0]:
+        out[jax.tree_util.keystr(path)] = np.asarray(leaf).tolist()
+    return out
+
+
+def models_json(result) -> dict[str, Any]:
+    """JSON-ready adjusted models: per image the RPC (vendor names) and bias, or the parameters,
+    with a posteriori sigmas of every adjusted parameter."""
+    images = {}
+    delivered = delivered_rpcs(result)
+    for name, model in result.models.items():
+        entry: dict[str, Any] = {"model": type(model).__name__}
+        key = next(k for k in result.blocks if k == name or (not isinstance(k, str) and name in k))
+        own = result.parameters(key)
+        entry["parameters"] = {k: v for k, (v, _) in own.items()}
+        entry["sigmas"] = {k: s for k, (_, s) in own.items()}
+        if delivered[name] is not None:
+            entry["rpc"] = vendor_values(delivered[name])
+        if isinstance(model, Biased):  # the correction on its own, with its kind
+            entry["bias"] = {"kind": type(model.bias).__name__, **_leaves(model.bias)}
+        images[name] = entry
+    return {"images": images}
+
+
+def write_outputs(
+    out_dir: os.PathLike,
+    result,
+    report_text: str,
+    report: dict[str, Any],
+    inputs: Iterable[os.PathLike] = (),
+    overwrite: bool = False,
+    rpc_files: bool = True,
+) -> list[pathlib.Path]:
+    """Write the adjustment into ``out_dir``; refuse to touch an input or (unless
+    ``overwrite``) an existing file. Returns the paths written."""
+    out = pathlib.Path(out_dir)
+    files: dict[str, str] = {}
+    notes = []
+    if rpc_files:
+        delivered = delivered_rpcs(result)
+        for name, model in result.models.items():
+            try:
+                rpc, err, how = adjusted_rpc(model, delivered[name])
+            except TypeError:
+                continue
+            files[f"{name}_adjusted_RPC.TXT"] = format_rpc_txt(rpc)
+            notes.append(
+                f"{name}_adjusted_RPC.TXT: {how}"
+                + (f" (max error {err:.3g} px on the check grid)" if how == "refit" else "")
+            )
+    files["adjusted_models.json"] = json.dumps(models_json(result), indent=1) + "\n"
+    files["ground_adjusted.csv"] = _csv(
+        ["id", "lon", "lat", "h", "role", "sigma_e_m", "sigma_n_m", "sigma_h_m"],
+        [
+            [p, *(_r(v) for v in g), role, *(_r(v) for v in s)]
+            for p, role, g, s in zip(
+                result.point_ids,
+                result.point_role,
+                result.ground,
+                result.ground_sigma_m,
+                strict=True,
+            )
+        ],
+    )
+    files["residuals.csv"] = _csv(
+        ["id", "image", "vx_px", "vy_px", "wx", "wy", "blunder"],
+        [
+            [p, img, _r(v[0]), _r(v[1]), _r(w[0]), _r(w[1]), int(b)]
+            for p, img, v, w, b in zip(
+                result.observation_ids,
+                result.observation_images,
+                result.residuals_px,
+                result.standardized,
+                result.blunders,
+                strict=True,
+            )
+        ],
+    )
+    files["report.json"] = json.dumps(report, indent=1) + "\n"
+    files["report.txt"] = report_text + ("\n\n" + "\n".join(notes) if notes else "") + "\n"
+    targets = {n: (out / n).resolve() for n in files}
+    given = {pathlib.Path(p).resolve() for p in inputs}
+    for path in targets.values():
+        if path in given:
+            raise FileExistsError(f"{path}: refusing to write an adjusted file over an input")
+        if path.exists() and not overwrite:
+            raise FileExistsError(f"{path}: exists (choose another --out or pass --overwrite)")
+    return [atomic_write_text(targets[n], text, overwrite=overwrite) for n, text in files.items()]
+
+
+__all__ = ["adjusted_rpc", "delivered_rpcs", "format_reports", "models_json", "write_outputs"]

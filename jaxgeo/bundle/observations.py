@@ -1,0 +1,35 @@
+"""Observation blocks as arrays: image measurements per (group, image slot), ground coordinates.
+
+Built from the user's tables by :func:`jaxgeo.bundle.build.build`; the pieces of a
+:class:`~jaxgeo.bundle.problem.Problem`. Image coordinates ``(x, y) = (col, row)`` px, ground
+``(lon_deg, lat_deg, h_m)``; weights are ``1 / sigma``.
+"""
+
+from __future__ import annotations
+
+import equinox as eqx
+from jaxtyping import Array, Float, Int
+
+
+class ImageObs(eqx.Module):
+    """Image measurements of image ``slot`` of the blocks of group ``group``.
+
+    ``block`` (m,) block index in the group, ``point`` (m,) ground point index, ``xy`` (m, 2) px,
+    ``weight`` (m,) = 1 / sigma_px.
+    """
+
+    block: Int[Array, " m"]
+    point: Int[Array, " m"]
+    xy: Float[Array, "m 2"]
+    weight: Float[Array, " m"]
+    group: int = eqx.field(static=True)
+    slot: int = eqx.field(static=True)
+
+
+class GroundObs(eqx.Module):
+    """Ground-coordinate observations: ``point`` (c,), ``lonlath`` (c, 3), ``weight`` (c, 3) =
+    1/sigma per east/north/up axis in metres (0 for an axis without observation)."""
+
+    point: Int[Array, " c"]
+    lonlath: Float[Array, "c 3"]
+    weight: Float[Array, "c 3"]

@@ -1,0 +1,223 @@
+"""Result: the :class:`AdjustResult` of a solved problem, in the user's names (host side).
+
+:func:`finish` maps the arrays of a :class:`~.solve.Solution` back to image names, point ids
+and parameter names, scales the cofactors by ``s0**2``, computes standardised residuals and
+blunder flags, and turns the solve's ``result`` into an exception (singular: the undetermined
+unknowns named) or a warning (not converged).
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import warnings
+from typing import Any
+
+import numpy as np
+
+from ..io.tables import GroundPoints, Observations
+from .build import Setup
+from .config import DEFAULT_SOLVER, SolverConfig
+from .covariance import undetermined_unknowns
+from .diagnose import undetermined
+from .errors import RESULTS, NotConvergedWarning, SingularNormalEquations, describe
+from .report import AccuracyReport, accuracy, project
+from .solve import Solution
+
+
+@dataclasses.dataclass(frozen=True)
+class AdjustResult:
+    """The adjusted block (numpy arrays; sigmas a posteriori, i.e. scaled by ``s0**2``).
+
+    Models: ``models`` image name -> adjusted sensor model; ``blocks`` the user's keys ->
+    adjusted models (multi-image models under their tuple key).
+    Parameters: ``param_names`` (``image.leaf[index]``), ``params``, ``param_sigma``,
+    ``param_cov``.
+    Points: ``point_ids``, ``point_role`` (gcp / check / tie), ``ground`` ``(n, 3)``
+    lon/lat/h, ``ground_sigma_m`` ``(n, 3)`` east/north/up, ``ground_cov_m2`` ``(n, 3, 3)``.
+    Observations (in the order given: ``observation_ids``, ``observation_images``):
+    ``residuals_px`` ``(m, 2)`` = project(adjusted) - measured, ``standardized`` ``(m, 2)``
+    (residual / (sigma sqrt(redundancy number))),
+    ``blunders`` ``(m,)`` where ``|standardized| > blunder_k``; ``ground_residuals_m``
+    ``(c, 3)`` adjusted - given ENU for the GCPs ``gcp_ids``.
+    Statistics: ``s0``, ``redundancy``, ``cost`` (sum of squared weighted residuals),
+    ``converged``, ``message`` (short), ``result`` (:class:`~.errors.RESULTS`), ``num_steps``;
+    ``report`` (check points, tables 2-6 of 000_)
+    or None.
+    """
+
+    models: dict[str, Any]
+    blocks: dict[Any, Any]
+    param_names: tuple[str, ...]
+    params: np.ndarray
+    param_sigma: np.ndarray
+    param_cov: np.ndarray
+    point_ids: tuple[str, ...]
+    point_role: tuple[str, ...]
+    ground: np.ndarray
+    ground_sigma_m: np.ndarray
+    ground_cov_m2: np.ndarray
+    observation_ids: tuple[str, ...]
+    observation_images: tuple[str, ...]
+    residuals_px: np.ndarray
+    standardized: np.ndarray
+    blunders: np.ndarray
+    gcp_ids: tuple[str, ...]
+    ground_residuals_m: np.ndarray
+    s0: float
+    redundancy: int
+    cost: float
+    converged: bool
+    message: str
+    result: RESULTS
+    num_steps: int
+    report: AccuracyReport | None
+    setup: Setup = dataclasses.field(repr=False)
+    solution: Solution = dataclasses.field(repr=False)
+
+    def parameters(self, key: Any) -> dict[str, tuple[float, float]]:
+        """``{leaf path: (value, sigma)}`` of one model key (image name or tuple of names)."""
+        label = key if isinstance(key, str) else "(" + ", ".join(key) + ")"
+        return {
+            n[len(label) :]: (float(v), float(s))
+            for n, v, s in zip(self.param_names, self.params, self.param_sigma, strict=True)
+            if n.startswith(label) and n[len(label) : len(label) + 1] in (".", "[")
+        }
+
+    def point(self, pid: str) -> tuple[np.ndarray, np.ndarray]:
+        """``(lon/lat/h, sigma ENU m)`` of one point."""
+        j = self.point_ids.index(pid)
+        return self.ground[j], self.ground_sigma_m[j]
+
+
+def raise_singular(setup: Setup, params: list[int], points: list[int], when: str = ""):
+    """Raise :class:`~.errors.SingularNormalEquations` naming parameters and points."""
+    pnames = [setup.param_names[i] for i in params]
+    qnames = [setup.point_ids[j] for j in points]
+    # undetermined parameters leave the points they carry undetermined too: name the cause
+    what = [f"parameter(s) {', '.join(pnames[:12])}" + (" ..." if len(pnames) > 12 else "")]
+    if qnames and not pnames:
+        what = [f"ground point(s) {', '.join(map(repr, qnames[:10]))}"]
+    raise SingularNormalEquations(
+        f"singular normal equations{when}: not determined: {'; '.join(what)} "
+        "(add GCPs or tie points, or choose fewer adjustable parameters)",
+        parameters=pnames,
+        points=qnames,
+    )
+
+
+def finish(
+    setup: Setup,
+    sol: Solution,
+    observations: Observations,
+    ground: GroundPoints | None,
+    solver: SolverConfig = DEFAULT_SOLVER,
+) -> AdjustResult:
+    """The :class:`AdjustResult` of a solved :class:`~.build.Setup` (``build`` +
+    :func:`~.solve.solve` with ``solver``, e.g. inside a larger jitted function): raises
+    :class:`~.errors.SingularNormalEquations` naming the undetermined unknowns when the result is
+    ``RESULTS.undetermined``, warns :class:`~.errors.NotConvergedWarning` if the solve did not
+    converge."""
+    problem = setup.problem
+    converged, message = describe(sol.result)
+    theta = tuple(np.asarray(t) for t in sol.theta)
+    s0 = float(sol.s0)
+    if bool(sol.result == RESULTS.undetermined):
+        masks = undetermined_unknowns(
+            problem, sol.q_params, sol.inflation_params, sol.inflation_points
+        )
+        bad_params, bad_points = (np.flatnonzero(np.asarray(m)).tolist() for m in masks)
+        if not np.all(np.isfinite(np.asarray(sol.inflation_params))):  # Cholesky failed: find
+            more_params, more = undetermined(  # the null space
+                problem, _final_y(problem, sol), loss=solver.loss, loss_scale=solver.loss_scale
+            )
+            bad_params, bad_points = more_params, (more if more else bad_points)
+        raise_singular(setup, bad_params, bad_points)
+    if not converged:
+        warnings.warn(
+            f"bundle adjustment did not converge ({message}) after {int(sol.num_steps)} steps; "
+            f"returning the last state (cost {float(sol.cost):.6g}, s0 {s0:.4g})",
+            NotConvergedWarning,
+            stacklevel=3,
+        )
+    return _result(setup, sol, theta, s0, converged, message, solver, observations, ground)
+
+
+def _final_y(problem, sol):
+    z = tuple(t - g.theta0 for t, g in zip(sol.theta, problem.groups, strict=True))
+    u = (sol.ground - problem.origin) * problem.metres_per_unit
+    return z, u
+
+
+def _result(setup, sol, theta, s0, converged, message, solver, observations, ground):
+    problem = setup.problem
+    var = s0**2 if np.isfinite(s0) else 1.0
+    q = np.asarray(sol.q_params)
+    order = setup.obs_order
+    m = len(observations.point_ids)
+    img_r = np.asarray(sol.residuals_image)
+    weights = np.concatenate([np.asarray(ob.weight) for ob in problem.images] + [np.zeros(0)])
+    res_px = np.full((m, 2), np.nan)
+    std = np.full((m, 2), np.nan)
+    red = np.asarray(sol.redundancy_image)
+    res_px[order] = img_r / weights[:, None]
+    with np.errstate(invalid="ignore", divide="ignore"):
+        std[order] = np.where(red > 1e-10, img_r / np.sqrt(np.maximum(red, 1e-300)), np.nan)
+    if solver.loss != "l2":  # report plain residuals, not the robust-scaled ones
+        models = setup.image_models(problem.groups, theta)
+        res_px = _plain_residuals(models, observations, sol, setup)
+    blunders = np.any(np.abs(np.nan_to_num(std)) > solver.blunder_k, axis=1)
+    gw = np.asarray(problem.ground.weight)
+    role = dict(zip(setup.point_ids, setup.point_role, strict=True))
+    is_gcp = np.array([role[p] == "gcp" for p in setup.ground_ids], dtype=bool)
+    with np.errstate(invalid="ignore", divide="ignore"):
+        g_res = np.where(gw > 0, np.asarray(sol.residuals_ground) / gw, np.nan)[is_gcp]
+    flat = np.concatenate([t.reshape(-1) for t in theta] + [np.zeros(0)])
+    qpp = np.asarray(sol.q_points)
+    report = None
+    if ground is not None and "check" in setup.point_role:
+        models = setup.image_models(problem.groups, theta)
+        est = {p: g for p, g in zip(setup.point_ids, np.asarray(sol.ground), strict=True)}
+        report = accuracy(models, observations, ground, est, s0=s0, title="adjusted")
+    return AdjustResult(
+        models=setup.image_models(problem.groups, theta),
+        blocks=setup.blocks(problem.groups, theta),
+        param_names=setup.param_names,
+        params=flat,
+        param_sigma=np.sqrt(np.maximum(np.diag(q), 0.0) * var),
+        param_cov=q * var,
+        point_ids=setup.point_ids,
+        point_role=setup.point_role,
+        ground=np.asarray(sol.ground),
+        ground_sigma_m=np.sqrt(np.maximum(np.diagonal(qpp, axis1=1, axis2=2), 0.0) * var),
+        ground_cov_m2=qpp * var,
+        observation_ids=tuple(observations.point_ids),
+        observation_images=tuple(observations.images),
+        residuals_px=res_px,
+        standardized=std,
+        blunders=blunders,
+        gcp_ids=tuple(p for p, k in zip(setup.ground_ids, is_gcp, strict=True) if k),
+        ground_residuals_m=g_res,
+        s0=s0,
+        redundancy=problem.redundancy,
+        cost=float(sol.cost),
+        converged=converged,
+        message=message,
+        result=sol.result,
+        num_steps=int(sol.num_steps),
+        report=report,
+        setup=setup,
+        solution=sol,
+    )
+
+
+def _plain_residuals(models, observations, sol, setup) -> np.ndarray:
+    ground = np.asarray(sol.ground)
+    pidx = {p: j for j, p in enumerate(setup.point_ids)}
+    out = np.zeros((len(observations.point_ids), 2))
+    for name, model in models.items():
+        sel = [i for i, img in enumerate(observations.images) if img == name]
+        if not sel:
+            continue
+        g = ground[[pidx[observations.point_ids[i]] for i in sel]]
+        out[sel] = np.asarray(project(model, g)) - observations.xy[sel]
+    return out

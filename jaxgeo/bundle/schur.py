@@ -1,0 +1,408 @@
+"""Structured Gauss-Newton / Levenberg-Marquardt: the Schur complement (reduced camera system).
+
+Every observation depends on one camera block and/or one ground point, so the Jacobian has
+non-zero blocks only there. They all come from ``P + 3`` Jacobian-vector products whatever the
+size of the problem ("colouring": tangent ``i`` sets parameter ``i`` of *every* block, or axis
+``i`` of every point, at once). The normal equations
+
+    [ U   W ] [dc]   [gc]
+    [ W^T V ] [dp] = [gp]
+
+have 3x3 point blocks ``V``; eliminating them gives the reduced camera system
+``S = U - W V^-1 W^T`` (dense, one row per camera parameter), solved by Cholesky, and the points
+by back-substitution. Levenberg-Marquardt damping is Marquardt's diagonal scaling
+``lambda diag(J^T J)`` (clamped to [1e-6, 1e32], as Ceres does), added before elimination.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable
+from typing import Any
+
+import equinox as eqx
+import jax
+import jax.numpy as jnp
+import optimistix as optx
+from jaxtyping import Array, Float, Int, PyTree
+
+from .problem import Structure
+
+NOISE_FLOOR = 1e-9
+"""Relative cost change below which a step cannot be verified by evaluating the cost: pixel
+coordinates of ~1e4 carry ~1e-11 px of rounding, which makes the sum of squares noisy at
+~1e-10 relative (measured on the Pleiades pair)."""
+CONVERGED_FLOOR = 1e-16
+"""Relative cost reduction promised by the full step below which the solve has converged."""
+STAGNANT_STEPS = 3
+"""Accepted steps in a row that fail to halve a decrement already under the cost's rounding
+noise (``NOISE_FLOOR`` of the cost) after which the solve has converged: the linear solve's own
+rounding then sets the decrement (seen at 320 sub-scenes: 3e-12 for ever, above ``tol**2``)."""
+DIAG_MIN = 1e-6
+DIAG_MAX = 1e32
+
+
+class Jacobians(eqx.Module):
+    """Non-zero Jacobian blocks and residuals, all image observations concatenated.
+
+    ``jc`` (M, 2, P) w.r.t. the observation's camera parameters, ``jp`` (M, 2, 3) w.r.t. its
+    point, ``r`` (M, 2); ``jg`` (c, 3, 3), ``rg`` (c, 3) of the ground observations; ``jpr``,
+    ``rpr`` per group ``(n_blocks, q, P)``, ``(n_blocks, q)`` of the block priors.
+    """
+
+    jc: Float[Array, "M 2 P"]
+    jp: Float[Array, "M 2 3"]
+    r: Float[Array, "M 2"]
+    jg: Float[Array, "c 3 3"]
+    rg: Float[Array, "c 3"]
+    jpr: tuple[Float[Array, "b q P"], ...]
+    rpr: tuple[Float[Array, "b q"], ...]
+
+
+class NormalBlocks(eqx.Module):
+    """Blocks of ``J^T J`` and ``J^T r``: ``u`` (N+1, N+1) dense (last row/column a dummy for
+    padding), ``gc`` (N+1,), ``v`` (n, 3, 3), ``gp`` (n, 3), ``w`` (M, P, 3) per observation."""
+
+    u: Float[Array, "N1 N1"]
+    gc: Float[Array, " N1"]
+    v: Float[Array, "n 3 3"]
+    gp: Float[Array, "n 3"]
+    w: Float[Array, "M P 3"]
+
+
+def colours(y: PyTree, width: int) -> PyTree:
+    """The ``width + 3`` tangents of the colouring, stacked on a leading axis, shaped like ``y``."""
+    z, u = y
+    eye = jnp.eye(width, dtype=u.dtype)
+    zs = tuple(
+        jnp.concatenate(
+            [
+                jnp.broadcast_to(eye[:, None, : zg.shape[1]], (width, *zg.shape)),
+                jnp.zeros((3, *zg.shape), zg.dtype),
+            ]
+        )
+        for zg in z
+    )
+    us = jnp.concatenate(
+        [
+            jnp.zeros((width, *u.shape), u.dtype),
+            jnp.broadcast_to(jnp.eye(3, dtype=u.dtype)[:, None, :], (3, *u.shape)),
+        ]
+    )
+    return zs, us
+
+
+def jacobians(linear: Callable, residual: PyTree, y: PyTree, width: int) -> Jacobians:
+    """The non-zero Jacobian blocks from ``width + 3`` JVPs of ``linear`` (the linearised
+    residual function) at ``y``; ``residual`` is the residual pytree ``(img, gnd, prior)``."""
+    out_img, out_gnd, out_pr = jax.vmap(linear)(colours(y, width))
+    img, gnd, pr = residual
+
+    def split(o):  # (P + 3, m, k) -> (m, k, P), (m, k, 3)
+        return jnp.moveaxis(o[:width], 0, -1), jnp.moveaxis(o[width:], 0, -1)
+
+    jc, jp = zip(*(split(o) for o in out_img), strict=True) if out_img else ((), ())
+    return Jacobians(
+        jc=jnp.concatenate(jc) if jc else jnp.zeros((0, 2, width)),
+        jp=jnp.concatenate(jp) if jp else jnp.zeros((0, 2, 3)),
+        r=jnp.concatenate(img) if img else jnp.zeros((0, 2)),
+        jg=jnp.moveaxis(out_gnd[width:], 0, -1),
+        rg=gnd,
+        jpr=tuple(jnp.moveaxis(o[:width], 0, -1) for o in out_pr),
+        rpr=tuple(pr),
+    )
+
+
+def normal_blocks(jac: Jacobians, s: Structure) -> NormalBlocks:
+    """Assemble :class:`NormalBlocks` from the Jacobian blocks (scatter-adds, no dense ``J``)."""
+    n1 = s.n_params + 1
+    idx = s.obs_params
+    u = (
+        jnp.zeros((n1, n1))
+        .at[idx[:, :, None], idx[:, None, :]]
+        .add(jnp.einsum("mkp,mkq->mpq", jac.jc, jac.jc))
+    )
+    gc = jnp.zeros(n1).at[idx].add(jnp.einsum("mkp,mk->mp", jac.jc, jac.r))
+    for bidx, jpr, rpr in zip(s.block_params, jac.jpr, jac.rpr, strict=True):
+        u = u.at[bidx[:, :, None], bidx[:, None, :]].add(jnp.einsum("bqp,bqr->bpr", jpr, jpr))
+        gc = gc.at[bidx].add(jnp.einsum("bqp,bq->bp", jpr, rpr))
+    seg = jax.ops.segment_sum
+    v = seg(jnp.einsum("mki,mkj->mij", jac.jp, jac.jp), s.obs_point, s.n_points)
+    gp = seg(jnp.einsum("mki,mk->mi", jac.jp, jac.r), s.obs_point, s.n_points)
+    v = v + seg(jnp.einsum("cki,ckj->cij", jac.jg, jac.jg), s.ground_point, s.n_points)
+    gp = gp + seg(jnp.einsum("cki,ck->ci", jac.jg, jac.rg), s.ground_point, s.n_points)
+    w = jnp.einsum("mkp,mkj->mpj", jac.jc, jac.jp)
+    return NormalBlocks(u=u, gc=gc, v=v, gp=gp, w=w)
+
+
+def inv3(v: Float[Array, "n 3 3"]) -> Float[Array, "n 3 3"]:
+    """Batched inverse of symmetric 3x3 blocks (Cholesky; NaN where not positive definite)."""
+    chol = jnp.linalg.cholesky(v)
+    return jax.vmap(lambda c: jax.scipy.linalg.cho_solve((c, True), jnp.eye(3)))(chol)
+
+
+def damped(blocks: NormalBlocks, s: Structure, lam) -> tuple[Array, Array]:
+    """``U + lam diag(U)`` (dummy row/column: identity) and ``V + lam diag(V)``."""
+    n = s.n_params
+    du = jnp.clip(jnp.diagonal(blocks.u), DIAG_MIN, DIAG_MAX)
+    u = blocks.u + lam * jnp.diag(du)
+    u = u.at[n, :].set(0.0).at[:, n].set(0.0).at[n, n].set(1.0)
+    dv = jnp.clip(jnp.diagonal(blocks.v, axis1=1, axis2=2), DIAG_MIN, DIAG_MAX)
+    v = blocks.v + lam * dv[:, :, None] * jnp.eye(3)
+    return u, v
+
+
+def reduced_system(
+    blocks: NormalBlocks, s: Structure, lam: Float[Array, ""] | float
+) -> tuple[Float[Array, "N1 N1"], Float[Array, "n 3 3"], Float[Array, "M P 3"]]:
+    """``(S, V^-1, W V^-1)`` of the damped normal equations (damping ``lam * diag``)."""
+    n = s.n_params
+    u, v = damped(blocks, s, lam)
+    vinv = inv3(v)
+    y = jnp.einsum("mpj,mjk->mpk", blocks.w, vinv[s.obs_point])
+    pa, pb = s.obs_params[s.pair_a], s.obs_params[s.pair_b]
+    sub = jnp.einsum("kpj,kqj->kpq", y[s.pair_a], blocks.w[s.pair_b])
+    big_s = u.at[pa[:, :, None], pb[:, None, :]].add(-sub)
+    # the dummy (padding) parameter stays an identity row
+    big_s = big_s.at[n, :].set(0.0).at[:, n].set(0.0).at[n, n].set(1.0)
+    return big_s, vinv, y
+
+
+def schur_solve(
+    blocks: NormalBlocks, s: Structure, lam: Float[Array, ""] | float, refine: int = 0
+) -> tuple[Float[Array, " N"], Float[Array, "n 3"]]:
+    """Solve ``(J^T J + lam D) d = J^T r`` for the camera ``dc`` (N,) and point ``dp`` (n, 3).
+
+    ``refine`` steps of iterative refinement against the block matrix can recover accuracy lost
+    to the cancellation in the Schur complement; none are needed at our conditioning (the
+    solution agrees with a dense QR solve to the noise floor of the cost).
+    """
+    n = s.n_params
+    big_s, vinv, y = reduced_system(blocks, s, lam)
+    u, v = damped(blocks, s, lam)
+    chol = jnp.linalg.cholesky(big_s)
+    idx, pt = s.obs_params, s.obs_point
+
+    def solve(gc, gp):
+        rhs = gc.at[idx].add(-jnp.einsum("mpj,mj->mp", y, gp[pt])).at[n].set(0.0)
+        dc = jax.scipy.linalg.cho_solve((chol, True), rhs)
+        back = jax.ops.segment_sum(jnp.einsum("mpj,mp->mj", blocks.w, dc[idx]), pt, s.n_points)
+        return dc, jnp.einsum("nij,nj->ni", vinv, gp - back)
+
+    def apply(dc, dp):
+        hc = (u @ dc).at[idx].add(jnp.einsum("mpj,mj->mp", blocks.w, dp[pt]))
+        cross = jnp.einsum("mpj,mp->mj", blocks.w, dc[idx])
+        hp = jnp.einsum("nij,nj->ni", v, dp) + jax.ops.segment_sum(cross, pt, s.n_points)
+        return hc.at[n].set(0.0), hp
+
+    gc = blocks.gc.at[n].set(0.0)
+    dc, dp = solve(gc, blocks.gp)
+    for _ in range(refine):
+        hc, hp = apply(dc, dp)
+        ec, ep = solve(gc - hc, blocks.gp - hp)
+        dc, dp = dc + ec, dp + ep
+    return dc[:n], dp
+
+
+class SchurState(eqx.Module):
+    """Descent state at the last accepted point: Jacobian blocks, normal blocks, and the squared
+    Newton decrement ``g^T H^-1 g`` (the squared length of the full Gauss-Newton step in units
+    of its own standard deviations; ``inf`` before the first query or when singular)."""
+
+    jac: Jacobians
+    blocks: NormalBlocks
+    decrement: Float[Array, ""]
+    stagnant: Int[Array, ""]
+    """Accepted steps in a row whose decrement did not halve the previous one."""
+
+
+def _zeros_state(s: Structure, m: int, c: int, priors: tuple[tuple[int, int], ...]) -> SchurState:
+    n1, p = s.n_params + 1, s.width
+    jac = Jacobians(
+        jc=jnp.zeros((m, 2, p)),
+        jp=jnp.zeros((m, 2, 3)),
+        r=jnp.zeros((m, 2)),
+        jg=jnp.zeros((c, 3, 3)),
+        rg=jnp.zeros((c, 3)),
+        jpr=tuple(jnp.zeros((b, q, p)) for b, q in priors),
+        rpr=tuple(jnp.zeros((b, q)) for b, q in priors),
+    )
+    blocks = NormalBlocks(
+        u=jnp.zeros((n1, n1)),
+        gc=jnp.zeros(n1),
+        v=jnp.zeros((s.n_points, 3, 3)),
+        gp=jnp.zeros((s.n_points, 3)),
+        w=jnp.zeros((m, p, 3)),
+    )
+    return SchurState(jac, blocks, jnp.array(jnp.inf), jnp.array(0))
+
+
+def split_params(flat: Float[Array, " N"], s: Structure) -> tuple[Float[Array, "b p"], ...]:
+    """Flat camera parameters (N,) -> per group ``(n_blocks, n_params)``."""
+    out, start = [], 0
+    for b, p in s.group_shapes:
+        out.append(flat[start : start + b * p].reshape(b, p))
+        start += b * p
+    return tuple(out)
+
+
+class SchurDescent(optx.AbstractDescent):
+    """(Damped) Gauss-Newton step by the Schur complement of the point blocks.
+
+    ``query`` builds the Jacobian and normal blocks once per accepted point (``width + 3``
+    JVPs of the linearised residuals) and the Newton decrement; ``step`` solves the damped
+    system for the trust region's step size, ``lambda = damping / step_size`` with Marquardt's
+    ``diag(J^T J)`` scaling (Levenberg-Marquardt), or returns ``step_size`` times the
+    Gauss-Newton step when ``damped`` is False.
+    """
+
+    structure: Structure
+    damping: float = 1e-4
+    damped: bool = eqx.field(static=True, default=True)
+
+    def init(self, y, f_info_struct) -> SchurState:
+        img, gnd, pr = f_info_struct.residual
+        m = sum(x.shape[0] for x in img)
+        return _zeros_state(self.structure, m, gnd.shape[0], tuple(x.shape for x in pr))
+
+    def query(self, y, f_info, state) -> SchurState:
+        s = self.structure
+        jac = jacobians(f_info.jac.mv, f_info.residual, y, s.width)
+        blocks = normal_blocks(jac, s)
+        dc, dp = schur_solve(blocks, s, 0.0)
+        dec = jnp.dot(blocks.gc[: s.n_params], dc) + jnp.sum(blocks.gp * dp)
+        dec = jnp.where(jnp.isfinite(dec), dec, jnp.inf)
+        stagnant = jnp.where(dec > 0.5 * state.decrement, state.stagnant + 1, 0)
+        return SchurState(jac, blocks, dec, stagnant)
+
+    def step(self, step_size, state: SchurState):
+        s = self.structure
+        if self.damped:
+            tiny = jnp.finfo(jnp.result_type(step_size)).tiny
+            lam = self.damping / jnp.maximum(step_size, tiny)
+            dc, dp = schur_solve(state.blocks, s, lam)
+            scale = 1.0
+        else:
+            dc, dp = schur_solve(state.blocks, s, 0.0)
+            scale = step_size
+        finite = jnp.all(jnp.isfinite(dc)) & jnp.all(jnp.isfinite(dp))
+        # a non-finite damped step is rejected by the trust region, which then damps more
+        result = optx.RESULTS.where(
+            finite | self.damped, optx.RESULTS.successful, optx.RESULTS.nonfinite
+        )
+        return (split_params(-scale * dc, s), -scale * dp), result
+
+
+class _TrustRegionState(eqx.Module):
+    step_size: Float[Array, ""]
+
+
+class NoiseTolerantTrustRegion(optx.AbstractSearch):
+    """``optx.ClassicalTrustRegion``, except that a step whose predicted and actual changes of
+    the cost are both below its rounding noise (``NOISE_FLOOR`` of the cost) is accepted.
+
+    Near the optimum the quadratic model is exact to second order while the cost cannot
+    resolve the improvement: the classical test then rejects good steps at random, and the
+    damping grows until the solve stalls short of the optimum.
+    """
+
+    high_cutoff: float = 0.99
+    low_cutoff: float = 0.01
+    high_constant: float = 3.5
+    low_constant: float = 0.25
+    noise: float = NOISE_FLOOR
+
+    def init(self, y, f_info_struct) -> _TrustRegionState:
+        del y, f_info_struct
+        return _TrustRegionState(step_size=jnp.array(1.0))
+
+    def step(self, first_step, y, y_eval, f_info, f_eval_info, state):
+        y_diff = jax.tree.map(lambda a, b: a - b, y_eval, y)
+        predicted = f_info.jac.mv(y_diff)
+        rtr = sum_squares(f_info.residual)
+        model = sum_squares(jax.tree.map(lambda a, b: a + b, predicted, f_info.residual))
+        reduction = 0.5 * (model - rtr)  # predicted change of the cost (negative: decrease)
+        f_min, f_min_eval = f_info.as_min(), f_eval_info.as_min()
+        diff = f_min_eval - f_min
+        noise = self.noise * jnp.abs(f_min)
+        tiny = (-reduction <= noise) & (diff <= 10.0 * noise) & jnp.isfinite(f_min_eval)
+        accept = (diff <= self.low_cutoff * reduction) | tiny | first_step
+        good = (diff < self.high_cutoff * reduction) & (reduction < 0) & ~first_step
+        mul = jnp.where(good, self.high_constant, 1.0)
+        mul = jnp.where(accept, mul, self.low_constant)
+        new = mul * state.step_size
+        return new, accept, optx.RESULTS.successful, _TrustRegionState(step_size=new)
+
+
+def sum_squares(tree) -> Float[Array, ""]:
+    return sum((jnp.sum(x**2) for x in jax.tree.leaves(tree)), jnp.zeros(()))
+
+
+class StructuredGaussNewton(optx.AbstractGaussNewton):
+    """Levenberg-Marquardt (or Gauss-Newton) over the Schur-complement descent.
+
+    ``method="lm"``: :class:`SchurDescent` with Marquardt-scaled damping inside
+    :class:`NoiseTolerantTrustRegion`; ``method="gn"``: undamped steps of length 1.
+
+    Termination is scale-free: the solve stops when the full Gauss-Newton step at the current
+    point is shorter than ``tol`` of its own standard deviation (``g^T H^-1 g < tol^2``) or
+    promises less than ``CONVERGED_FLOOR`` of the cost, or when it promises less than the cost's
+    rounding noise and has stopped shrinking (``STAGNANT_STEPS``: large, ill-conditioned reduced
+    systems, where the solve's rounding keeps it above ``tol**2``), or when ``max_rejections``
+    steps in a row were rejected (the damping grew by 4^k without any decrease of the cost: the
+    cost is at its floating-point floor). The Cauchy criterion of optimistix on the raw
+    parameters is off (``rtol = atol = 0``): parameters of very different units (pixels, pixels
+    per pixel, metres) make it meaningless.
+    """
+
+    rtol: float
+    atol: float
+    norm: Callable[[PyTree], Array]
+    descent: SchurDescent
+    search: Any
+    verbose: Callable[..., None]
+    tol: float = eqx.field(static=True)
+    max_rejections: int = eqx.field(static=True)
+
+    def __init__(
+        self,
+        structure: Structure,
+        tol: float = 1e-6,
+        method: str = "lm",
+        damping: float = 1e-4,
+        max_rejections: int = 8,
+        verbose: bool = False,
+    ):
+        if method not in ("lm", "gn"):
+            raise ValueError(f"method must be 'lm' or 'gn', got {method!r}")
+        self.rtol = 0.0
+        self.atol = 0.0
+        self.norm = optx.max_norm
+        self.descent = SchurDescent(structure, damping=damping, damped=method == "lm")
+        self.search = NoiseTolerantTrustRegion() if method == "lm" else optx.LearningRate(1.0)
+        self.verbose = _print_verbose if verbose else _silent
+        self.tol = tol
+        self.max_rejections = max_rejections
+
+    def terminate(self, fn, y, args, options, state, tags):
+        # the decrement is the cost reduction the full step promises: below 1e-12 of the cost
+        # it is under the rounding noise of the cost itself and no step can be verified
+        cost = sum((jnp.sum(r**2) for r in jax.tree.leaves(state.f_info.residual)), 0.0)
+        floor = jnp.maximum(self.tol**2, CONVERGED_FLOOR * cost)
+        dec = state.descent_state.decrement
+        small = dec < floor
+        small |= (dec < NOISE_FLOOR * cost) & (state.descent_state.stagnant >= STAGNANT_STEPS)
+        stalled = state.num_steps_since_acceptance >= self.max_rejections
+        done = (small & ~state.first_step) | stalled | state.terminate
+        return done, state.result
+
+
+def _silent(**kwargs):
+    del kwargs
+
+
+def _print_verbose(**kwargs):
+    keep = ("num_steps", "accepted_steps", "loss_this_step", "loss_last_accepted_step", "step_size")
+    jax.debug.print(
+        " ".join(f"{kwargs[k][0]}: {{{k}}}" for k in keep if k in kwargs),
+        **{k: kwargs[k][1] for k in keep if k in kwargs},
+    )

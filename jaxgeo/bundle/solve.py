@@ -1,0 +1,272 @@
+"""Solve: the bundle adjustment as a pure function of arrays (residuals, solve, statistics).
+
+:func:`solve` takes a :class:`~jaxgeo.bundle.problem.Problem` and a
+:class:`~jaxgeo.bundle.config.SolverConfig` and returns a :class:`Solution`; both are pytrees,
+so ``solve`` can be jitted (``eqx.filter_jit``), vmapped over independent problems of one
+structure (e.g. Monte-Carlo noise on ``xy``) and differentiated (implicit function theorem,
+through optimistix). Failures are data: ``Solution.result`` is a
+:class:`~jaxgeo.bundle.errors.RESULTS` per problem, raised only with ``throw=True``.
+"""
+
+from __future__ import annotations
+
+import equinox as eqx
+import jax
+import jax.numpy as jnp
+import lineax as lx
+import optimistix as optx
+from jaxtyping import Array, Float, Int
+
+from .. import geodesy
+from .config import DEFAULT_SOLVER, SolverConfig
+from .covariance import cofactors, undetermined_unknowns
+from .errors import RESULTS
+from .problem import Problem
+from .schur import (
+    Jacobians,
+    NormalBlocks,
+    StructuredGaussNewton,
+    jacobians,
+    normal_blocks,
+    split_params,
+    sum_squares,
+)
+
+
+def robust(r: Float[Array, "m k"], loss: str, c: float) -> Float[Array, "m k"]:
+    """Residual vectors rescaled so that their squared norm is ``rho(|r|^2)`` (Huber, Cauchy).
+
+    Gauss-Newton on the rescaled residuals minimises ``sum rho(|r_i|^2)``; ``c`` is the
+    threshold in a priori sigmas.
+    """
+    if loss == "l2":
+        return r
+    s = jnp.sum(r**2, axis=-1)
+    pos = s > 0.0
+    safe = jnp.where(pos, s, 1.0)  # double-where: finite gradients at r = 0
+    if loss == "huber":
+        rho = jnp.where(safe <= c**2, safe, 2.0 * c * jnp.sqrt(safe) - c**2)
+    elif loss == "cauchy":
+        rho = c**2 * jnp.log1p(safe / c**2)
+    else:
+        raise ValueError(f"unknown loss {loss!r}; expected 'l2', 'huber' or 'cauchy'")
+    factor = jnp.where(pos, jnp.sqrt(rho / safe), 1.0)
+    return r * factor[..., None]
+
+
+def _take(tree, index):
+    return jax.tree.map(lambda x: x[index] if eqx.is_array(x) else x, tree)
+
+
+def _block_priors(block) -> Float[Array, " q"]:
+    return jnp.asarray(block.prior_residuals(), dtype=float).reshape(-1)
+
+
+def thetas(problem: Problem, z, scales) -> tuple[Float[Array, "b p"], ...]:
+    """Solver variables ``z`` -> raveled parameters per group."""
+    return tuple(g.theta0 + sc * zg for g, sc, zg in zip(problem.groups, scales, z, strict=True))
+
+
+def residuals(y, args):
+    """Weighted residuals ``(image per observation block, ground, prior per group)``.
+
+    ``y = (z, u)`` (see :mod:`~jaxgeo.bundle.problem`); ``args = (problem, scales, loss,
+    loss_scale)``: the loss (``"l2"``, ``"huber"``, ``"cauchy"``) on the image residuals.
+    """
+    problem, scales, loss, loss_scale = args
+    z, u = y
+    ground = problem.ground_points(u)
+    theta = thetas(problem, z, scales)
+    stacked = tuple(g.blocks(t) for g, t in zip(problem.groups, theta, strict=True))
+    img = []
+    for ob in problem.images:
+        grp = problem.groups[ob.group]
+
+        def one(block, g, xy, w, grp=grp, slot=ob.slot):
+            return (grp.image_model(block, slot).project(g) - xy) * w
+
+        per_obs = _take(stacked[ob.group], ob.block)
+        r = eqx.filter_vmap(one, in_axes=(eqx.if_array(0), 0, 0, 0))(
+            per_obs, ground[ob.point], ob.xy, ob.weight
+        )
+        img.append(robust(r, loss, loss_scale))
+    gobs = problem.ground
+    gnd = jax.vmap(lambda g, o, w: geodesy.geodetic_to_enu(g, o) * w)(
+        ground[gobs.point], gobs.lonlath, gobs.weight
+    )
+    prior = []
+    for grp, blocks, th, mean, wt in zip(
+        problem.groups, stacked, theta, problem.prior_mean, problem.prior_weight, strict=True
+    ):
+        own = eqx.filter_vmap(_block_priors, in_axes=eqx.if_array(0))(blocks)
+        own = own.reshape(grp.n_blocks, -1)
+        user = (th - mean) * wt if mean.shape[1] else jnp.zeros((grp.n_blocks, 0))
+        prior.append(jnp.concatenate([own, user], axis=1))
+    return tuple(img), gnd, tuple(prior)
+
+
+class Solution(eqx.Module):
+    """Result of :func:`solve` (arrays only; see :class:`jaxgeo.bundle.result.AdjustResult`).
+
+    Fields:
+        theta: per group ``(n_blocks, n_params)`` adjusted parameters.
+        ground: ``(n_points, 3)`` adjusted ground points ``(lon_deg, lat_deg, h_m)``.
+        residuals_image: ``(M, 2)`` weighted image residuals, observation blocks concatenated
+            (``project - measured``, divided by sigma; robust-rescaled if a loss is set).
+        residuals_ground: ``(c, 3)`` weighted ground residuals (ENU adjusted - given, / sigma).
+        q_params: ``(N, N)`` cofactor matrix of all parameters (a priori sigma 1; multiply
+            by ``s0**2`` for the a posteriori covariance), groups in order, raveled.
+        q_points: ``(n_points, 3, 3)`` cofactor matrices of the points, ENU metres.
+        redundancy_image: ``(M, 2)`` redundancy numbers of the image observations.
+        redundancy_ground: ``(c, 3)`` redundancy numbers of the ground observations.
+        inflation_params, inflation_points: ``Q_ii H_ii`` per unknown (see
+            :class:`~jaxgeo.bundle.covariance.Covariance`): huge or NaN where the unknown is not
+            determined.
+        cost: sum of squared weighted residuals at the solution.
+        s0: a posteriori standard deviation of unit weight (NaN without redundancy).
+        result: :class:`~jaxgeo.bundle.errors.RESULTS`: ``successful``, ``undetermined`` (some
+            unknowns not determined; takes precedence), ``not_converged`` (maximum number of
+            steps), or optimistix' own (``nonfinite``...); ``num_steps``: solver steps taken.
+    """
+
+    theta: tuple[Float[Array, "b p"], ...]
+    ground: Float[Array, "n 3"]
+    residuals_image: Float[Array, "M 2"]
+    residuals_ground: Float[Array, "c 3"]
+    q_params: Float[Array, "N N"]
+    q_points: Float[Array, "n 3 3"]
+    redundancy_image: Float[Array, "M 2"]
+    redundancy_ground: Float[Array, "c 3"]
+    inflation_params: Float[Array, " N"]
+    inflation_points: Float[Array, "n 3"]
+    cost: Float[Array, ""]
+    s0: Float[Array, ""]
+    result: RESULTS
+    num_steps: Int[Array, ""]
+
+
+def initial_unknowns(problem: Problem):
+    """The solver's starting point ``y0 = (z, u) = 0``: the initial parameters and points."""
+    z0 = tuple(jnp.zeros_like(g.theta0) for g in problem.groups)
+    return z0, jnp.zeros_like(problem.origin)
+
+
+def unit_scales(problem: Problem) -> tuple[Float[Array, "b p"], ...]:
+    """Parameter scales of 1 (``theta = theta0 + z``)."""
+    return tuple(jnp.ones_like(g.theta0) for g in problem.groups)
+
+
+def blocks_at(
+    problem: Problem, scales, y, loss: str = "l2", loss_scale: float = 3.0
+) -> tuple[Jacobians, NormalBlocks]:
+    """The Jacobian and normal-equation blocks at ``y``."""
+    r, lin = jax.linearize(lambda yy: residuals(yy, (problem, scales, loss, loss_scale)), y)
+    jac = jacobians(lin, r, y, problem.structure.width)
+    return jac, normal_blocks(jac, problem.structure)
+
+
+def parameter_scales(
+    problem: Problem, loss: str = "l2", loss_scale: float = 3.0
+) -> tuple[Float[Array, "b p"], ...]:
+    """Column scaling ``1 / sqrt(diag J^T J)`` of the parameters at the initial values."""
+    _, blocks = blocks_at(
+        problem, unit_scales(problem), initial_unknowns(problem), loss, loss_scale
+    )
+    d = jnp.diagonal(blocks.u)[: problem.structure.n_params]
+    sc = jnp.where(d > 0.0, 1.0 / jnp.sqrt(jnp.where(d > 0.0, d, 1.0)), 1.0)
+    return jax.lax.stop_gradient(split_params(sc, problem.structure))
+
+
+def solve(
+    problem: Problem,
+    solver: SolverConfig = DEFAULT_SOLVER,
+    *,
+    throw: bool = False,
+    verbose: bool = False,
+) -> Solution:
+    """Adjust ``problem``: a pure function, jittable with ``eqx.filter_jit`` and vmappable.
+
+    ``solver.method``: ``"lm"`` Levenberg-Marquardt over the Schur-complement descent
+    (default), ``"gn"`` Gauss-Newton over the same descent, ``"dense"`` optimistix' own
+    Levenberg-Marquardt with a dense QR on Jacobi-scaled parameters (small problems and
+    cross-checks only). A robust ``solver.loss`` first solves least squares, then re-weights
+    from there. The outcome is ``Solution.result`` (see :class:`Solution`): singular normal
+    equations are detected here, inside the compiled solve. ``throw=True`` raises (an
+    ``equinox`` runtime error with the :class:`~jaxgeo.bundle.errors.RESULTS` message) on any
+    result other than ``successful``; under ``vmap`` each problem has its own result.
+    """
+    s = problem.structure
+    loss, c = solver.loss, float(solver.loss_scale)
+    y0 = initial_unknowns(problem)
+    if solver.method == "dense":
+        scales = parameter_scales(problem, loss, c)
+        optimiser = optx.LevenbergMarquardt(
+            rtol=solver.tol, atol=solver.tol, linear_solver=lx.QR(), verbose=verbose
+        )
+    else:
+        scales = unit_scales(problem)
+        optimiser = StructuredGaussNewton(s, tol=solver.tol, method=solver.method, verbose=verbose)
+    steps = jnp.zeros((), int)
+    if loss != "l2":
+        # a robust loss starts from the least-squares solution: from far away every residual
+        # sits in the loss' linear part, where Gauss-Newton on sqrt(rho) crawls
+        first = optx.least_squares(
+            residuals,
+            optimiser,
+            y0,
+            args=(problem, scales, "l2", c),
+            max_steps=solver.max_steps,
+            throw=False,
+        )
+        y0, steps = first.value, first.stats["num_steps"]
+    sol = optx.least_squares(
+        residuals,
+        optimiser,
+        y0,
+        args=(problem, scales, loss, c),
+        max_steps=solver.max_steps,
+        throw=False,
+    )
+    y = sol.value
+    if solver.method == "dense":
+        jac, blocks = blocks_at(problem, scales, y, loss, c)
+    else:  # the descent's blocks are those of the last accepted point, i.e. of y
+        jac, blocks = sol.state.descent_state.jac, sol.state.descent_state.blocks
+    cov = cofactors(jac, blocks, s)
+    flat_scale = jnp.concatenate([x.reshape(-1) for x in scales] + [jnp.zeros(0)])
+    q_params = cov.cc * flat_scale[:, None] * flat_scale[None, :]
+    cost = sum_squares((jac.r, jac.rg, jac.rpr))
+    red = problem.redundancy
+    s0 = jnp.sqrt(cost / red) if red > 0 else jnp.full((), jnp.nan)
+    bad_params, bad_points = undetermined_unknowns(
+        problem, q_params, cov.inflation_params, cov.inflation_points
+    )
+    result = RESULTS.promote(sol.result)
+    result = RESULTS.where(
+        result == RESULTS.nonlinear_max_steps_reached, RESULTS.not_converged, result
+    )
+    result = RESULTS.where(jnp.any(bad_params) | jnp.any(bad_points), RESULTS.undetermined, result)
+    out = Solution(
+        theta=thetas(problem, y[0], scales),
+        ground=problem.ground_points(y[1]),
+        residuals_image=jac.r,
+        residuals_ground=jac.rg,
+        q_params=q_params,
+        q_points=cov.pp,
+        redundancy_image=1.0 - cov.obs,
+        redundancy_ground=1.0 - cov.ground,
+        inflation_params=cov.inflation_params,
+        inflation_points=cov.inflation_points,
+        cost=cost,
+        s0=s0,
+        result=result,
+        num_steps=steps + sol.stats["num_steps"],
+    )
+    if throw:
+        out = result.error_if(out, result != RESULTS.successful)
+    return out
+
+
+solve_jit = eqx.filter_jit(solve)
+""":func:`solve` compiled (``eqx.filter_jit``): one compilation per problem structure and
+solver configuration."""

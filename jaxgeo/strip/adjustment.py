@@ -1,0 +1,194 @@
+"""``adjust_strip``: the two-level full-strip adjustment of 003_ (sections 6-9), tables in.
+
+1. the GCP distribution rule of section 9 is checked (a :class:`GCPDistributionWarning` names
+   the gaps);
+2. level 1: ties formed from the sub-scenes' line offsets, one bundle adjustment of all
+   sub-scenes (affine bias each) with the ties and the GCPs where they exist;
+3. level 2: the universal correction (eq. 12-13) fitted to the GCPs' level-1 positions and
+   applied to every sub-scene; updated RPCs on request (:meth:`StripResult.updated_rpcs`).
+
+Both levels run as one compiled function (:func:`.solve.two_level`); the same function,
+vmapped, adjusts a batch (:func:`.batch.monte_carlo`). :func:`adjust_individually` is the
+practice the paper compares with: every sub-scene adjusted to its own GCPs.
+"""
+
+from __future__ import annotations
+
+import copy
+import time
+import warnings
+from collections.abc import Mapping
+from typing import Any
+
+import equinox as eqx
+import jax
+import jax.numpy as jnp
+import numpy as np
+
+from ..bundle.adjustment import adjust, with_bias
+from ..bundle.build import build
+from ..bundle.config import SolverConfig
+from ..bundle.errors import AdjustmentError
+from ..bundle.result import AdjustResult, finish
+from ..io import GroundPoints, Observations
+from ..models.bias import BIAS_KINDS
+from .config import StripConfig
+from .delivery import Strip
+from .distribution import check_gcp_distribution
+from .errors import UniversalCorrectionWarning
+from .level1 import level1_input
+from .level2 import Level2Data, level2_input
+from .report import strip_report
+from .result import StripResult
+from .solve import degree_index, en_error_m, evaluate_jit, localize_in, tie_gap, two_level_jit
+from .universal import N_TERMS, UniversallyCorrected, check_design
+
+N_BIAS_GCPS = {name: kind().n_params // 2 for name, kind in BIAS_KINDS.items()}
+"""GCPs one sub-scene needs to be adjusted on its own with each bias (two equations each)."""
+
+
+def _in_level1(err: AdjustmentError, strip: Strip) -> AdjustmentError:
+    """``err`` (same type and attributes) with the level-1 context and the strip's file."""
+    where = strip.files.description if strip.files is not None else "the strip"
+    out = copy.copy(err)
+    out.args = (f"level-1 bundle adjustment of {where}: {err}", *err.args[1:])
+    return out
+
+
+def adjust_strip(strip: Strip, config: StripConfig | None = None) -> StripResult:
+    """Two-level adjustment of a strip (see the module docstring).
+
+    Args:
+        strip: sub-scenes with vendor RPCs, ground points, measurements (:func:`read_strip`).
+        config: the ties, both levels and the level-1 solver (:class:`~.config.StripConfig`;
+            default ``StripConfig()``, 003_'s settings). A fixed universal-correction degree whose
+            leave-one-GCP-scene-out error exceeds the best one's by half warns
+            (:class:`UniversalCorrectionWarning`): with few GCP scenes a quadratic fits their
+            noise and degrades the scenes between them.
+
+    Raises a :class:`~.errors.ConfigError` naming the setting (ties only without bias priors,
+    too few or aligned GCPs for the correction), after the GCP distribution warning, and the
+    bundle adjustment's :class:`~jaxgeo.bundle.errors.AdjustmentError` with the strip named.
+    """
+    t0 = time.perf_counter()
+    config = StripConfig() if config is None else config
+    names = strip.names
+    if len(names) < 2:
+        raise ValueError("a strip adjustment needs at least two sub-scenes")
+    dist = check_gcp_distribution(
+        len(names), strip.gcp_scenes(), names, warn=config.check_distribution
+    )
+    config.level1.check_priors()  # after the distribution warning: it says what to add
+    degree = config.level2.degree
+    inp = level1_input(strip, config.ties, use_gcps=config.level1.use_gcps)
+    models = with_bias({n: strip.rpcs[n] for n in names}, config.level1.bias)
+    try:
+        setup = build(
+            models,
+            inp.observations,
+            inp.ground,
+            prior_sigma=config.level1.prior_sigma(models[names[0]]),
+            check_control=False,
+        )
+    except AdjustmentError as err:
+        raise _in_level1(err, strip) from err
+    if len(setup.problem.groups) != 1:
+        raise ValueError(
+            "the sub-scene RPCs of a strip must share one structure (term order, shapes); got "
+            f"{len(setup.problem.groups)} kinds"
+        )
+    block_of = np.array([setup.image_index[n][1] for n in names])
+    data, rows = level2_input(strip, inp, block_of)
+    where = f"{strip.files.ground}: " if strip.files is not None else ""
+    check_design(
+        np.asarray(data.gcp_lonlath), "shift" if degree in ("auto", "none") else degree, where
+    )
+    t1 = time.perf_counter()
+    sol = two_level_jit(setup.problem, data, degree_index(degree), config.solver)
+    sol = jax.block_until_ready(sol)
+    t2 = time.perf_counter()
+    ev = evaluate_jit(setup.problem, data, sol)
+    try:
+        level1 = finish(setup, sol.level1, inp.observations, inp.ground, config.solver)
+    except AdjustmentError as err:
+        raise _in_level1(err, strip) from err
+    corr = jax.tree.map(np.asarray, sol.correction)
+    final = {n: UniversallyCorrected(level1.models[n], corr) for n in names}
+    used = list(N_TERMS)[int(sol.degree_index)]
+    cv = np.asarray(sol.cv_rms_m)
+    if degree != "auto" and cv[int(sol.degree_index)] > 1.5 * np.nanmin(cv):
+        best = list(N_TERMS)[int(np.nanargmin(cv))]
+        warnings.warn(
+            f"the {used} universal correction predicts the GCPs of a GCP scene left out to "
+            f"{cv[int(sol.degree_index)]:.2f} m RMS, the {best} one to {np.nanmin(cv):.2f} m: "
+            f"too few GCP scenes for {used}; consider degree='auto' or '{best}'",
+            UniversalCorrectionWarning,
+            stacklevel=2,
+        )
+    report = strip_report(strip, sol, ev, rows, inp, setup.problem.n_unknowns, used)
+    return StripResult(
+        strip=strip,
+        models=final,
+        level1=level1,
+        correction=corr,
+        distribution=dist,
+        report=report,
+        config=config,
+        solution=sol,
+        evaluation=ev,
+        inputs=inp,
+        data=data,
+        timings_s={"setup": t1 - t0, "first_call": t2 - t1},
+    )
+
+
+def evaluate_models(result: StripResult, models: Mapping[str, Any]) -> dict[str, np.ndarray]:
+    """Check-point errors ``(c, 2)`` and tie gaps ``(t, 2)`` (east, north m) of any set of
+    sub-scene models of one structure (e.g. scenes adjusted one by one), on ``result``'s check
+    points and ties: ``{"check_error_m": ..., "tie_gap_m": ...}``."""
+    names = result.strip.names
+    order = sorted(names, key=lambda n: result.setup.image_index[n][1])  # block order
+    blocks = jax.tree.map(lambda *x: jnp.stack(x), *(models[n] for n in order))
+    check, gap = _evaluate_blocks(blocks, result.data)
+    return {"check_error_m": np.asarray(check), "tie_gap_m": np.asarray(gap)}
+
+
+@eqx.filter_jit
+def _evaluate_blocks(blocks, d: Level2Data):
+    h = d.check_lonlath[:, 2]
+    check = en_error_m(localize_in(blocks, d.check_scene, d.check_xy, h), d.check_lonlath)
+    return check, tie_gap(blocks, d)
+
+
+def adjust_individually(
+    strip: Strip, bias: str = "affine", solver: SolverConfig | None = None
+) -> tuple[dict[str, Any], AdjustResult | None]:
+    """Each sub-scene adjusted on its own with its own GCPs (the practice that leaves the
+    discontinuities of 003_ figure 2). Returns ``(models, result)``: every sub-scene's model
+    (vendor RPC with a zero bias where the scene has too few GCPs for ``bias``) and the
+    :class:`~jaxgeo.bundle.result.AdjustResult` of the adjusted scenes (one block-diagonal
+    bundle solved with ``solver``, default :func:`jaxgeo.adjust`'s; ``None`` if no scene has
+    enough GCPs)."""
+    models = with_bias(dict(strip.rpcs), bias)
+    need = N_BIAS_GCPS[bias]
+    g = strip.ground
+    index = {p: i for i, p in enumerate(g.ids)}
+    o = strip.observations
+    rows: dict[str, list[int]] = {n: [] for n in strip.names}
+    for i, (p, img) in enumerate(zip(o.point_ids, o.images, strict=True)):
+        if p in index and g.role[index[p]] == "gcp":
+            rows[img].append(i)
+    todo = [n for n in strip.names if len(rows[n]) >= need]
+    if not todo:
+        return models, None
+    # one block-diagonal bundle == independent adjustments: a GCP seen in two sub-scenes gets
+    # one copy per sub-scene, so no scene sees another's measurements
+    sel = [i for n in todo for i in rows[n]]
+    ids = tuple(f"{o.point_ids[i]}@{o.images[i]}" for i in sel)
+    obs = Observations(ids, tuple(o.images[i] for i in sel), o.xy[sel], o.sigma_px[sel])
+    gi = [index[o.point_ids[i]] for i in sel]
+    ground = GroundPoints(ids, g.lonlath[gi], ("gcp",) * len(sel), g.sigma_m[gi])
+    extra = {} if solver is None else {"solver": solver}
+    res = adjust({n: models[n] for n in todo}, obs, ground, **extra)
+    models.update(res.models)
+    return models, res

@@ -1,0 +1,57 @@
+"""Termination at the floating-point floor: a decrement that rounding keeps above ``tol**2``.
+
+At 320 sub-scenes the squared Newton decrement of the strip's level 1 settles at ~3e-12 (the
+Cholesky of the 1920 x 1920 reduced system rounds), above ``tol**2 = 1e-12``, while every tiny
+step is accepted: the solve ran to ``max_steps``. Here the same situation is made on a small
+block by asking for an unreachable precision (``tol = 0`` and no relative floor): only the
+stagnation rule can end the solve, and it must end it at the same solution.
+"""
+
+import warnings
+
+import jax
+import pytest
+
+from jaxgeo.bundle import NotConvergedWarning, SolverConfig, adjust, schur
+from tests.bundle.conftest import make_block
+
+
+@pytest.fixture(scope="module")
+def small(ventoux_pair):
+    return make_block(*ventoux_pair, n=8, n_gcp=4, seed=5)
+
+
+def _adjust_at_the_floor(small, monkeypatch, stagnant_steps):
+    monkeypatch.setattr(schur, "CONVERGED_FLOOR", 0.0)
+    monkeypatch.setattr(schur, "STAGNANT_STEPS", stagnant_steps)
+    jax.clear_caches()  # the constants are read when the solve is traced
+    with warnings.catch_warnings(record=True) as caught:
+        warnings.simplefilter("always")
+        res = adjust(
+            small.models,
+            small.obs,
+            small.ground,
+            bias="affine",
+            solver=SolverConfig(tol=0.0, max_steps=40),
+        )
+    jax.clear_caches()
+    return res, [w for w in caught if issubclass(w.category, NotConvergedWarning)]
+
+
+def test_stagnant_decrement_ends_the_solve(small, monkeypatch):
+    ref = adjust(small.models, small.obs, small.ground, bias="affine")
+    assert ref.converged
+    res, warned = _adjust_at_the_floor(small, monkeypatch, schur.STAGNANT_STEPS)
+    assert res.converged and not warned
+    assert res.num_steps < 40
+    for name in small.models:
+        got, want = res.parameters(name), ref.parameters(name)
+        for key, (value, sigma) in want.items():
+            assert abs(got[key][0] - value) <= 1e-6 * sigma, (name, key)
+
+
+def test_without_the_rule_the_solve_runs_to_max_steps(small, monkeypatch):
+    """The control: the same request with the stagnation rule off never terminates."""
+    res, warned = _adjust_at_the_floor(small, monkeypatch, 10**6)
+    assert not res.converged and warned
+    assert res.num_steps == 40

@@ -1,0 +1,49 @@
+"""The ``jaxgeo`` entry point: ``--version`` from the package metadata, and a lazy CLI
+(``--help`` and ``--version`` import no sub-command and not jax)."""
+
+import importlib.metadata
+import subprocess
+import sys
+
+import pytest
+
+from jaxgeo.cli import COMMANDS, main
+
+LAZY = """
+import contextlib, io, sys
+from jaxgeo.cli import main
+out = io.StringIO()
+with contextlib.redirect_stdout(out):
+    try:
+        main([{flag!r}])
+    except SystemExit as e:
+        assert e.code == 0, e.code
+heavy = sorted(m for m in sys.modules if m == "jax" or m.startswith(("jax.", "jaxgeo.strip",
+               "jaxgeo.bundle", "jaxgeo.models", "jaxgeo.cli.")))
+print(out.getvalue())
+print("HEAVY", heavy)
+"""
+
+
+@pytest.mark.parametrize("flag", ["--help", "--version"])
+def test_help_and_version_do_not_import_jax(flag):
+    run = subprocess.run(
+        [sys.executable, "-c", LAZY.format(flag=flag)], capture_output=True, text=True, check=True
+    )
+    assert run.stdout.rstrip().splitlines()[-1] == "HEAVY []", run.stdout
+    if flag == "--help":
+        assert all(name in run.stdout for name in COMMANDS)
+
+
+def test_version_from_package_metadata(capsys):
+    with pytest.raises(SystemExit) as exit_:
+        main(["--version"])
+    assert exit_.value.code == 0
+    assert capsys.readouterr().out.strip() == f"jaxgeo {importlib.metadata.version('jaxgeo')}"
+
+
+def test_subcommand_help_names_its_options(capsys):
+    with pytest.raises(SystemExit):
+        main(["strip", "--help"])
+    out = capsys.readouterr().out
+    assert "--ties-per-pair" in out and "shift-drift" in out and "--degree" in out
