@@ -127,7 +127,7 @@ def enu_to_geodetic(
 
 def metres_per_unit(
     lonlath: Float[ArrayLike, "*batch 3"], *, xp: Any = jnp
-) -> Float[Array, "*batch 3"]:
+) -> Float[ArrayLike, "*batch 3"]:
     """Metres per degree of longitude, per degree of latitude, and per metre of height.
 
     At ``(lon_deg, lat_deg, h_m)``: ``(pi/180) (N + h) cos(lat)``, ``(pi/180) (M + h)`` and 1,

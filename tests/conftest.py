@@ -17,8 +17,18 @@ if "xla_cpu_multi_thread_eigen" not in os.environ.get("XLA_FLAGS", ""):
         os.environ.get("XLA_FLAGS", "") + " --xla_cpu_multi_thread_eigen=false"
     ).strip()
 
+# Runtime shape/type checks of every jaxgeo function (jaxtyping + beartype), as equinox and
+# optimistix test themselves; the hook must be installed before jaxgeo is first imported.
+# JAXGEO_TYPECHECK=0 switches it off (e.g. to time a test).
+if os.environ.get("JAXGEO_TYPECHECK", "1") != "0":
+    from jaxtyping import install_import_hook
+
+    import tests.typecheck  # noqa: F401  (the hook's decorators look it up by this name)
+
+    install_import_hook("jaxgeo", "tests.typecheck.typechecker")
+
 import jax  # noqa: E402
-import pytest
+import pytest  # noqa: E402
 
 jax.config.update("jax_enable_x64", True)
 
@@ -27,6 +37,13 @@ REAL_DATA = pathlib.Path(os.environ.get("JAXGEO_REAL_DATA", REPO / "tests" / "da
 SHARED_DATA = pathlib.Path(
     os.environ.get("JAXGEO_SHARED_DATA", REPO.parent / "shared" / "data" / "real")
 )
+
+
+def pytest_configure(config):
+    # jaxgeo's own warnings fail a test unless it expects them (pytest.warns or a
+    # filterwarnings mark); added here, not in pyproject.toml, because resolving the category
+    # imports jaxgeo, which must come after the type-checking hook above
+    config.addinivalue_line("filterwarnings", "error::jaxgeo.errors.JaxgeoWarning")
 
 
 @pytest.fixture(scope="session")

@@ -1,0 +1,51 @@
+"""The runtime type checker of the test suite: beartype behind jaxtyping, lenient on sequences.
+
+jaxgeo's public functions take array-likes (``Float[ArrayLike, "*batch 3"]``), and users pass
+plain lists as often as arrays: ``rpc.project([[lon, lat, h]])``. jax's ``ArrayLike`` excludes
+lists, so a parameter annotated with a jaxtyping array type also accepts a ``Sequence`` here
+(its shape is then checked where it becomes an array). Everything else is checked as annotated:
+array shapes and dtypes, and ints for floats (PEP 484's numeric tower).
+"""
+
+from __future__ import annotations
+
+import functools
+import typing
+from collections.abc import Sequence
+
+import beartype
+import jaxtyping
+
+_CONF = beartype.BeartypeConf(is_pep484_tower=True)
+
+
+def _is_array_hint(hint) -> bool:
+    return isinstance(hint, type) and issubclass(hint, jaxtyping.AbstractArray)
+
+
+def _lenient(hint):
+    if _is_array_hint(hint):
+        return hint | Sequence
+    if typing.get_origin(hint) in (typing.Union, getattr(__import__("types"), "UnionType")):
+        args = typing.get_args(hint)
+        if any(_is_array_hint(a) for a in args):
+            return typing.Union[(*args, Sequence)]
+    return hint
+
+
+def typechecker(fn):
+    """``beartype`` of ``fn`` with array-typed parameters also accepting sequences."""
+    try:
+        hints = typing.get_type_hints(fn, include_extras=True)
+    except Exception:  # unresolvable annotations: check as beartype would
+        return beartype.beartype(conf=_CONF)(fn)
+    new = {k: (v if k == "return" else _lenient(v)) for k, v in hints.items()}
+    if new == hints:
+        return beartype.beartype(conf=_CONF)(fn)
+
+    @functools.wraps(fn)
+    def proxy(*args, **kwargs):
+        return fn(*args, **kwargs)
+
+    proxy.__annotations__ = new
+    return beartype.beartype(conf=_CONF)(proxy)
