@@ -10,7 +10,7 @@ import argparse
 import importlib
 import sys
 
-COMMANDS = ("demo", "simulate", "adjust", "strip")
+COMMANDS = ("demo", "simulate", "adjust", "strip", "ortho")
 
 
 class CommandError(Exception):
