@@ -14,7 +14,9 @@ from ..models.dem import DEMStatus, localize_on_dem
 
 
 BATCH = 64
-"""Host-side localisation calls are padded to multiples of this: one compilation serves all."""
+CHUNK = 4096
+"""Host-side localisation calls are padded to ``BATCH`` points or run in ``CHUNK``-point
+pieces: few shapes, few compilations."""
 
 
 @eqx.filter_jit
@@ -31,10 +33,15 @@ def localize_on_dem_padded(model, xy: np.ndarray, grid) -> tuple[np.ndarray, np.
     """Jitted :func:`localize_on_dem` on ``(n, 2)`` points padded to a multiple of ``BATCH``."""
     xy = np.asarray(xy, dtype=float).reshape(-1, 2)
     n = len(xy)
-    size = max(BATCH, 1 << int(np.ceil(np.log2(max(n, 1)))))
-    pad = np.concatenate([xy, np.repeat(xy[:1], size - n, axis=0)]) if n else np.zeros((size, 2))
-    g, st = _on_dem(model, pad, grid)
-    return np.asarray(g)[:n], np.asarray(st)[:n]
+    size = BATCH if n <= BATCH else CHUNK  # two shapes at most: two compilations
+    gs, sts = [], []
+    for i in range(0, max(n, 1), size):
+        part = xy[i : i + size] if n else np.zeros((1, 2))
+        pad = np.concatenate([part, np.repeat(part[:1], size - len(part), axis=0)])
+        g, st = _on_dem(model, pad, grid)
+        gs.append(np.asarray(g)[: len(part)])
+        sts.append(np.asarray(st)[: len(part)])
+    return np.concatenate(gs)[:n], np.concatenate(sts)[:n]
 
 
 @dataclasses.dataclass(frozen=True)
@@ -67,11 +74,12 @@ def border_pixels(width: int, height: int, n: int = 16) -> np.ndarray:
     return np.concatenate([top, right, bottom, left])
 
 
-def rough_bounds(model, border_xy: np.ndarray, dh_m: float = 500.0):
-    """lon/lat box of the border localised at the model's reference height +- ``dh_m``."""
+def rough_bounds(model, border_xy: np.ndarray, dh_m: float = 500.0, heights=None):
+    """lon/lat box of the border localised at the model's reference height +- ``dh_m`` (or at
+    ``(h_min, h_ref, h_max)`` given as ``heights``), and the box at the middle height."""
     h0 = float(model.reference_ground()[2])
     pts = []
-    for h in (h0 - dh_m, h0, h0 + dh_m):
+    for h in heights if heights is not None else (h0 - dh_m, h0, h0 + dh_m):
         g = np.asarray(_at_height(model, border_xy, np.asarray(h)))
         pts.append(g[:, :2])
     pts = np.concatenate(pts)
@@ -98,8 +106,19 @@ def dem_for_image(model, dem, width: int, height: int, source: str = "image"):
             f"it spans lon {b[0]:.5f}..{b[2]:.5f}, lat {b[1]:.5f}..{b[3]:.5f}"
         )
     b = dem.bounds_lonlat
-    box = (max(box[0], b[0]), max(box[1], b[1]), min(box[2], b[2]), min(box[3], b[3]))
-    return dem.grid(box)
+
+    def clip(box):
+        return (max(box[0], b[0]), max(box[1], b[1]), min(box[2], b[2]), min(box[3], b[3]))
+
+    grid = dem.grid(clip(box))
+    # second pass: the footprint at the DEM's own height range, which the first box may miss
+    lo, hi = (float(v) for v in grid.height_range())
+    box2, _ = rough_bounds(model, border, heights=(lo - 10.0, 0.5 * (lo + hi), hi + 10.0))
+    if not (box2[0] >= box[0] and box2[1] >= box[1] and box2[2] <= box[2] and box2[3] <= box[3]):
+        box = (min(box[0], box2[0]), min(box[1], box2[1]), max(box[2], box2[2]),
+               max(box[3], box2[3]))  # fmt: skip
+        grid = dem.grid(clip(box))
+    return grid
 
 
 def footprint(model, grid, width: int, height: int) -> np.ndarray:
