@@ -26,7 +26,7 @@ def _is_array_hint(hint) -> bool:
 def _lenient(hint):
     if _is_array_hint(hint):
         return hint | Sequence
-    if typing.get_origin(hint) in (typing.Union, getattr(__import__("types"), "UnionType")):
+    if typing.get_origin(hint) in (typing.Union, __import__("types").UnionType):
         args = typing.get_args(hint)
         if any(_is_array_hint(a) for a in args):
             return typing.Union[(*args, Sequence)]

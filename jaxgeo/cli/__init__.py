@@ -17,6 +17,7 @@ COMMANDS = {
     "simulate": "write a simulated Cartosat-1 stereo pair or Carto-2S strip",
     "adjust": "bundle block adjustment of RPC images (bias compensation)",
     "strip": "two-level full-strip adjustment of a Carto-2S-style strip of sub-scenes",
+    "ortho": "orthorectify an image with any sensor model over a DEM (COG out)",
 }
 """Sub-commands (module ``jaxgeo.cli.<name>``) and their one-line help."""
 

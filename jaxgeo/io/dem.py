@@ -61,6 +61,18 @@ class DEM:
     offset_m: float
     _inverse: Any = dataclasses.field(repr=False)  # world (x, y) -> (col, row), corner-based
     _transformer: Any = dataclasses.field(repr=False)  # WGS84 lon/lat -> raster CRS, or None
+    height_reference: str = "ellipsoidal"  # of the file's values; "orthometric": geoid added
+    geoid: Any = dataclasses.field(default=None, repr=False)  # io.geoid.GeoidGrid or None
+
+    def grid(self, bounds_lonlat, margin_cells: int = 2):
+        """The DEM over ``(lon_min, lat_min, lon_max, lat_max)`` as a models-layer ``DEMGrid``.
+
+        Ellipsoidal heights (geoid added), NaN on nodata; raises ``ValueError`` saying how much
+        of the area the DEM covers when it does not cover all of it (see ``io.dem_grid``).
+        """
+        from .dem_grid import dem_grid
+
+        return dem_grid(self, bounds_lonlat, margin_cells)
 
     def _index(self, lonlat: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """Fractional corner-based ``(col, row)`` of WGS84 points (NaN where they cannot map)."""
@@ -135,10 +147,18 @@ class DEM:
                 f"{self.path}: {int(hole.sum())} of {n} points fall on nodata cells of the DEM "
                 f"({_span(pts[hole])}): fill the voids or use a DEM that covers the whole area"
             )
+        if self.geoid is not None:
+            h = h + self.geoid(pts[:, 0], pts[:, 1])
         return (h + self.offset_m).reshape(batch)
 
 
-def read_dem(path: str | os.PathLike, offset_m: float = 0.0) -> DEM:
+def read_dem(
+    path: str | os.PathLike,
+    offset_m: float = 0.0,
+    *,
+    height: str | None = None,
+    geoid: str | os.PathLike | None = None,
+) -> DEM:
     """Open a single-band height raster (GeoTIFF or anything rasterio reads) as a :class:`DEM`.
 
     Args:
@@ -147,6 +167,11 @@ def read_dem(path: str | os.PathLike, offset_m: float = 0.0) -> DEM:
         offset_m: added to every height: e.g. a constant geoid undulation ``N`` (m) to turn
             orthometric heights ``H`` into ellipsoidal ``h = H + N`` over a small area. jaxgeo
             takes the result as WGS84 ellipsoidal heights (see the module docstring).
+        height: ``"ellipsoidal"`` (values are WGS84 ellipsoidal heights) or ``"orthometric"``
+            (values are above the geoid ``geoid``; ``h = H + N``). ``None``: orthometric with
+            the file's own vertical CRS when it declares EGM96/EGM2008, else ellipsoidal.
+        geoid: ``"egm96"``, ``"egm2008"`` (PROJ grids pyproj finds) or a geoid grid file path
+            (GTX/GeoTIFF); only with orthometric heights.
 
     Raises ``FileNotFoundError`` for a missing path, ``ValueError`` naming the file when it is
     not a raster, has more than one band, or has no CRS or transform.
@@ -192,4 +217,38 @@ def read_dem(path: str | os.PathLike, offset_m: float = 0.0) -> DEM:
     else:
         transformer = pyproj.Transformer.from_crs(wgs84, horizontal, always_xy=True)
         crs_out = wkt
-    return DEM(path, shape, crs_out, bounds_lonlat, vertical, offset_m, inverse, transformer)
+    reference, geoid_grid = _height_reference(path, vertical, height, geoid)
+    return DEM(path, shape, crs_out, bounds_lonlat, vertical, offset_m, inverse, transformer,
+               reference, geoid_grid)  # fmt: skip
+
+
+def _height_reference(path, vertical: str | None, height, geoid):
+    """Resolve ``(height, geoid)`` against the file's vertical CRS -> (reference, GeoidGrid)."""
+    from .geoid import read_geoid
+
+    if height not in (None, "ellipsoidal", "orthometric"):
+        raise ValueError(f"{path}: height must be 'ellipsoidal' or 'orthometric', got {height!r}")
+    declared = None
+    if vertical is not None:
+        v = vertical.upper().replace(" ", "")
+        declared = (
+            "egm2008" if ("EGM2008" in v or "EGM08" in v) else "egm96" if "EGM96" in v else None
+        )
+    if height is None:
+        if geoid is not None or declared is not None:
+            height = "orthometric"
+        elif vertical is not None:
+            raise ValueError(f"{path}: the file declares vertical CRS {vertical!r}, which jaxgeo "
+                             "does not know: pass height= and geoid= explicitly")  # fmt: skip
+        else:
+            height = "ellipsoidal"
+    if height == "ellipsoidal":
+        if geoid is not None:
+            raise ValueError(f"{path}: a geoid only applies to orthometric heights "
+                             "(height='orthometric')")  # fmt: skip
+        return "ellipsoidal", None
+    geoid = geoid if geoid is not None else declared
+    if geoid is None:
+        raise ValueError(f"{path}: orthometric heights need a geoid ('egm96', 'egm2008' or a "
+                         "geoid grid file)")  # fmt: skip
+    return "orthometric", read_geoid(geoid)

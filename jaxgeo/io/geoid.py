@@ -1,0 +1,123 @@
+"""Geoid undulation grids: ``N(lon, lat)`` in metres, so that ellipsoidal ``h = H + N``.
+
+    geoid = read_geoid("egm96")                  # PROJ's us_nga_egm96_15.tif, where pyproj finds it
+    geoid = read_geoid("ventoux/dem/egm96_15_crop_lon3-8_lat42-47.gtx")
+    n_m = geoid(lon_deg, lat_deg)
+
+Values are bilinear between grid nodes (the node of a raster cell is its centre; GTX and PROJ
+GeoTIFF grids are written that way), as PROJ and shareloc interpolate them.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import os
+import pathlib
+
+import numpy as np
+
+__all__ = ["GEOID_GRIDS", "GeoidGrid", "read_geoid"]
+
+GEOID_GRIDS = {
+    "egm96": ("us_nga_egm96_15.tif", "egm96_15.gtx"),
+    "egm2008": ("us_nga_egm08_25.tif", "egm08_25.gtx"),
+}
+"""Geoid names -> PROJ grid file names searched in pyproj's data directories."""
+
+
+@dataclasses.dataclass(frozen=True, eq=False)
+class GeoidGrid:
+    """A geoid undulation grid in WGS84 lon/lat; call it as ``geoid(lon_deg, lat_deg) -> N_m``."""
+
+    source: str
+    values_m: np.ndarray  # (rows, cols), row 0 at the north
+    lon0_deg: float  # node of cell (0, 0)
+    lat0_deg: float
+    dlon_deg: float
+    dlat_deg: float  # negative for north-up grids
+
+    def __call__(self, lon_deg, lat_deg) -> np.ndarray:
+        lon = np.asarray(lon_deg, dtype=float)
+        lat = np.asarray(lat_deg, dtype=float)
+        rows, cols = self.values_m.shape
+        span = cols * abs(self.dlon_deg)
+        c = (lon - self.lon0_deg) / self.dlon_deg
+        if span >= 359.0:  # global grid: wrap longitudes
+            c = np.mod(c, cols)
+        r = (lat - self.lat0_deg) / self.dlat_deg
+        bad = ~((c >= 0) & (c <= cols - 1) & (r >= 0) & (r <= rows - 1))
+        if np.any(bad):
+            i = int(np.flatnonzero(bad.ravel())[0])
+            raise ValueError(
+                f"{self.source}: {int(bad.sum())} point(s) lie outside the geoid grid (first at "
+                f"lon {lon.ravel()[i]:.5f}, lat {lat.ravel()[i]:.5f}); it covers lon "
+                f"{self.lon0_deg:.4f}..{self.lon0_deg + (cols - 1) * self.dlon_deg:.4f}, lat "
+                f"{self.lat0_deg + (rows - 1) * self.dlat_deg:.4f}..{self.lat0_deg:.4f}"
+            )
+        c0 = np.minimum(np.floor(c).astype(np.int64), cols - 2)
+        r0 = np.minimum(np.floor(r).astype(np.int64), rows - 2)
+        tc, tr = c - c0, r - r0
+        c1 = (c0 + 1) % cols if span >= 359.0 else c0 + 1
+        z = self.values_m
+        return (1 - tr) * ((1 - tc) * z[r0, c0] + tc * z[r0, c1]) + tr * (
+            (1 - tc) * z[r0 + 1, c0] + tc * z[r0 + 1, c1]
+        )
+
+
+def _proj_dirs() -> list[pathlib.Path]:
+    import pyproj
+
+    dirs = [os.environ.get("PROJ_DATA"), os.environ.get("PROJ_LIB")]
+    for get in (pyproj.datadir.get_user_data_dir, pyproj.datadir.get_data_dir):
+        try:
+            dirs.append(get())
+        except Exception:  # noqa: BLE001 - a data dir pyproj cannot name is simply not searched
+            pass
+    out = []
+    for d in dirs:
+        for part in (d or "").split(os.pathsep):
+            if part and pathlib.Path(part).is_dir():
+                out.append(pathlib.Path(part))
+    return out
+
+
+def _find_proj_grid(name: str) -> pathlib.Path:
+    files = GEOID_GRIDS[name]
+    dirs = _proj_dirs()
+    for d in dirs:
+        for f in files:
+            if (d / f).is_file():
+                return d / f
+    raise ValueError(
+        f"geoid {name!r}: PROJ grid {files[0]} not found in the PROJ data directories "
+        f"({', '.join(map(str, dirs)) or 'none'}); install it (e.g. `projsync --file {files[0]}`) "
+        f"or pass the path of a geoid grid file (GTX or GeoTIFF)"
+    )
+
+
+def read_geoid(geoid: str | os.PathLike) -> GeoidGrid:
+    """Open a geoid grid: ``"egm96"`` / ``"egm2008"`` (PROJ grids) or a grid file path.
+
+    Raises ``ValueError`` for an unknown name, a PROJ grid that is not installed, or a file
+    that is not a single-band geographic raster.
+    """
+    import rasterio
+
+    if isinstance(geoid, str) and geoid.lower() in GEOID_GRIDS:
+        path = _find_proj_grid(geoid.lower())
+    else:
+        path = pathlib.Path(geoid)
+        if not path.is_file():
+            raise ValueError(
+                f"unknown geoid {str(geoid)!r}: expected one of {sorted(GEOID_GRIDS)} or the "
+                "path of a geoid grid file"
+            )
+    with rasterio.open(path) as src:
+        if src.crs is not None and not src.crs.is_geographic:
+            raise ValueError(f"{path}: a geoid grid must be in geographic lon/lat, got {src.crs}")
+        t = src.transform
+        if t.b != 0 or t.d != 0:
+            raise ValueError(f"{path}: rotated geoid grids are not supported")
+        z = src.read(1, masked=True)
+    values = np.ma.filled(z.astype(float), np.nan)
+    return GeoidGrid(str(path), values, t.c + 0.5 * t.a, t.f + 0.5 * t.e, float(t.a), float(t.e))

@@ -1,0 +1,147 @@
+"""``localize_on_dem``: exact on flat DEMs, agrees with GDAL's RPC_DEM transformer on SRTM,
+first intersection behind ridges, NaN + status outside, gradients; ``read_dem`` geoids."""
+
+import jax
+import numpy as np
+import pytest
+from jax.test_util import check_grads
+
+import jaxgeo
+from jaxgeo.io import read_dem, to_rasterio_rpc
+from jaxgeo.models.dem import DEMGrid, DEMStatus, localize_on_dem
+from tests.ortho.conftest import ventoux_dem_ellipsoidal  # noqa: F401  (fixture)
+
+GTX = "ventoux/dem/egm96_15_crop_lon3-8_lat42-47.gtx"
+SRTM = "ventoux/dem/N44E005_srtm90.tif"
+
+
+@pytest.fixture(scope="module")
+def left(real_data):
+    return jaxgeo.read_rpc(real_data / "phr_ventoux__left_image.geom")
+
+
+def _hills(rpc, n=300, step=0.001):
+    lon0, lat0 = (float(v) for v in rpc.ground_offset[:2])
+    lon = lon0 - 0.15 + step * np.arange(n)
+    lat = lat0 + 0.15 - step * np.arange(n)
+    lon_g, lat_g = np.meshgrid(lon, lat)
+    z = 800 + 300 * np.sin(lon_g * 60) * np.cos(lat_g * 50)
+    return DEMGrid(z, (lon[0], lat[0]), (step, -step))
+
+
+localize_jit = jax.jit(localize_on_dem)
+
+
+def test_flat_dem_equals_localize(left):
+    z = np.full((50, 50), 612.5)
+    lon0, lat0 = (float(v) for v in left.ground_offset[:2])
+    grid = DEMGrid(z, (lon0 - 0.2, lat0 + 0.2), (0.01, -0.01))
+    xy = np.array([[5000.0, 5000.0], [5400.0, 5300.0], [12000.0, 9000.0]])
+    g, st = localize_jit(left, xy, grid)
+    assert np.all(np.asarray(st) == DEMStatus.OK)
+    np.testing.assert_allclose(g, left.localize(xy, 612.5), atol=1e-9)
+
+
+def test_hills_reproject_and_lie_on_dem(left):
+    grid = _hills(left)
+    rng = np.random.default_rng(1)
+    xy = np.stack([rng.uniform(4000, 8000, 32), rng.uniform(4000, 8000, 32)], -1)
+    g, st = localize_jit(left, xy, grid)
+    assert np.all(np.asarray(st) == DEMStatus.OK)
+    np.testing.assert_allclose(left.project(g), xy, atol=1e-6)
+    np.testing.assert_allclose(g[:, 2], grid.height(g[:, :2]), atol=1e-6)
+
+
+def test_outside_and_bad_input_are_nan_with_status(left):
+    grid = _hills(left, n=40)  # a small DEM: most of the scene is outside it
+    xy = np.array([[np.nan, 1.0], [30000.0, 30000.0]])
+    g, st = localize_jit(left, xy, grid)
+    assert np.all(np.isnan(g))
+    assert list(np.asarray(st)) == [DEMStatus.BAD_INPUT, DEMStatus.OUTSIDE]
+    z = np.asarray(_hills(left).heights_m).copy()
+    z[:, :] = np.nan
+    g, st = localize_jit(left, np.array([[5000.0, 5000.0]]), DEMGrid(z, (0.0, 50.0), (1.0, -1.0)))
+    assert np.isnan(g).all() and int(st[0]) != DEMStatus.OK
+
+
+def test_first_intersection_in_front_of_a_wall(left):
+    """A wall between the sensor and the terrain: the ray stops on the wall, not behind it."""
+    grid = _hills(left)
+    xy = np.array([[5250.0, 5250.0]])
+    g_open, _ = localize_jit(left, xy, grid)
+    # the line of sight climbs toward the sensor: put a 3000 m wall across it, half-way up
+    g_high = left.localize(xy, 1500.0)
+    z = np.asarray(grid.heights_m).copy()
+    col, row = np.asarray(grid.pixel(g_high[:, :2]))[0]
+    z[int(row) - 3 : int(row) + 4, int(col) - 3 : int(col) + 4] = 3000.0
+    g_wall, st = localize_jit(left, xy, DEMGrid(z, grid.origin, grid.step))
+    assert int(st[0]) == DEMStatus.OK
+    assert float(g_wall[0, 2]) > 1400.0 > float(g_open[0, 2])
+    np.testing.assert_allclose(left.project(g_wall), xy, atol=1e-6)
+
+
+def test_gradients(left):
+    grid = _hills(left)
+    xy = np.array([[5100.0, 5200.0], [5300.0, 5050.0]])
+    check_grads(lambda p: localize_jit(left, p, grid)[0], (xy,), order=1, modes=["fwd", "rev"],
+                atol=1e-6, rtol=1e-4, eps=1e-3)  # fmt: skip
+    check_grads(
+        lambda z: localize_jit(left, xy, DEMGrid(z, grid.origin, grid.step))[0][:, 2],
+        (grid.heights_m,),
+        order=1,
+        modes=["rev"],
+        atol=1e-6,
+        rtol=1e-4,
+        eps=1e-3,
+    )
+
+
+def test_agrees_with_gdal_rpc_dem(left, real_data, ventoux_dem_ellipsoidal):  # noqa: F811
+    from rasterio.transform import RPCTransformer
+
+    dem = read_dem(ventoux_dem_ellipsoidal, height="ellipsoidal")
+    grid = dem.grid((5.15, 44.15, 5.25, 44.25))
+    rng = np.random.default_rng(0)
+    xy = np.stack([rng.uniform(5000, 5500, 64), rng.uniform(5000, 5500, 64)], -1)
+    g, st = localize_jit(left, xy, grid)
+    assert np.all(np.asarray(st) == DEMStatus.OK)
+    with RPCTransformer(to_rasterio_rpc(left), RPC_DEM=str(ventoux_dem_ellipsoidal)) as tr:
+        lon, lat = tr.xy(xy[:, 1] + 0.5, xy[:, 0] + 0.5, offset="ul")  # GDAL = ours + 0.5
+    d_e = (np.asarray(g[:, 0]) - np.asarray(lon)) * 111_320 * np.cos(np.radians(44.2))
+    d_n = (np.asarray(g[:, 1]) - np.asarray(lat)) * 111_320
+    dist = np.hypot(d_e, d_n)
+    # GDAL stops its own iteration at ~0.1 px (~5 cm); jaxgeo reprojects to 1e-6 px
+    assert dist.mean() < 0.05 and dist.max() < 0.15
+    np.testing.assert_allclose(left.project(g), xy, atol=1e-6)
+
+
+def test_shareloc_geoid_and_dem_values(real_data):
+    """shareloc test_dtm_intersection.py: geoid heights and DEM + geoid (reference_values.json)."""
+    from jaxgeo.io.geoid import read_geoid
+
+    geoid = read_geoid(real_data / GTX)
+    np.testing.assert_allclose(geoid(5.19368066, 44.20749145), 50.8618354, atol=1e-6)
+    np.testing.assert_allclose(geoid(5.17381589, 44.22559175), 50.8761, atol=1e-6)
+    dem = read_dem(real_data / SRTM, height="orthometric", geoid=real_data / GTX)
+    h = dem(np.array([5.002777777777778, 44.99444444444445]))
+    np.testing.assert_allclose(h, 221.73, rtol=0.01)
+    grid = dem.grid((5.0, 44.9, 5.1, 44.999))
+    np.testing.assert_allclose(grid.height(np.array([5.002777777777778, 44.99444444444445])), h)
+
+
+def test_read_dem_errors(real_data, tmp_path):
+    with pytest.raises(ValueError, match="need a geoid"):
+        read_dem(real_data / SRTM, height="orthometric")
+    with pytest.raises(ValueError, match="unknown geoid"):
+        read_dem(real_data / SRTM, geoid="egm1066")
+    dem = read_dem(real_data / SRTM)
+    with pytest.raises(ValueError, match=r"covers only 33\.5%"):
+        dem.grid((5.8, 44.8, 6.2, 45.1))
+    import rasterio
+
+    nocrs = tmp_path / "nocrs.tif"
+    with rasterio.open(nocrs, "w", driver="GTiff", width=4, height=4, count=1,
+                       dtype="float32") as dst:  # fmt: skip
+        dst.write(np.zeros((1, 4, 4), dtype="float32"))
+    with pytest.raises(ValueError, match="no CRS"):
+        read_dem(nocrs)
