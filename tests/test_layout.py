@@ -19,7 +19,8 @@ REASON_MARK = "Longer than 500 lines because"
 def _modules() -> list[str]:
     names = ["jaxgeo"]
     for info in pkgutil.walk_packages(jaxgeo.__path__, prefix="jaxgeo."):
-        names.append(info.name)
+        if not info.name.endswith(".__main__"):  # runs the program when imported
+            names.append(info.name)
     return names
 
 

@@ -3,7 +3,8 @@
 jaxgeo's public functions take array-likes (``Float[ArrayLike, "*batch 3"]``), and users pass
 plain lists as often as arrays: ``rpc.project([[lon, lat, h]])``. jax's ``ArrayLike`` excludes
 lists, so a parameter annotated with a jaxtyping array type also accepts a ``Sequence`` here
-(its shape is then checked where it becomes an array). Everything else is checked as annotated:
+(its shape is then checked where it becomes an array); so does a plain ``np.ndarray`` or
+``jax.Array`` parameter. Everything else is checked as annotated:
 array shapes and dtypes, and ints for floats (PEP 484's numeric tower).
 """
 
@@ -14,22 +15,34 @@ import typing
 from collections.abc import Sequence
 
 import beartype
+import jax
 import jaxtyping
+import numpy as np
 
 _CONF = beartype.BeartypeConf(is_pep484_tower=True)
 
 
 def _is_array_hint(hint) -> bool:
-    return isinstance(hint, type) and issubclass(hint, jaxtyping.AbstractArray)
+    return isinstance(hint, type) and issubclass(
+        hint, (jaxtyping.AbstractArray, np.ndarray, jax.Array)
+    )
+
+
+def _with_numpy(hint):
+    """``Float[Array, s]`` -> also ``Float[np.ndarray, s]`` (jnp functions take numpy arrays)."""
+    if isinstance(hint, type) and issubclass(hint, jaxtyping.AbstractArray):
+        if hint.array_type is jax.Array:
+            return typing.Union[hint, hint.dtype[np.ndarray, hint.dim_str]]
+    return hint
 
 
 def _lenient(hint):
     if _is_array_hint(hint):
-        return hint | Sequence
+        return typing.Union[_with_numpy(hint), Sequence]
     if typing.get_origin(hint) in (typing.Union, __import__("types").UnionType):
         args = typing.get_args(hint)
         if any(_is_array_hint(a) for a in args):
-            return typing.Union[(*args, Sequence)]
+            return typing.Union[(*(_with_numpy(a) for a in args), Sequence)]
     return hint
 
 

@@ -107,7 +107,7 @@ def _parse_text(text: str, path: str) -> list[dict[str, tuple[str, int]]]:
     return scenes
 
 
-def _number(path: str, key: str, value: str, line: int | None) -> float:
+def _number(path: str, key: str, value: str | float, line: int | None) -> float:
     where = f"{path}:{line}" if line is not None else path
     try:
         x = float(value)

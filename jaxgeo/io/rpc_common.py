@@ -145,7 +145,7 @@ def parse_order(text: str | None, source: str, where: str) -> TermOrder:
 
 def assemble(
     scalars: Mapping[str, float],
-    coeffs: Mapping[str, Sequence[float]],
+    coeffs: Mapping[str, Sequence[float] | np.ndarray],
     source: str,
     order: TermOrder = "RPC00B",
 ) -> RPC:

@@ -73,9 +73,9 @@ def _monomial_list(normalized: Float[Array, "*batch 3"]) -> list[Float[Array, "*
     ]  # fmt: skip
 
 
-def monomials(normalized: Float[Array, "*batch 3"]) -> Float[Array, "*batch 20"]:
+def monomials(normalized: Float[ArrayLike, "*batch 3"]) -> Float[Array, "*batch 20"]:
     """The 20 cubic monomials of normalised ``(L, P, H)`` in RPC00B order."""
-    return jnp.stack(_monomial_list(normalized), axis=-1)
+    return jnp.stack(_monomial_list(jnp.asarray(normalized, dtype=float)), axis=-1)
 
 
 def _polynomial(coeffs: Float[Array, "20"], terms: list[Float[Array, "*batch"]]):
