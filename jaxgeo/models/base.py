@@ -76,10 +76,10 @@ class AbstractSensorModel(eqx.Module):
 
     def localize(
         self,
-        image: Float[ArrayLike, "*batch 2"],
-        h: Float[ArrayLike, "*batch"],
-        guess: Float[ArrayLike, "*batch 2"] | None = None,
-    ) -> Float[Array, "*batch 3"]:
+        image: Float[ArrayLike, "*ibatch 2"],
+        h: Float[ArrayLike, "*hbatch"],
+        guess: Float[ArrayLike, "*gbatch 2"] | None = None,
+    ) -> Float[Array, "... 3"]:
         """Image ``(x, y)`` px at ellipsoidal height ``h`` m -> ground ``(lon_deg, lat_deg, h_m)``.
 
         Per point :meth:`_localize_point`: by default Newton's method on ``project(lon, lat, h)
