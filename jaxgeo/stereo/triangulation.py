@@ -85,7 +85,7 @@ def _midpoint(starts, ends):
 def triangulate_los_midpoint(
     models: Sequence[AbstractSensorModel], image_points: np.ndarray, chunk: int = 65536
 ) -> np.ndarray:
-    """shareloc/CARS triangulation: ``image_points`` ``(n, n_views, 2)`` -> ``(n, 3)`` lon, lat, h."""
+    """shareloc/CARS triangulation: ``image_points`` ``(n, n_views, 2)`` -> ``(n, 3)`` lon/lat/h."""
     image_points = np.asarray(image_points, dtype=float)
     out = np.full((image_points.shape[0], 3), np.nan)
     for s in range(0, image_points.shape[0], chunk):
