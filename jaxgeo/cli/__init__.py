@@ -17,6 +17,8 @@ COMMANDS = {
     "simulate": "write a simulated Cartosat-1 stereo pair or Carto-2S strip",
     "adjust": "bundle block adjustment of RPC images (bias compensation)",
     "strip": "two-level full-strip adjustment of a Carto-2S-style strip of sub-scenes",
+    "match": "tie points by SIFT matching guided by the sensor models",
+    "dsm": "digital surface model from a stereo pair or triplet",
 }
 """Sub-commands (module ``jaxgeo.cli.<name>``) and their one-line help."""
 

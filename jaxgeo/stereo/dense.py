@@ -63,12 +63,15 @@ class SGMSettings:
     speckle_range: int = 2
 
 
+DEFAULT_SGM = SGMSettings()
+
+
 def sgm_disparity(
     left8: np.ndarray,
     right8: np.ndarray,
     disp_min: float,
     disp_max: float,
-    settings: SGMSettings = SGMSettings(),
+    settings: SGMSettings | None = None,
     valid: np.ndarray | None = None,
 ) -> np.ndarray:
     """Disparity ``d`` (float32, NaN = no match) of two uint8 epipolar images in the range
@@ -76,6 +79,7 @@ def sgm_disparity(
     check (``disp12_max_diff``), uniqueness and speckle filters."""
     import cv2
 
+    settings = DEFAULT_SGM if settings is None else settings
     # d = -d_cv: d in [dmin, dmax] <=> d_cv in [-dmax, -dmin]
     min_cv = int(np.floor(-disp_max))
     num = int(np.ceil((-disp_min - min_cv + 1) / 16.0)) * 16

@@ -32,9 +32,9 @@ class DSMGrid:
 
     @property
     def transform(self):
-        from rasterio.transform import from_origin
+        from affine import Affine
 
-        return from_origin(self.x0, self.y0, self.res_m, self.res_m)
+        return Affine(self.res_m, 0.0, self.x0, 0.0, -self.res_m, self.y0)
 
 
 def local_utm_epsg(lon_deg: float, lat_deg: float) -> int:

@@ -23,49 +23,86 @@ from ..models.base import AbstractSensorModel
 TILE_OVERLAP_PX = 32
 
 
-def to_uint8(image: np.ndarray, low_pct: float = 0.5, high_pct: float = 99.5) -> np.ndarray:
-    """Linear stretch of a (uint16 / float) image to uint8 between two percentiles of its finite
-    values (NaN -> 0)."""
+def stretch_limits(image: np.ndarray, low_pct: float = 0.5, high_pct: float = 99.5):
+    """Percentiles of the finite values of ``image`` (the uint8 stretch limits)."""
     image = np.asarray(image, dtype=float)
-    finite = np.isfinite(image)
-    if not finite.any():
-        return np.zeros(image.shape, np.uint8)
-    lo, hi = np.percentile(image[finite], [low_pct, high_pct])
-    scaled = (np.where(finite, image, lo) - lo) * (255.0 / max(hi - lo, 1e-12))
+    finite = image[np.isfinite(image)]
+    if finite.size == 0:
+        return 0.0, 1.0
+    lo, hi = np.percentile(finite, [low_pct, high_pct])
+    return float(lo), float(max(hi, lo + 1e-12))
+
+
+def to_uint8(image: np.ndarray, limits: tuple[float, float] | None = None) -> np.ndarray:
+    """Linear stretch of a (uint16 / float) image to uint8 between ``limits`` (default the 0.5
+    and 99.5 percentiles of its finite values); NaN -> 0."""
+    image = np.asarray(image, dtype=float)
+    lo, hi = stretch_limits(image) if limits is None else limits
+    scaled = (np.where(np.isfinite(image), image, lo) - lo) * (255.0 / (hi - lo))
     return np.clip(np.rint(scaled), 0, 255).astype(np.uint8)
 
 
-def sift_features(
-    image8: np.ndarray, tile_px: int = 2048, max_features_per_tile: int = 0
-) -> tuple[np.ndarray, np.ndarray]:
-    """SIFT keypoints ``(n, 2)`` (x, y) and descriptors ``(n, 128)`` float32 of a uint8 image,
-    detected tile by tile (a keypoint is kept by the tile whose core holds it)."""
-    import cv2
-
-    sift = cv2.SIFT_create(nfeatures=max_features_per_tile)
-    rows, cols = image8.shape
-    xy_all, desc_all = [], []
+def _tiles(rows, cols, tile_px):
     for r0 in range(0, rows, tile_px):
         for c0 in range(0, cols, tile_px):
             ra, ca = max(r0 - TILE_OVERLAP_PX, 0), max(c0 - TILE_OVERLAP_PX, 0)
             rb = min(r0 + tile_px + TILE_OVERLAP_PX, rows)
             cb = min(c0 + tile_px + TILE_OVERLAP_PX, cols)
-            kps, desc = sift.detectAndCompute(np.ascontiguousarray(image8[ra:rb, ca:cb]), None)
-            if desc is None:
-                continue
-            # OpenCV keypoints are in pixel-centre-at-0 coordinates like jaxgeo's
-            xy = np.array([k.pt for k in kps], dtype=float) + (ca, ra)
-            core = (
-                (xy[:, 0] >= c0 - 0.5)
-                & (xy[:, 0] < c0 + tile_px - 0.5)
-                & (xy[:, 1] >= r0 - 0.5)
-                & (xy[:, 1] < r0 + tile_px - 0.5)
-            )
-            xy_all.append(xy[core])
-            desc_all.append(desc[core])
-    if not xy_all:
+            yield (r0, c0), (ra, ca, rb, cb)
+
+
+def _detect(sift, tile8, core, offset, tile_px):
+    kps, desc = sift.detectAndCompute(np.ascontiguousarray(tile8), None)
+    if desc is None:
         return np.zeros((0, 2)), np.zeros((0, 128), np.float32)
-    return np.concatenate(xy_all), np.concatenate(desc_all)
+    # OpenCV keypoints are in pixel-centre-at-0 coordinates like jaxgeo's
+    xy = np.array([k.pt for k in kps], dtype=float) + offset
+    r0, c0 = core
+    keep = (xy[:, 0] >= c0 - 0.5) & (xy[:, 0] < c0 + tile_px - 0.5)
+    keep &= (xy[:, 1] >= r0 - 0.5) & (xy[:, 1] < r0 + tile_px - 0.5)
+    return xy[keep], desc[keep]
+
+
+def _concat(parts):
+    if not parts:
+        return np.zeros((0, 2)), np.zeros((0, 128), np.float32)
+    return np.concatenate([p[0] for p in parts]), np.concatenate([p[1] for p in parts])
+
+
+def sift_features(image8: np.ndarray, tile_px: int = 2048) -> tuple[np.ndarray, np.ndarray]:
+    """SIFT keypoints ``(n, 2)`` (x, y) and descriptors ``(n, 128)`` float32 of a uint8 image,
+    detected tile by tile (a keypoint is kept by the tile whose core holds it)."""
+    import cv2
+
+    sift = cv2.SIFT_create()
+    parts = []
+    for core, (ra, ca, rb, cb) in _tiles(*image8.shape, tile_px):
+        parts.append(_detect(sift, image8[ra:rb, ca:cb], core, (ca, ra), tile_px))
+    return _concat(parts)
+
+
+def sift_features_raster(
+    path, window: tuple[int, int, int, int] | None = None, tile_px: int = 2048
+) -> tuple[np.ndarray, np.ndarray]:
+    """:func:`sift_features` of band 1 of a raster file over ``window = (col, row, w, h)``
+    (whole image by default), reading one tile at a time (bounded memory for large images);
+    the uint8 stretch comes from a decimated read. Keypoints in full-image pixels."""
+    import cv2
+    import rasterio
+    from rasterio.windows import Window
+
+    sift = cv2.SIFT_create()
+    with rasterio.open(path) as src:
+        col, row, w, h = window if window is not None else (0, 0, src.width, src.height)
+        scale = max(1, int(np.ceil(max(w, h) / 1024)))
+        small = src.read(1, window=Window(col, row, w, h), out_shape=(h // scale, w // scale))
+        limits = stretch_limits(small)
+        parts = []
+        for core, (ra, ca, rb, cb) in _tiles(h, w, tile_px):
+            tile = src.read(1, window=Window(col + ca, row + ra, cb - ca, rb - ra))
+            xy, desc = _detect(sift, to_uint8(tile, limits), core, (ca, ra), tile_px)
+            parts.append((xy + (col, row), desc))
+    return _concat(parts)
 
 
 @jax.jit
@@ -149,3 +186,20 @@ def guided_matches(
     sigma = 1.4826 * np.median(np.abs(across - med)) if n_cand else 0.0
     keep = np.abs(across - med) <= max(3.5 * sigma, 0.5)
     return Matches(xy1[pairs[keep, 0]], xy2[pairs[keep, 1]], across[keep], n_cand)
+
+
+def epipolar_offsets(
+    model1: AbstractSensorModel,
+    model2: AbstractSensorModel,
+    xy1: np.ndarray,
+    xy2: np.ndarray,
+    height_range_m: tuple[float, float],
+) -> np.ndarray:
+    """Signed distance (px) of each ``xy2`` from the epipolar curve of ``xy1`` in image 2 (the
+    segment between heights ``height_range_m``): the models' relative bias across the epipolar
+    direction, as :class:`Matches` reports it in ``across_px``."""
+    h_lo, h_hi = map(float, height_range_m)
+    a, b = (np.asarray(v) for v in _epipolar_segments(model1, model2, xy1, h_lo, h_hi))
+    u = (b - a) / np.linalg.norm(b - a, axis=1, keepdims=True)
+    rel = np.asarray(xy2, dtype=float) - a
+    return rel[:, 0] * -u[:, 1] + rel[:, 1] * u[:, 0]

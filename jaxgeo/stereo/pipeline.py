@@ -27,7 +27,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from ..models.base import AbstractSensorModel
-from .dense import SGMSettings, resample, sgm_disparity
+from .dense import DEFAULT_SGM, SGMSettings, resample, sgm_disparity
 from .dsm import DSMGrid, rasterize
 from .matching import guided_matches, sift_features, to_uint8
 from .rectification import EpipolarGrids, epipolar_grids
@@ -113,7 +113,7 @@ def stereo_pair(
     sec_path: str | os.PathLike,
     roi: tuple[int, int, int, int] | None = None,
     epi_step: int = 30,
-    sgm: SGMSettings = SGMSettings(),
+    sgm: SGMSettings = DEFAULT_SGM,
     method: str = "intersect",
     keep: bool = False,
     log: Callable[[str], None] | None = None,
@@ -134,7 +134,9 @@ def stereo_pair(
         roi = (0, 0, *ref_size)
     col, row, w, h = map(int, roi)
     if col < 0 or row < 0 or w <= 0 or h <= 0 or col + w > ref_size[0] or row + h > ref_size[1]:
-        raise ValueError(f"stereo: ROI {roi} is not inside {ref_path} ({ref_size[0]} x {ref_size[1]})")
+        raise ValueError(
+            f"stereo: ROI {roi} is not inside {ref_path} ({ref_size[0]} x {ref_size[1]})"
+        )
     roi = (col, row, w, h)
     stats: dict = {}
     h_valid = los_heights(ref)
