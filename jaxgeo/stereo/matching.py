@@ -15,10 +15,10 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 
-import jax
 import numpy as np
 
 from ..models.base import AbstractSensorModel
+from .rectification import _batched, _transfer
 
 TILE_OVERLAP_PX = 32
 
@@ -105,10 +105,11 @@ def sift_features_raster(
     return _concat(parts)
 
 
-@jax.jit
 def _epipolar_segments(m1, m2, xy, h_lo, h_hi):
-    a = m2.project(m1.localize(xy, h_lo))
-    b = m2.project(m1.localize(xy, h_hi))
+    """Image-2 ends of the epipolar segments of image-1 points (the rectification's compiled
+    transfer, shared)."""
+    a = _batched(_transfer, (m1, m2), xy, h_lo)
+    b = _batched(_transfer, (m1, m2), xy, h_hi)
     return a, b
 
 

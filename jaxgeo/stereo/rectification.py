@@ -120,6 +120,25 @@ def _loc(src, xy, h):
     return src.localize(xy, h)
 
 
+BATCH = 64
+"""Points per call of the jitted transfers: one compiled shape whatever the grid size."""
+
+
+def _batched(fn, models, xy, h):
+    """``fn(*models, xy, h)`` over fixed-size batches (NaN-padded)."""
+    xy = np.asarray(xy, dtype=float).reshape(-1, 2)
+    h = np.broadcast_to(np.asarray(h, dtype=float), xy.shape[:1])
+    n = xy.shape[0]
+    pad = -n % BATCH
+    xy = np.concatenate([xy, np.zeros((pad, 2))])
+    h = np.concatenate([h, np.zeros(pad)])
+    out = [
+        np.asarray(fn(*models, jnp.asarray(xy[s : s + BATCH]), jnp.asarray(h[s : s + BATCH])))
+        for s in range(0, n + pad, BATCH)
+    ]
+    return np.concatenate(out)[:n]
+
+
 class _Pair:
     """Transfers between the two images at given heights (module-level jits: compiled once)."""
 
@@ -135,7 +154,7 @@ class _Pair:
             return np.full(xy.shape[0], float(self.elevation))
         h = np.zeros(xy.shape[0])
         for _ in range(DEM_ITERATIONS):
-            g = np.asarray(_loc(model, jnp.asarray(xy), jnp.asarray(h)))
+            g = _batched(_loc, (model,), xy, h)
             h_new = np.asarray(self.elevation(g[:, :2]), dtype=float)
             if np.nanmax(np.abs(h_new - h)) < 1e-6:
                 h = h_new
@@ -144,7 +163,7 @@ class _Pair:
         return h
 
     def coloc(self, src, dst, xy, h):
-        return np.asarray(_transfer(src, dst, jnp.asarray(xy), jnp.asarray(h)))
+        return _batched(_transfer, (src, dst), xy, h)
 
 
 def _epipolar_segment(pair: _Pair, xy_left: np.ndarray, dh: float):

@@ -100,3 +100,18 @@ def test_triangulation_matches_cars(ventoux):
     # jaxgeo's image-space intersection (method="intersect") differs from this chord midpoint by
     # the rays' miss: +4.5 cm median in height (relative bias of the pair); not run here (a
     # 40 s compile of the vmapped Gauss-Newton), measured in the closing notes of issue 13.
+
+
+def test_grids_of_a_biased_model(ventoux, grids0):
+    """Any model works: an RPC + image shift as the right model moves the right grid by the
+    shift and leaves the left grid (the epipolar geometry in the left image) unchanged."""
+    from jaxgeo.models import Biased, Shift
+
+    left, right, _, _ = ventoux
+    biased = Biased(right, Shift((1.25, -0.75)))  # measured = model - shift
+    g = epipolar_grids(left, biased, LEFT_WINDOW, elevation=0.0, epi_step=30)
+    np.testing.assert_allclose(g.left, grids0.left, atol=1e-8, rtol=0)
+    np.testing.assert_allclose(
+        g.right - grids0.right, np.broadcast_to([-1.25, 0.75], g.right.shape), atol=1e-8
+    )
+    assert g.epipolar_shape == grids0.epipolar_shape
