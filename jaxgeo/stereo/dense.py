@@ -26,6 +26,7 @@ def resample(
     origin_xy: tuple[float, float] = (0.0, 0.0),
     y_shift_px: float = 0.0,
     interpolation: str = "cubic",
+    x_range: tuple[int, int] | None = None,
 ) -> np.ndarray:
     """The epipolar image of ``side`` (``grids.epipolar_shape``, float32, NaN outside).
 
@@ -35,7 +36,9 @@ def resample(
     import cv2
 
     rows, cols = grids.epipolar_shape
-    xe, ye = np.meshgrid(np.arange(cols, dtype=float), np.arange(rows, dtype=float) + y_shift_px)
+    x0, x1 = (0, cols) if x_range is None else x_range
+    xs = np.arange(x0, x1, dtype=float)
+    xe, ye = np.meshgrid(xs, np.arange(rows, dtype=float) + y_shift_px)
     sensor = grids.to_sensor(side, np.stack([xe, ye], axis=-1)) - np.asarray(origin_xy)
     # maps relative to the window are small numbers: float32 keeps 1e-4 px
     map_x = sensor[..., 0].astype(np.float32)

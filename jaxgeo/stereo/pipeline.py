@@ -29,7 +29,7 @@ import numpy as np
 from ..models.base import AbstractSensorModel
 from .dense import DEFAULT_SGM, SGMSettings, resample, sgm_disparity
 from .dsm import DSMGrid, rasterize
-from .matching import guided_matches, sift_features, to_uint8
+from .matching import guided_matches, sift_features, stretch_limits, to_uint8
 from .rectification import EpipolarGrids, epipolar_grids
 from .triangulation import los_heights, triangulate
 
@@ -191,12 +191,23 @@ def stereo_pair(
     stats["vertical_disparity_after_std_px"] = float(np.std(dy2[ok2])) if ok2.any() else np.nan
     lap("vertical_disparity")
     log(f"vertical disparity {dy_med:+.2f} px removed; SGM over [{dmin:.0f}, {dmax:.0f}] px")
-    valid_l, valid_r = np.isfinite(left), np.isfinite(right)
-    disp = sgm_disparity(to_uint8(left), to_uint8(right), dmin, dmax, sgm, valid=valid_l)
+    # widen both epipolar images by the disparity range: the right matches of the left image's
+    # edge columns lie outside its own epipolar extent
     rows_e, cols_e = grids.epipolar_shape
-    ye, xe = np.mgrid[0:rows_e, 0:cols_e].astype(float)
-    xr = np.rint(xe + np.nan_to_num(disp)).astype(np.int64)
-    in_r = (xr >= 0) & (xr < cols_e)
+    x0, x1 = min(0, int(np.floor(dmin))), cols_e + max(0, int(np.ceil(dmax)))
+    left_w = resample(img1, grids, "left", origin_xy=roi[:2], x_range=(x0, x1))
+    right_w = resample(
+        img2, grids, "right", origin_xy=win2[:2], y_shift_px=dy_med, x_range=(x0, x1)
+    )
+    lims1 = stretch_limits(left_w)
+    lims2 = stretch_limits(right_w)
+    valid_l, valid_r = np.isfinite(left_w), np.isfinite(right_w)
+    disp = sgm_disparity(
+        to_uint8(left_w, lims1), to_uint8(right_w, lims2), dmin, dmax, sgm, valid=valid_l
+    )
+    ye, xe = np.mgrid[0:rows_e, x0:x1].astype(float)
+    xr = np.rint(xe + np.nan_to_num(disp)).astype(np.int64) - x0
+    in_r = (xr >= 0) & (xr < x1 - x0)
     ok_r = np.zeros_like(valid_l)
     ok_r[in_r] = valid_r[ye.astype(np.int64)[in_r], xr[in_r]]
     disp = np.where(ok_r, disp, np.nan)
@@ -214,7 +225,12 @@ def stereo_pair(
     if keep:
         products.grids = grids
         products.intermediates = dict(
-            left=left, right=right, disparity=disp, ties_xy1=ties.xy1, ties_xy2=ties.xy2
+            left=left_w,
+            right=right_w,
+            epipolar_x0=x0,
+            disparity=disp,
+            ties_xy1=ties.xy1,
+            ties_xy2=ties.xy2,
         )
     return products
 
