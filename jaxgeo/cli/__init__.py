@@ -18,6 +18,8 @@ COMMANDS = {
     "adjust": "bundle block adjustment of RPC images (bias compensation)",
     "strip": "two-level full-strip adjustment of a Carto-2S-style strip of sub-scenes",
     "ortho": "orthorectify an image with any sensor model over a DEM (COG out)",
+    "match": "tie points by SIFT matching guided by the sensor models",
+    "dsm": "digital surface model from a stereo pair or triplet",
 }
 """Sub-commands (module ``jaxgeo.cli.<name>``) and their one-line help."""
 
