@@ -1,0 +1,273 @@
+# %% [markdown]
+# # GCP sweeps: bias-corrected RPCs and the Kepler model's rotation orders
+#
+# `002_0f5a34c3ba5aae9c.txt` (Cartosat-1 over Warsaw, 36 well-distributed points): the RMSE of
+# independent check points (ICPs) as the number and the layout of GCPs change, for the
+# vendor RPCs refined with GCPs (table 2) and for the UCL Kepler along-track model with
+# constant or first-order rotations (tables 3-7). Here on a **simulated** Warsaw-like pair
+# (`jaxgeo.simulate.cartosat1_stereo(site="warsaw")`: flat, 36 points on a jittered grid, 0.3 px
+# measurement noise, GCPs surveyed to 0.1 m).
+#
+# A sweep is many adjustments of one structure: the problem is built once with every point as
+# a GCP, and a layout switches the GCP weights of the points it does not use to zero (they
+# become check points, adjusted as tie points). All layouts of one model then run in **one**
+# jitted, vmapped call of `jaxgeo.bundle.solve.solve`.
+
+# %%
+import time
+
+import equinox as eqx
+import jax
+import jax.numpy as jnp
+import matplotlib.pyplot as plt
+import numpy as np
+
+import jaxgeo
+from jaxgeo.bundle import RESULTS, SolverConfig, direct_georeferencing, with_bias
+from jaxgeo.bundle.build import build
+from jaxgeo.bundle.solve import solve
+from jaxgeo.models import KeplerSequence, SceneMetadata
+from jaxgeo.simulate import cartosat1_stereo
+
+T0 = time.perf_counter()
+scene = cartosat1_stereo(1, site="warsaw")
+obs, ground = scene.observations, scene.ground
+all_gcp = ground.with_roles({p: "gcp" for p in ground.ids})
+N = len(ground.ids)
+print(f"{N} points, heights {ground.lonlath[:, 2].min():.0f}..{ground.lonlath[:, 2].max():.0f} m; "
+      f"simulated in {time.perf_counter() - T0:.0f} s")  # fmt: skip
+
+# %% [markdown]
+# ## Layouts
+#
+# For every GCP count: a *spread* layout (farthest-point sampling from the scene centre, as a
+# surveyor would choose), a *clustered* one (the nearest points to one corner), and random
+# draws.
+
+# %%
+lonlat = ground.lonlath[:, :2]
+xy_m = (lonlat - lonlat.mean(axis=0)) * [np.cos(np.deg2rad(lonlat[:, 1].mean())) * 111e3, 111e3]
+
+
+def spread(n):
+    chosen = [int(np.argmin(np.linalg.norm(xy_m, axis=1)))]
+    while len(chosen) < n:
+        d = np.min(np.linalg.norm(xy_m[:, None] - xy_m[chosen][None], axis=2), axis=1)
+        chosen.append(int(np.argmax(d)))
+    return chosen
+
+
+def clustered(n):
+    corner = xy_m.min(axis=0)
+    return list(np.argsort(np.linalg.norm(xy_m - corner, axis=1))[:n])
+
+
+rng = np.random.default_rng(0)
+COUNTS = (1, 2, 3, 4, 5, 6, 7, 8, 9, 12, 18)
+N_RANDOM = 6
+layouts, labels = [], []
+for n in COUNTS:
+    for kind, idx in [("spread", spread(n)), ("clustered", clustered(n))] + [
+        ("random", list(rng.choice(N, n, replace=False))) for _ in range(N_RANDOM)
+    ]:
+        m = np.zeros(N)
+        m[idx] = 1.0
+        layouts.append(m)
+        labels.append((n, kind))
+layouts = np.array(layouts)
+print(f"{len(layouts)} layouts")
+
+# %% [markdown]
+# ## One vmapped sweep per model
+#
+# `sweep(models)` builds the problem with all 36 GCPs, then solves every layout at once and
+# returns the ICP RMSE east / north / height (m) against the surveyed coordinates, and each
+# solve's result (a layout with too few GCPs for the model's parameters comes back
+# `undetermined`, from the covariance of that very solve).
+
+# %%
+SOLVER = SolverConfig(max_steps=60)
+
+
+def sweep(models):
+    setup = build(models, obs, all_gcp)
+    p0 = setup.problem
+    w0 = p0.ground.weight
+    order = [ground.ids.index(pid) for pid in setup.point_ids]
+    surveyed = jnp.asarray(ground.lonlath[order])
+    gmask = jnp.asarray(layouts[:, order])  # layout over the problem's points
+    gobs = np.asarray(p0.ground.point)  # ground observation -> point
+
+    def one(mask):
+        p = eqx.tree_at(lambda q: q.ground.weight, p0, w0 * mask[gobs][:, None])
+        sol = solve(p, SOLVER)
+        err = (sol.ground - surveyed) * p0.metres_per_unit
+        icp = 1.0 - mask
+        return jnp.sqrt((icp[:, None] * err**2).sum(0) / icp.sum()), sol.result
+
+    t = time.perf_counter()
+    out = jax.block_until_ready(jax.jit(jax.vmap(one))(gmask))
+    return np.asarray(out[0]), np.asarray(out[1]), time.perf_counter() - t
+
+
+def summary(rmse, result, n, kinds=("spread", "clustered", "random")):
+    """Median RMSE over the layouts of ``n`` GCPs of ``kinds`` that were determined."""
+    sel = [i for i, (k, kind) in enumerate(labels) if k == n and kind in kinds
+           and result[i] == RESULTS.successful]  # fmt: skip
+    return np.median(rmse[sel], axis=0) if sel else np.full(3, np.nan), len(sel)
+
+
+# %% [markdown]
+# ## Table 2: vendor RPCs refined with GCPs
+#
+# Two bias models: a shift (2 parameters per image, from 1 GCP) and an affine bias (6, from
+# 3 GCPs); no GCP is direct georeferencing with the vendor RPCs.
+
+# %%
+rpc = {}
+for bias in ("shift", "affine"):
+    rmse, result, dt = sweep(with_bias(scene.vendor, bias))
+    rpc[bias] = (rmse, result)
+    print(f"RPC + {bias}: {len(layouts)} adjustments in {dt:.1f} s (one call, compilation "
+          f"included); determined: {(result == RESULTS.successful).sum()}")  # fmt: skip
+direct = direct_georeferencing(scene.vendor, obs, ground.with_roles({p: "check" for p in
+                               ground.ids}), roles=("check",)).rms_m  # fmt: skip
+
+PAPER2 = {0: (11.79, 113.81, 760.23), 1: (17.54, 3.38, 5.37), 2: (16.01, 2.33, 5.12),
+          3: (2.32, 1.49, 2.29), 4: (1.45, 1.51, 1.93), 5: (1.48, 1.52, 1.96),
+          6: (1.48, 1.69, 2.04), 7: (1.50, 1.65, 2.02), 8: (1.43, 1.57, 2.06),
+          9: (1.35, 1.54, 2.10)}  # fmt: skip
+print(f"\n{'GCPs':>4s} | {'paper x / y / h (m)':>22s} | {'RPC + shift':>22s} | "
+      f"{'RPC + affine':>22s}   (median over spread, clustered, {N_RANDOM} random)")  # fmt: skip
+
+
+def cells(v):
+    return " / ".join(f"{x:6.2f}" for x in v)
+
+
+print(f"{0:4d} | {cells(PAPER2[0])} | {cells(direct)} | {cells(direct)}")
+for n in COUNTS:
+    paper = cells(PAPER2[n]) if n in PAPER2 else " " * 22
+    a = summary(*rpc["shift"], n)[0]
+    b = summary(*rpc["affine"], n)[0]
+    print(f"{n:4d} | {paper} | {cells(a)} | {cells(b)}")
+
+# %% [markdown]
+# The paper's direct georeferencing was far worse in height (760 m): its LPS set-up evaluated
+# the RPCs without a proper height; the simulated vendor RPCs are off by ~10-20 m, as the
+# Hobart ones of the Cartosat-1 paper. With GCPs both agree on the shape: a pixel (2.5 m) and
+# better from 3-4 GCPs on, little change beyond. One difference: the paper's 1- and 2-GCP rows
+# keep 16-17 m of error in x, where a shift from one GCP here is already at the metre level:
+# the simulated vendor error is almost a pure image shift, which one GCP removes, while the
+# paper's refinement left a rotation/scale error that needs 3 GCPs.
+
+# %% [markdown]
+# ## Tables 3-7: the Kepler model with rotation orders 0 and 1
+#
+# `KeplerSequence.from_metadata` places one circular orbit through both images from the scene
+# metadata (corners, flying height, view angles, focal length, pixel size, line time, the
+# fore/aft interval); the adjustment then estimates the position and velocity of the base
+# framelet (6 parameters shared by both images) and per image the attitude angles omega, phi,
+# kappa, each constant or with a rate (orders 0 or 1). Metadata from the simulated truth: the
+# corners localised at h = 0.
+
+# %%
+t_fore = float(scene.truth["fore"].row_time(0.0))
+
+
+def metadata(name, model, angle_deg):
+    n = 12000
+    px = np.array([[0.0, 0.0], [n - 1.0, 0.0], [n - 1.0, n - 1.0], [0.0, n - 1.0]])
+    return SceneMetadata(name, n, n, np.asarray(model.localize(px, 0.0)), 618e3, angle_deg, 0.0,
+                         1945.0, 7.0, 0.336e-3, float(model.row_time(0.0)) - t_fore)  # fmt: skip
+
+
+start = KeplerSequence.from_metadata(
+    [metadata(n, scene.truth[n], a) for n, a in zip(scene.names, (26.0, -5.0), strict=True)],
+    orders=(1, 1, 1),
+)
+ORDERS = {"w0 p0 k0": (0, 0, 0), "w0 p1 k0": (0, 1, 0), "w1 p1 k0": (1, 1, 0),
+          "w1 p1 k1": (1, 1, 1)}  # fmt: skip
+PAPER_K = {  # tables 3-6: GCPs -> x, y, h (m)
+    "w0 p0 k0": {4: (1.41, 1.44, 1.93), 5: (1.43, 1.44, 1.76), 6: (1.43, 1.45, 1.80),
+                 9: (1.28, 1.05, 1.77)},
+    "w0 p1 k0": {4: (6.07, 1.84, 1.51), 5: (0.98, 1.32, 1.41), 6: (6.36, 1.69, 1.28),
+                 9: (0.89, 1.04, 1.11)},
+    "w1 p1 k0": {5: (0.88, 1.31, 1.22), 6: (0.87, 1.26, 1.30), 9: (0.85, 1.02, 0.76)},
+    "w1 p1 k1": {5: (0.36, 0.93, 0.65), 6: (0.41, 0.91, 0.65), 9: (0.58, 0.79, 0.66)},
+}  # fmt: skip
+kepler = {}
+for name, o in ORDERS.items():
+    seq = start.with_orders([o, o])
+    rmse, result, dt = sweep({tuple(scene.names): seq})
+    kepler[name] = (rmse, result)
+    print(f"Kepler {name} ({seq.n_params} parameters): {len(layouts)} adjustments in {dt:.1f} s; "
+          f"determined: {(result == RESULTS.successful).sum()}")  # fmt: skip
+
+for name in ORDERS:
+    print(f"\nKepler {name}: GCPs | paper x / y / h (m) | jaxgeo (median)   | determined")
+    for n in (3, 4, 5, 6, 9, 12):
+        v, k = summary(*kepler[name], n)
+        paper = cells(PAPER_K[name][n]) if n in PAPER_K[name] else " " * 22
+        print(f"{n:5d} | {paper} | {cells(v)} | {k}")
+
+# %% [markdown]
+# ## Table 7: all models with 5 GCPs
+
+# %%
+print(f"{'method':14s} | {'paper x / y / h (m)':>22s} | {'jaxgeo, spread layout':>22s} | "
+      f"{'jaxgeo, median':>22s}")  # fmt: skip
+PAPER7 = {"RPC": (1.48, 1.52, 1.96), **{k: PAPER_K[k][5] for k in ORDERS}}
+rows7 = {"RPC": rpc["affine"], **kepler}
+spread5 = labels.index((5, "spread"))
+for name, (rmse, result) in rows7.items():
+    print(f"{name:14s} | {cells(PAPER7[name])} | {cells(rmse[spread5])} | "
+          f"{cells(summary(rmse, result, 5)[0])}")  # fmt: skip
+total = {k: float(np.linalg.norm(summary(*v, 5)[0])) for k, v in rows7.items()}
+ratio = total["RPC"] / total["w1 p1 k1"]
+print(f"\n3D RMSE with 5 GCPs: RPC {total['RPC']:.2f} m, Kepler w1 p1 k1 "
+      f"{total['w1 p1 k1']:.2f} m: ratio {ratio:.2f} (paper: "
+      f"{np.linalg.norm(PAPER7['RPC']) / np.linalg.norm(PAPER7['w1 p1 k1']):.2f})")  # fmt: skip
+print("paper's finding (first-order rotations 2-3x better than RPCs with 5 GCPs) holds:",
+      2.0 <= ratio)  # fmt: skip
+
+# %% [markdown]
+# ## RMSE against the number of GCPs
+
+# %%
+fig, axes = plt.subplots(1, 3, figsize=(15, 4.3), sharey=True)
+curves = {"RPC + shift": rpc["shift"], "RPC + affine": rpc["affine"],
+          **{f"Kepler {k}": v for k, v in kepler.items()}}  # fmt: skip
+for i, axis in enumerate(("x / east", "y / north", "h")):
+    for j, (name, (rmse, result)) in enumerate(curves.items()):
+        ns, med = [], []
+        for n in COUNTS:
+            v, k = summary(rmse, result, n)
+            if k:
+                ns.append(n)
+                med.append(v[i])
+        axes[i].semilogy(ns, med, "o-", color=f"C{j}", label=name)
+    axes[i].semilogy(list(PAPER2)[1:], [PAPER2[n][i] for n in list(PAPER2)[1:]], "k:",
+                     label="paper, RPC (table 2)")  # fmt: skip
+    axes[i].semilogy(sorted(PAPER_K["w1 p1 k1"]), [PAPER_K["w1 p1 k1"][n][i] for n in
+                     sorted(PAPER_K["w1 p1 k1"])], "k--", label="paper, Kepler w1 p1 k1")  # fmt: skip
+    axes[i].set(title=f"ICP RMSE {axis}", xlabel="GCPs")
+axes[0].set_ylabel("m (median over layouts)")
+axes[2].legend(fontsize=7)
+fig.tight_layout()
+
+# %% [markdown]
+# **Where the simulation and the paper differ, and why.** The simulated truth is a smooth
+# rigorous model (polynomial orbit and attitude with a 5 urad wobble) and the vendor RPCs are
+# fitted to a copy of it with constant orbit/attitude offsets: in image space that error is a
+# shift plus a small affine part, which the affine bias removes completely. What remains for
+# every model is the measurement and GCP noise, so the bias-corrected RPCs and the Kepler
+# model end at a similar level, and the 2-3x advantage the paper found for first-order
+# rotations does not appear unless the RPC error has a component the affine bias cannot
+# absorb. On the real Warsaw data the RPCs (and LPS' refinement of them) evidently left such an
+# error. The simulation does reproduce the paper's other findings: constant rotations are not
+# enough for a 5 s scan with attitude rates (orders 0 are worse than 1), and the Kepler model
+# with all first-order rotations needs 5 GCPs (with 4, 18 parameters are barely determined).
+
+# %%
+print(f"notebook run time {time.perf_counter() - T0:.0f} s (jaxgeo {jaxgeo.__version__})")
