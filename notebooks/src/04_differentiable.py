@@ -14,6 +14,7 @@
 # 3. the covariance-predicted accuracy against a vmapped Monte-Carlo simulation, with timings.
 
 # %%
+import json
 import time
 
 import equinox as eqx
@@ -27,14 +28,17 @@ from jaxgeo.bundle import SolverConfig, adjust, with_bias
 from jaxgeo.bundle.build import build
 from jaxgeo.bundle.covariance import cofactors
 from jaxgeo.bundle.solve import blocks_at, initial_unknowns, solve, unit_scales
-from jaxgeo.io import GroundPoints, Observations
-from jaxgeo.simulate import DEMO_SEED, cartosat1_stereo
+from jaxgeo.io import GroundPoints, Observations, read_ground, read_observations, read_rpc
+from jaxgeo.simulate import Terrain, demo_dir
 
-T0 = time.perf_counter()
-scene = cartosat1_stereo(DEMO_SEED, site="hobart")
-obs, ground = scene.observations, scene.ground
+T0, C0 = time.perf_counter(), time.process_time()
+d = demo_dir()  # the embedded demo scene (jaxgeo.simulate.write_demo)
+names = ("fore", "aft")
+vendor_rpcs = {n: read_rpc(d / f"{n}.txt") for n in names}
+obs, ground = read_observations(d / "observations.csv"), read_ground(d / "ground.csv")
+terrain = Terrain.from_dict(json.loads((d / "truth.json").read_text())["terrain"])
 SOLVER = SolverConfig(tol=1e-10, max_steps=100)  # tight: finite differences need it
-res = adjust(scene.vendor, obs, ground, bias="affine", solver=SOLVER)
+res = adjust(vendor_rpcs, obs, ground, bias="affine", solver=SOLVER)
 setup = res.setup
 problem = setup.problem
 print(f"adjusted: converged {res.converged} in {res.num_steps} steps, s0 {res.s0:.3f}; "
@@ -78,21 +82,27 @@ print(f"check RMS {float(f0):.4f} m; value and gradient: {t_first:.1f} s first c
       f"{1e3 * (time.perf_counter() - t):.1f} ms after")  # fmt: skip
 
 # %% [markdown]
-# The finite-difference check: move one GCP by +-0.5 m in height and by +-0.5 m east, solve
-# again, and compare the central difference with the gradient (converted to metres).
+# The finite-difference check: move one GCP by +-h in height and east, solve again, and
+# compare the central difference with the gradient (converted to metres). The check RMS is
+# curved in the GCP position, so the central difference carries an O(h^2) error: it shrinks
+# 100x from h = 0.5 m to 0.05 m, and the smaller step is held to 1e-4.
 
 # %%
-f_jit = jax.jit(check_rms)
+def f_jit(gcp, xy):  # the compiled value-and-gradient of above, its value only
+    return value_and_grad(gcp, xy)[0]
+
+
 mpu_gcp = np.asarray(problem.metres_per_unit)[np.asarray(problem.ground.point)[gcp_rows]]
-k, step_m = 0, 0.5
+k = 0
 for axis, name in ((2, "height"), (0, "east")):
-    d = np.zeros(gcp0.shape)
-    d[k, axis] = step_m / mpu_gcp[k, axis]
-    fd = (float(f_jit(gcp0 + d, xy0)) - float(f_jit(gcp0 - d, xy0))) / (2 * step_m)
     ad = float(g_gcp[k, axis]) / mpu_gcp[k, axis]
-    rel = abs(ad - fd) / abs(fd)
-    print(f"GCP {gcp_ids[k]} {name}: autodiff {ad:+.7f}, finite difference {fd:+.7f} m/m, "
-          f"relative difference {rel:.1e}")  # fmt: skip
+    for step_m in (0.5, 0.05):
+        d = np.zeros(gcp0.shape)
+        d[k, axis] = step_m / mpu_gcp[k, axis]
+        fd = (float(f_jit(gcp0 + d, xy0)) - float(f_jit(gcp0 - d, xy0))) / (2 * step_m)
+        rel = abs(ad - fd) / abs(fd)
+        print(f"GCP {gcp_ids[k]} {name}: autodiff {ad:+.8f}, finite difference (h = {step_m} m) "
+              f"{fd:+.8f} m/m, relative difference {rel:.1e}")  # fmt: skip
     assert rel < 1e-4, rel
 
 # %% [markdown]
@@ -133,8 +143,7 @@ print("most influential GCP:", gcp_ids[int(np.argmax(sens_gcp))],
 # function of the GCP positions (lon, lat; heights from the terrain), no solve needed.
 
 # %%
-terrain = scene.terrain
-vendor = [scene.vendor[n] for n in scene.names]
+vendor = [vendor_rpcs[n] for n in names]
 common = np.array(ground.lonlath)
 grid_px = np.stack(np.meshgrid(np.linspace(600, 11400, 7), np.linspace(600, 11400, 7)), -1)
 grid_ll = np.asarray(vendor[0].localize(grid_px.reshape(-1, 2), float(np.mean(common[:, 2]))))
@@ -153,7 +162,7 @@ def layout_problem(n_gcp):
     xy = np.concatenate([np.asarray(m.project(g)) for m in vendor])
     o = Observations(tuple(ids) * 2, ("fore",) * len(ids) + ("aft",) * len(ids), xy,
                      np.full(2 * len(ids), 0.5))  # fmt: skip
-    return build(with_bias(scene.vendor, "affine"), o, gp).problem
+    return build(with_bias(vendor_rpcs, "affine"), o, gp).problem
 
 
 def with_positions(p, lonlat):
@@ -217,7 +226,8 @@ print(f"  regular (corners, 5% inset) {regular:.3f}; 200 random layouts: best "
       f"{random_rms.min():.3f}, median {np.median(random_rms):.3f}, worst {random_rms.max():.3f} "
       f"({t_rand:.2f} s, one vmapped call)")  # fmt: skip
 print("gradient layout at least as good as the best random one:",
-      history[-1] <= random_rms.min() + 1e-9)  # fmt: skip
+      history[-1] <= random_rms.min() + 1e-9, "| within 2 % of the regular one:",
+      history[-1] < 1.02 * regular)  # fmt: skip
 
 # %%
 fig, axes = plt.subplots(1, 2, figsize=(13, 4.8))
@@ -234,6 +244,15 @@ axes[1].plot(*np.asarray(regular_ll).T, "s", mfc="none", color="C2", label="regu
 axes[1].set(xlabel="lon (deg)", ylabel="lat (deg)", title=f"{N_GCP} GCP layouts")
 axes[1].legend(loc="best", fontsize=8)
 fig.tight_layout()
+
+# %% [markdown]
+# From a start bunched in the middle of the scene, gradient descent spreads the GCPs towards
+# the corners of the stereo overlap and lands within a few percent of the regular corner
+# layout, better than the best of 200 random layouts: for an affine bias per image, control
+# at the extremes of the scene is what determines the scale and rotation terms, which a
+# photogrammetrist would also have chosen. The gradient earns its keep where intuition does
+# not reach: other counts, uneven terrain, forbidden areas (a penalty term), or a
+# different accuracy target (heights only, one area of interest).
 
 # %% [markdown]
 # ## 3. Covariance-predicted accuracy vs a vmapped Monte-Carlo
@@ -312,4 +331,5 @@ ax.legend()
 # biases, metres of ground error), which is why the first-order covariance fits.
 
 # %%
-print(f"notebook run time {time.perf_counter() - T0:.0f} s (jaxgeo {jaxgeo.__version__})")
+print(f"notebook run time {time.perf_counter() - T0:.0f} s wall, "
+      f"{time.process_time() - C0:.0f} s CPU (jaxgeo {jaxgeo.__version__})")
