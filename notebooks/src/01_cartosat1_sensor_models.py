@@ -231,9 +231,14 @@ start = {n: GenericPushbroom.from_metadata(metadata(n, scene.truth[n], a))
          for n, a in zip(scene.names, (26.0, -5.0), strict=True)}  # fmt: skip
 non_gcp = [p for p in ground.ids if p not in gcp_ids]
 g15 = ground.with_roles({p: "gcp" for p in non_gcp[:6]})  # 6 more, spread by the simulation
-prior = {n: eqx.tree_at(lambda q: (q.orbit.coeffs, q.attitude.coeffs), m,
-                        (jnp.full_like(m.orbit.coeffs, 1000.0),
-                         jnp.full_like(m.attitude.coeffs, 0.01))) for n, m in start.items()}  # fmt: skip
+prior = {
+    n: eqx.tree_at(
+        lambda q: (q.orbit.coeffs, q.attitude.coeffs),
+        m,
+        (jnp.full_like(m.orbit.coeffs, 1000.0), jnp.full_like(m.attitude.coeffs, 0.01)),
+    )
+    for n, m in start.items()
+}
 pushbroom = {k: adjust(start, obs, g, prior_sigma=prior) for k, g in ((9, ground), (15, g15))}
 table(
     "Table 6: paper (9, 15 GCPs) | jaxgeo (same)",

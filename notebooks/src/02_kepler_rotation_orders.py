@@ -293,8 +293,9 @@ for i, axis in enumerate(("x / east", "y / north", "h")):
         axes[i].semilogy(ns, med, "o-", color=f"C{j}", label=name)
     axes[i].semilogy(list(PAPER2)[1:], [PAPER2[n][i] for n in list(PAPER2)[1:]], "k:",
                      label="paper, RPC (table 2)")  # fmt: skip
-    axes[i].semilogy(sorted(PAPER_K["w1 p1 k1"]), [PAPER_K["w1 p1 k1"][n][i] for n in
-                     sorted(PAPER_K["w1 p1 k1"])], "k--", label="paper, Kepler w1 p1 k1")  # fmt: skip
+    best = PAPER_K["w1 p1 k1"]
+    axes[i].semilogy(sorted(best), [best[n][i] for n in sorted(best)], "k--",
+                     label="paper, Kepler w1 p1 k1")  # fmt: skip
     axes[i].set(title=f"ICP RMSE {axis}", xlabel="GCPs")
 axes[0].set_ylabel("m (median over layouts)")
 axes[2].legend(fontsize=7)

@@ -173,9 +173,9 @@ print(f"check RMS plan over the sub-scenes after the last GCP of the violating l
 # bias fitted to the 4 GCPs of one sub-scene partly fits their noise, while the universal
 # correction pools the GCPs of the whole strip). With no GCP in the last third, the quadratic
 # correction is extrapolated there and the error grows towards the end of the strip (the
-# "curved effect" of section 9); the rule's check before solving names the gap. The paper's absolute numbers (13-22 m in table 1)
-# are not comparable: its reference data were at that level; the simulation's GCPs are
-# surveyed to 0.1 m.
+# "curved effect" of section 9); the rule's check before solving names the gap. The paper's
+# absolute numbers (13-22 m in table 1) are not comparable: its reference data were at that
+# level; the simulation's GCPs are surveyed to 0.1 m.
 
 # %%
 print(f"notebook run time {time.perf_counter() - T0:.0f} s wall, "
