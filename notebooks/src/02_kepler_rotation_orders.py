@@ -112,15 +112,25 @@ def sweep_problem(setup, p0, sel, prior_weight):
     t = time.perf_counter()
     rmse, ok = jax.block_until_ready(solve_layouts(p0, surveyed, gmask))
     all_rmse = np.full((len(layouts), 3), np.nan)
-    all_ok = np.zeros(len(layouts), bool)
+    all_ok = np.full(len(layouts), -1)  # -1: not solved (other GCP counts)
     all_rmse[sel], all_ok[sel] = np.asarray(rmse), np.asarray(ok)
     return all_rmse, all_ok, time.perf_counter() - t
 
 
-def summary(rmse, ok, n, kinds=("spread", "clustered", "random")):
-    """Median RMSE over the layouts of ``n`` GCPs of ``kinds`` that were determined."""
-    sel = [i for i, (k, kind) in enumerate(labels) if k == n and kind in kinds and ok[i]]
+def summary(rmse, code, n, kinds=("spread", "clustered", "random"), accept=(0,)):
+    """Median RMSE over the layouts of ``n`` GCPs of ``kinds`` whose solve ended with a code in
+    ``accept`` (default: solved and determined), and how many there were."""
+    sel = [i for i, (k, kind) in enumerate(labels)
+           if k == n and kind in kinds and code[i] in accept]  # fmt: skip
     return np.median(rmse[sel], axis=0) if sel else np.full(3, np.nan), len(sel)
+
+
+STATUS = ("solved", "undetermined", "not converged", "other")
+
+
+def status(code, n):
+    c = code[[i for i, (k, _) in enumerate(labels) if k == n]]
+    return ", ".join(f"{(c == j).sum()} {s}" for j, s in enumerate(STATUS) if (c == j).any())
 
 
 @eqx.filter_jit
@@ -133,7 +143,10 @@ def solve_layouts(p0, surveyed, masks):
         err = (sol.ground - surveyed) * p0.metres_per_unit
         icp = 1.0 - mask
         rmse = jnp.sqrt((icp[:, None] * err**2).sum(0) / icp.sum())
-        return rmse, sol.result == RESULTS.successful
+        code = jnp.select(  # 0 solved, 1 undetermined (singular), 2 not converged, 3 other
+            [sol.result == RESULTS.successful, sol.result == RESULTS.undetermined,
+             sol.result == RESULTS.not_converged], [0, 1, 2], 3)  # fmt: skip
+        return rmse, code
 
     return jax.vmap(one)(masks)
 
@@ -150,7 +163,7 @@ for bias in ("shift", "affine"):
     rmse, result, dt = sweep(with_bias(scene.vendor, bias))
     rpc[bias] = (rmse, result)
     print(f"RPC + {bias}: {len(layouts)} adjustments in {dt:.1f} s (one call, compilation "
-          f"included); determined: {result.sum()}")  # fmt: skip
+          f"included); determined: {(result == 0).sum()}")  # fmt: skip
 direct = direct_georeferencing(scene.vendor, obs, ground.with_roles({p: "check" for p in
                                ground.ids}), roles=("check",)).rms_m  # fmt: skip
 
@@ -246,28 +259,30 @@ print(f"Kepler, 4 rotation orders x {n_kepler} layouts: {4 * n_kepler} adjustmen
       f"(one compilation)")  # fmt: skip
 for name, o in ORDERS.items():
     print(f"  {name}: {6 + 2 * (3 + sum(o))} parameters, determined in "
-          f"{kepler[name][1].sum()} of {n_kepler} layouts")  # fmt: skip
+          f"{(kepler[name][1] == 0).sum()} of {n_kepler} layouts")  # fmt: skip
 
 for name in ORDERS:
-    print(f"\nKepler {name}: GCPs | paper x / y / h (m) | jaxgeo (median)   | determined")
+    print(f"\nKepler {name}: GCPs | paper x / y / h (m) | jaxgeo, median of all solves | "
+          "status of the solves")  # fmt: skip
     for n in KEPLER_COUNTS:
-        v, k = summary(*kepler[name], n)
+        v, k = summary(*kepler[name], n, accept=(0, 1, 2))
         paper = cells(PAPER_K[name][n]) if n in PAPER_K[name] else " " * 22
-        print(f"{n:5d} | {paper} | {cells(v)} | {k}")
+        print(f"{n:5d} | {paper} | {cells(v)} | {status(kepler[name][1], n)}")
 
 # %% [markdown]
 # ## Table 7: all models with 5 GCPs
 
 # %%
 print(f"{'method':14s} | {'paper x / y / h (m)':>22s} | {'jaxgeo, spread layout':>22s} | "
-      f"{'jaxgeo, median':>22s}")  # fmt: skip
+      f"{'jaxgeo, median':>22s} | spread layout's solve")  # fmt: skip
 PAPER7 = {"RPC": (1.48, 1.52, 1.96), **{k: PAPER_K[k][5] for k in ORDERS}}
 rows7 = {"RPC": rpc["affine"], **kepler}
 spread5 = labels.index((5, "spread"))
 for name, (rmse, result) in rows7.items():
     print(f"{name:14s} | {cells(PAPER7[name])} | {cells(rmse[spread5])} | "
-          f"{cells(summary(rmse, result, 5)[0])}")  # fmt: skip
-total = {k: float(np.linalg.norm(summary(*v, 5)[0])) for k, v in rows7.items()}
+          f"{cells(summary(rmse, result, 5, accept=(0, 1, 2))[0])} | {STATUS[result[spread5]]}")
+total = {k: float(np.linalg.norm(summary(*v, 5, accept=(0, 1, 2))[0]))
+         for k, v in rows7.items()}  # fmt: skip
 ratio = total["RPC"] / total["w1 p1 k1"]
 print(f"\n3D RMSE with 5 GCPs: RPC {total['RPC']:.2f} m, Kepler w1 p1 k1 "
       f"{total['w1 p1 k1']:.2f} m: ratio {ratio:.2f} (paper: "
@@ -286,7 +301,7 @@ for i, axis in enumerate(("x / east", "y / north", "h")):
     for j, (name, (rmse, result)) in enumerate(curves.items()):
         ns, med = [], []
         for n in COUNTS:
-            v, k = summary(rmse, result, n)
+            v, k = summary(rmse, result, n, accept=(0, 1, 2) if "Kepler" in name else (0,))
             if k:
                 ns.append(n)
                 med.append(v[i])
