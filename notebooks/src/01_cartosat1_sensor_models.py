@@ -256,9 +256,10 @@ print("converged:", {k: r.converged for k, r in pushbroom.items()},
 # against 0.38-0.44 in the paper) and image RMS (0.4-0.6 px) show that it does not fit the
 # simulated images to their noise (0.3 px). Unlike the paper (9 GCPs slightly better than
 # 15), the 6 extra GCPs help here, as they should for a model that is short of freedom. The
-# likely reason: the simulated truth's attitude carries a smooth 5 urad wobble (a degree-5 polynomial over the 4 s scan), about a
-# pixel on the ground, which one degree-2 spline segment cannot follow; the vendor RPCs were
-# fitted to the full truth and keep it, so the bias-corrected RPCs do not see it.
+# likely reason: the simulated truth's attitude carries a smooth 5 urad wobble (a degree-5
+# polynomial over the 4 s scan), about a pixel on the ground, which one degree-2 spline
+# segment cannot follow; the vendor RPCs were fitted to the full truth and keep it, so the
+# bias-corrected RPCs do not see it.
 # (`GenericPushbroom.from_metadata(..., n_segments=2)` gives the splines more freedom.)
 
 # %% [markdown]
