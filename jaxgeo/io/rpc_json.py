@@ -45,10 +45,6 @@ def looks_like_json(text: str) -> bool:
     return text.lstrip().startswith("{")
 
 
-def _reject_constant(token: str):
-    raise ValueError(f"{token} is not a finite number")
-
-
 def _pairs(pairs: list[tuple[str, object]]) -> dict:
     out: dict = {}
     for key, value in pairs:
@@ -61,7 +57,7 @@ def _pairs(pairs: list[tuple[str, object]]) -> dict:
 def parse_json(text: str, source: str) -> dict:
     """The top-level JSON object of ``text`` (RPCFormatError naming the line on bad JSON)."""
     try:
-        root = json.loads(text, object_pairs_hook=_pairs, parse_constant=_reject_constant)
+        root = json.loads(text, object_pairs_hook=_pairs)  # NaN/Infinity: refused with their key
     except json.JSONDecodeError as err:
         raise RPCFormatError(f"{source}: line {err.lineno}: malformed JSON ({err.msg})") from None
     except ValueError as err:
