@@ -11,6 +11,7 @@ centres, ``(0, 0)`` the centre of the first pixel); readers convert vendor conve
 # --- other io modules (tables, metadata, ...) re-export below this line ---
 from .dem import DEM as DEM
 from .dem import read_dem as read_dem
+from .metadata import MetadataError as MetadataError
 from .metadata import SceneMetadata as SceneMetadata
 from .metadata import read_metadata as read_metadata
 from .metadata import write_metadata_json as write_metadata_json

@@ -27,6 +27,7 @@ import dataclasses
 import math
 import os
 import pathlib
+import warnings
 from typing import Any
 
 import numpy as np
@@ -89,6 +90,7 @@ class DEM:
     def __call__(self, lonlat) -> np.ndarray:
         """Ellipsoidal heights (m) at ``lonlat`` ``(..., 2)`` (lon, lat degrees)."""
         import rasterio
+        from rasterio.errors import RasterioError
         from rasterio.windows import Window
 
         pts = np.asarray(lonlat, dtype=float)
@@ -126,8 +128,11 @@ class DEM:
         c1, r1 = np.minimum(c0 + 1, cols - 1), np.minimum(r0 + 1, rows - 1)
         wc0, wr0 = int(c0.min()), int(r0.min())
         window = Window(wc0, wr0, int(c1.max()) - wc0 + 1, int(r1.max()) - wr0 + 1)
-        with rasterio.open(self.path) as src:
-            band = src.read(1, window=window, masked=True)
+        try:
+            with rasterio.open(self.path) as src:
+                band = src.read(1, window=window, masked=True)
+        except RasterioError as err:  # e.g. a truncated or corrupt file
+            raise ValueError(f"{self.path}: cannot read the DEM's heights ({err})") from None
         z = np.ma.getdata(band).astype(float)
         invalid = np.ma.getmaskarray(band) | ~np.isfinite(z)
         z = np.where(invalid, 0.0, z)
@@ -178,7 +183,7 @@ def read_dem(
     """
     import pyproj
     import rasterio
-    from rasterio.errors import RasterioIOError
+    from rasterio.errors import NotGeoreferencedWarning, RasterioIOError
     from rasterio.warp import transform_bounds
 
     path = pathlib.Path(path)
@@ -188,7 +193,9 @@ def read_dem(
     if not math.isfinite(offset_m):
         raise ValueError(f"{path}: offset_m must be finite, got {offset_m}")
     try:
-        src = rasterio.open(path)
+        with warnings.catch_warnings():  # no transform: refused below, with the file named
+            warnings.simplefilter("ignore", NotGeoreferencedWarning)
+            src = rasterio.open(path)
     except RasterioIOError as err:
         raise ValueError(f"{path}: not a raster rasterio/GDAL can read ({err})") from None
     with src:

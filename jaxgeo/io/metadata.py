@@ -56,6 +56,11 @@ from .atomic import atomic_write_text
 CORNER_NAMES = ("ul", "ur", "lr", "ll")
 """Corner order of :attr:`SceneMetadata.corners`: UL (0, 0), UR, LR, LL."""
 
+
+class MetadataError(ValueError):
+    """A metadata file that cannot be read; the message names the file (and line or scene)."""
+
+
 _REQUIRED = ("image_id", "n_cols", "n_rows", "corners", "flying_height_m", "along_track_angle_deg")
 
 
@@ -90,20 +95,22 @@ def _parse_text(text: str, path: str) -> list[dict[str, tuple[str, int]]]:
             scenes.append(current)
             continue
         if "=" not in line:
-            raise ValueError(f"{path}:{number}: expected 'key = value' or '[scene]', got {raw!r}")
+            raise MetadataError(
+                f"{path}:{number}: expected 'key = value' or '[scene]', got {raw!r}"
+            )
         key, value = line.split("=", 1)
         key = _canonical_key(key)
         if current is None:
             current = {}
             scenes.append(current)
         if key in current and key != "image_id":
-            raise ValueError(
+            raise MetadataError(
                 f"{path}:{number}: duplicate key {key!r} (first on line {current[key][1]}); "
                 "start each further scene with a '[name]' line"
             )
         current[key] = (value.strip(), number)
     if not scenes:
-        raise ValueError(f"{path}: no scene metadata found (empty file)")
+        raise MetadataError(f"{path}: no scene metadata found (empty file)")
     return scenes
 
 
@@ -111,10 +118,10 @@ def _number(path: str, key: str, value: str | float, line: int | None) -> float:
     where = f"{path}:{line}" if line is not None else path
     try:
         x = float(value)
-    except (TypeError, ValueError):
-        raise ValueError(f"{where}: {key} must be a number, got {value!r}") from None
+    except (TypeError, ValueError, OverflowError):  # OverflowError: a 400-digit JSON integer
+        raise MetadataError(f"{where}: {key} must be a number, got {value!r}") from None
     if not math.isfinite(x):
-        raise ValueError(f"{where}: {key} must be finite, got {value!r}")
+        raise MetadataError(f"{where}: {key} must be finite, got {value!r}")
     return x
 
 
@@ -122,7 +129,7 @@ def _integer(path: str, key: str, value: Any, line: int | None) -> int:
     x = _number(path, key, value, line)
     if x != int(x):
         where = f"{path}:{line}" if line is not None else path
-        raise ValueError(f"{where}: {key} must be an integer, got {value!r}")
+        raise MetadataError(f"{where}: {key} must be an integer, got {value!r}")
     return int(x)
 
 
@@ -133,7 +140,7 @@ def _scene_from_text(entries: dict[str, tuple[str, int]], path: str, index: int)
     required.append("along_track_angle_deg")
     missing = [k for k in required if k not in entries]
     if missing:
-        raise ValueError(
+        raise MetadataError(
             f"{path}: scene {name!r} is missing required field(s): {', '.join(missing)}"
         )
 
@@ -160,7 +167,7 @@ def _scene_from_text(entries: dict[str, tuple[str, int]], path: str, index: int)
     try:
         return SceneMetadata(**kwargs)
     except ValueError as err:
-        raise ValueError(f"{path}: {err}") from None
+        raise MetadataError(f"{path}: {err}") from None
 
 
 # --- JSON -------------------------------------------------------------------------------
@@ -170,16 +177,18 @@ _FIELDS = tuple(f.name for f in dataclasses.fields(SceneMetadata))
 
 def _scene_from_json(obj: Any, path: str, index: int) -> SceneMetadata:
     if not isinstance(obj, dict):
-        raise ValueError(f"{path}: scene #{index} must be a JSON object, got {type(obj).__name__}")
+        raise MetadataError(
+            f"{path}: scene #{index} must be a JSON object, got {type(obj).__name__}"
+        )
     name = obj.get("image_id", f"#{index}")
     missing = [k for k in _REQUIRED if k not in obj]
     if missing:
-        raise ValueError(
+        raise MetadataError(
             f"{path}: scene {name!r} is missing required field(s): {', '.join(missing)}"
         )
     unknown = sorted(set(obj) - set(_FIELDS))
     if unknown:
-        raise ValueError(f"{path}: scene {name!r} has unknown field(s): {', '.join(unknown)}")
+        raise MetadataError(f"{path}: scene {name!r} has unknown field(s): {', '.join(unknown)}")
     kwargs = dict(obj)
     kwargs["image_id"] = str(obj["image_id"])
     for key in ("n_cols", "n_rows"):
@@ -189,14 +198,14 @@ def _scene_from_json(obj: Any, path: str, index: int) -> SceneMetadata:
             kwargs[key] = _number(path, f"scene {name!r} {key}", obj[key], None)
     try:
         corners = np.array(obj["corners"], dtype=float)
-    except (TypeError, ValueError):
+    except (TypeError, ValueError, OverflowError):
         msg = f"{path}: scene {name!r} corners must be a 4 x 3 list of numbers"
-        raise ValueError(msg) from None
+        raise MetadataError(msg) from None
     kwargs["corners"] = corners
     try:
         return SceneMetadata(**kwargs)
     except ValueError as err:
-        raise ValueError(f"{path}: {err}") from None
+        raise MetadataError(f"{path}: {err}") from None
 
 
 # --- public functions -------------------------------------------------------------------
@@ -209,7 +218,11 @@ def read_metadata(path: str | os.PathLike) -> list[SceneMetadata]:
     file may start with a ``[scene]`` line). Returns the scenes in file order.
     """
     path = pathlib.Path(path)
-    text = path.read_text(encoding="utf-8-sig")
+    try:
+        text = path.read_bytes().decode("utf-8-sig")
+    except UnicodeDecodeError as err:
+        line = path.read_bytes()[: err.start].count(b"\n") + 1
+        raise MetadataError(f"{path}:{line}: not UTF-8 text ({err.reason})") from None
     stripped = text.lstrip()
     first_line = stripped.split("\n", 1)[0].split("#", 1)[0].strip()
     is_json = path.suffix.lower() == ".json" or stripped.startswith("{")
@@ -218,12 +231,14 @@ def read_metadata(path: str | os.PathLike) -> list[SceneMetadata]:
         try:
             data = json.loads(text)
         except json.JSONDecodeError as err:
-            raise ValueError(f"{path}:{err.lineno}: invalid JSON: {err.msg}") from None
+            raise MetadataError(f"{path}:{err.lineno}: invalid JSON: {err.msg}") from None
+        except (ValueError, RecursionError) as err:  # e.g. an integer of over 4300 digits
+            raise MetadataError(f"{path}: invalid JSON: {err}") from None
         if isinstance(data, dict) and "scenes" in data:
             data = data["scenes"]
         items = data if isinstance(data, list) else [data]
         if not items:
-            raise ValueError(f"{path}: no scene metadata found (empty list)")
+            raise MetadataError(f"{path}: no scene metadata found (empty list)")
         return [_scene_from_json(obj, str(path), i) for i, obj in enumerate(items)]
     return [_scene_from_text(s, str(path), i) for i, s in enumerate(_parse_text(text, str(path)))]
 

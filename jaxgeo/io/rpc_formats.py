@@ -12,6 +12,8 @@ format         recognised by
 ``ossim_geom`` ``line_num_coeff_00:``-style keys (OSSIM/OTB ``.geom`` keyword list)
 ``rpc_txt``    ``LINE_OFF:`` / ``LINE_NUM_COEFF_1:`` keys (GDAL, Ikonos, SkySat/Planet,
                Cartosat-1 ``_RPC_ORG.TXT``)
+``json``       a JSON object: rpcm's dictionary (``row_offset`` ...), alone or under ``"rpc"``
+               (DFC2019 / IARPA per-image files, Sat-NeRF), or GDAL-named keys
 =============  ==========================================================================
 
 Every reader returns a :class:`jaxgeo.models.RPC` in jaxgeo's pixel convention: ``(x, y) =
@@ -33,6 +35,7 @@ import re
 from ..models.rpc import RPC
 from .rpc_common import RPCFormatError, source_name
 from .rpc_gdal import read_raster_rpc, write_geotiff_rpc
+from .rpc_json import looks_like_json, read_rpc_json
 from .rpc_text import (
     GEOM_MARKER,
     read_ossim_geom,
@@ -48,7 +51,7 @@ _JP2_MAGIC = b"\x00\x00\x00\x0cjP  \r\n\x87\n"
 _RPB = re.compile(r"^[ \t]*BEGIN_GROUP[ \t]*=[ \t]*IMAGE\b|\blineNumCoef[ \t]*=", re.M | re.I)
 _OSSIM = re.compile(r"^[ \t]*type[ \t]*:[ \t]*ossim\w*Model\b", re.M)
 _TXT = re.compile(r"^[ \t]*(?:LINE_NUM_COEFF(?:_\d+)?|LINE_OFF|SAMP_OFF)[ \t]*:", re.M | re.I)
-_FORMATS = "GeoTIFF/NITF, .RPB, _RPC.TXT, OSSIM .geom, DIMAP or DigitalGlobe/Maxar XML"
+_FORMATS = "GeoTIFF/NITF, .RPB, _RPC.TXT, OSSIM .geom, DIMAP or DigitalGlobe/Maxar XML, JSON"
 
 
 def _is_binary(head: bytes) -> bool:
@@ -71,6 +74,8 @@ def _check_path(path: str | os.PathLike) -> pathlib.Path:
 
 
 def _detect_text(text: str, source: str) -> str:
+    if looks_like_json(text):
+        return "json"
     if text.lstrip().startswith("<"):
         kind = xml_kind(parse_xml(text, source))
         if kind is None:
@@ -122,6 +127,8 @@ def read_rpc(path: str | os.PathLike) -> RPC:
         return read_rpb(text, source)
     if kind == "ossim_geom":
         return read_ossim_geom(text, source)
+    if kind == "json":
+        return read_rpc_json(text, source)
     return read_rpc_txt(text, source)
 
 

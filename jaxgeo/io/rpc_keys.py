@@ -14,11 +14,16 @@ style           spelling              coefficients
 ``rasterio``    ``line_off``          ``line_num_coeff`` (a list; GDAL's Python names)
 ``rpb``         ``lineOffset``        ``lineNumCoef = ( .., .. )`` (comma list)
 ``maxar_xml``   ``LINEOFFSET``        ``<LINENUMCOEF>`` (whitespace list)
+``rpcm_json``   ``row_offset``        ``"row_num": [..]`` (rpcm / Sat-NeRF / DFC2019 JSON)
 ==============  ====================  ===============================================
 
 The first family is NITF RPC00B's (GDAL's RPC metadata, ``_RPC.TXT``, DIMAP, OSSIM lower-cased);
 the second DigitalGlobe's ``.RPB`` (upper-cased in Maxar XML). The GeoTIFF RPCCoefficientTag holds
-the same values as 92 doubles in :data:`GEOTIFF_TAG_ORDER`. Readers look keys up through
+the same values as 92 doubles in :data:`GEOTIFF_TAG_ORDER`. rpcm (and the JSON files of the
+DFC2019 / IARPA data sets as Sat-NeRF writes them) names the fields ``row_offset`` ...
+``col_den`` (:attr:`RPCKey.rpcm`).
+Airbus DIMAP v1 (``PHR_Dimap_Document``) follows neither family: :data:`DIMAP_V1_SCALARS` and
+:data:`DIMAP_V1_POLYNOMIALS`. Readers look keys up through
 :meth:`KeyStyle.scalar_names` / :meth:`KeyStyle.coeff_names`, writers emit
 :func:`vendor_items`; nothing else spells a vendor key.
 """
@@ -41,23 +46,26 @@ class RPCKey(NamedTuple):
     """DigitalGlobe ``.RPB`` name (Maxar XML upper-cases it)."""
     unit: str | None
     """Unit word of Ikonos-style ``_RPC.TXT`` files (None for coefficients)."""
+    rpcm: str = ""
+    """rpcm's attribute name (``row_offset`` ... ``col_den``): its ``RPCModel.__dict__``, the
+    ``"rpc"`` dictionary of the DFC2019 / IARPA JSON files that Sat-NeRF and rpcm read."""
 
 
 RPC_KEYS: tuple[RPCKey, ...] = (
-    RPCKey("line_off", "LINE_OFF", "lineOffset", "pixels"),
-    RPCKey("samp_off", "SAMP_OFF", "sampOffset", "pixels"),
-    RPCKey("lat_off", "LAT_OFF", "latOffset", "degrees"),
-    RPCKey("lon_off", "LONG_OFF", "longOffset", "degrees"),
-    RPCKey("height_off", "HEIGHT_OFF", "heightOffset", "meters"),
-    RPCKey("line_scale", "LINE_SCALE", "lineScale", "pixels"),
-    RPCKey("samp_scale", "SAMP_SCALE", "sampScale", "pixels"),
-    RPCKey("lat_scale", "LAT_SCALE", "latScale", "degrees"),
-    RPCKey("lon_scale", "LONG_SCALE", "longScale", "degrees"),
-    RPCKey("height_scale", "HEIGHT_SCALE", "heightScale", "meters"),
-    RPCKey("line_num", "LINE_NUM_COEFF", "lineNumCoef", None),
-    RPCKey("line_den", "LINE_DEN_COEFF", "lineDenCoef", None),
-    RPCKey("samp_num", "SAMP_NUM_COEFF", "sampNumCoef", None),
-    RPCKey("samp_den", "SAMP_DEN_COEFF", "sampDenCoef", None),
+    RPCKey("line_off", "LINE_OFF", "lineOffset", "pixels", "row_offset"),
+    RPCKey("samp_off", "SAMP_OFF", "sampOffset", "pixels", "col_offset"),
+    RPCKey("lat_off", "LAT_OFF", "latOffset", "degrees", "lat_offset"),
+    RPCKey("lon_off", "LONG_OFF", "longOffset", "degrees", "lon_offset"),
+    RPCKey("height_off", "HEIGHT_OFF", "heightOffset", "meters", "alt_offset"),
+    RPCKey("line_scale", "LINE_SCALE", "lineScale", "pixels", "row_scale"),
+    RPCKey("samp_scale", "SAMP_SCALE", "sampScale", "pixels", "col_scale"),
+    RPCKey("lat_scale", "LAT_SCALE", "latScale", "degrees", "lat_scale"),
+    RPCKey("lon_scale", "LONG_SCALE", "longScale", "degrees", "lon_scale"),
+    RPCKey("height_scale", "HEIGHT_SCALE", "heightScale", "meters", "alt_scale"),
+    RPCKey("line_num", "LINE_NUM_COEFF", "lineNumCoef", None, "row_num"),
+    RPCKey("line_den", "LINE_DEN_COEFF", "lineDenCoef", None, "row_den"),
+    RPCKey("samp_num", "SAMP_NUM_COEFF", "sampNumCoef", None, "col_num"),
+    RPCKey("samp_den", "SAMP_DEN_COEFF", "sampDenCoef", None, "col_den"),
 )
 """Every field, in the order of the NITF RPC00B record (10 scalars, then 4 polynomials)."""
 
@@ -76,7 +84,7 @@ NITF_ALIASES = {"LON_OFF": "LONG_OFF", "LON_SCALE": "LONG_SCALE"}
 GEOTIFF_TAG_ORDER = ("err_bias", "err_rand", *SCALARS, *COEFFS)
 """Layout of the 92 doubles of the GeoTIFF RPCCoefficientTag (coefficients 20 each)."""
 
-Spelling = Literal["nitf", "nitf_lower", "rpb", "rpb_upper"]
+Spelling = Literal["nitf", "nitf_lower", "rpb", "rpb_upper", "rpcm"]
 
 
 @dataclasses.dataclass(frozen=True)
@@ -106,6 +114,8 @@ class KeyStyle:
             return key.nitf.lower()
         if self.spelling == "rpb":
             return key.rpb
+        if self.spelling == "rpcm":
+            return key.rpcm
         return key.rpb.upper()
 
     def indexed(self, stem: str, i: int) -> str:
@@ -132,9 +142,36 @@ STYLES: Mapping[str, KeyStyle] = {
         KeyStyle("rasterio", "nitf_lower"),
         KeyStyle("rpb", "rpb", list_sep=","),
         KeyStyle("maxar_xml", "rpb_upper"),
+        KeyStyle("rpcm_json", "rpcm"),
     )
 }
 """Every vendor style, by the format name :func:`jaxgeo.io.detect_rpc_format` gives."""
+
+
+DIMAP_V1_SCALARS: Mapping[str, tuple[str, str]] = {
+    "lon_off": ("Lon", "B"),
+    "lon_scale": ("Lon", "A"),
+    "lat_off": ("Lat", "B"),
+    "lat_scale": ("Lat", "A"),
+    "height_off": ("Alt", "B"),
+    "height_scale": ("Alt", "A"),
+    "samp_off": ("Col", "B"),
+    "samp_scale": ("Col", "A"),
+    "line_off": ("Row", "B"),
+    "line_scale": ("Row", "A"),
+}
+"""DIMAP v1 ``RFM_Validity``: ``field -> (element, child)``; ``value = A * normalised + B``
+(A the scale, B the offset; image offsets count from 1)."""
+DIMAP_V1_POLYNOMIALS: Mapping[str, tuple[str, str, str]] = {
+    "F_COL": ("Inverse_Model", "samp_num", "samp_den"),
+    "F_ROW": ("Inverse_Model", "line_num", "line_den"),
+    "F_LON": ("Direct_Model", "lon_num", "lon_den"),
+    "F_LAT": ("Direct_Model", "lat_num", "lat_den"),
+}
+"""DIMAP v1 ``Global_RFM`` lists: ``element -> (model, numerator, denominator)``; each holds 40
+numbers, the 20 numerator then the 20 denominator coefficients, RPC00B order. The direct (image
+-> ground) polynomials take normalised ``(col, row, h)`` where the inverse ones take
+``(lon, lat, h)``."""
 
 
 def vendor_items(
@@ -158,6 +195,8 @@ def vendor_items(
 
 __all__ = [
     "COEFFS",
+    "DIMAP_V1_POLYNOMIALS",
+    "DIMAP_V1_SCALARS",
     "GEOTIFF_TAG_ORDER",
     "N_TERMS",
     "RPC_KEYS",

@@ -108,7 +108,8 @@ def read_rpc_txt(text: str, source: str) -> RPC:
     entries = _key_value_lines(text, source, upper=True, relevant=_txt_relevant)
     for key, (lineno, _) in entries.items():
         match = _INDEXED.fullmatch(key)
-        if match and not 1 <= int(match.group(2)) <= N_TERMS:
+        index = match.group(2) if match else ""
+        if match and (len(index) > 3 or not 1 <= int(index) <= N_TERMS):  # len: no 5000-digit int
             raise RPCFormatError(
                 f"{source}: line {lineno}: {key}: coefficient index out of range 1..{N_TERMS}"
             )

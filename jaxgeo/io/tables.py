@@ -61,20 +61,32 @@ def _float(value: str, where: str, column: str, allow_empty: bool = False) -> fl
 def _rows(path: pathlib.Path, required: tuple[str, ...]):
     if not path.is_file():
         raise FileNotFoundError(f"{path}: no such file")
-    text = path.read_text(encoding="utf-8-sig")
+    try:
+        text = path.read_bytes().decode("utf-8-sig")
+    except UnicodeDecodeError as err:
+        line = path.read_bytes()[: err.start].count(b"\n") + 1
+        raise TableError(f"{path}:{line}: not UTF-8 text ({err.reason})") from None
     lines = [(i, ln) for i, ln in enumerate(text.splitlines(), start=1)]
     lines = [(i, ln) for i, ln in lines if ln.strip() and not ln.lstrip().startswith("#")]
     if not lines:
         raise TableError(f"{path}: empty table (expected header {','.join(required)})")
-    reader = csv.reader([ln for _, ln in lines])
-    header = [h.strip().lower() for h in next(reader)]
+
+    def fields(lineno: int, line: str) -> list[str]:
+        # one line at a time: a stray quote must not swallow the lines after it
+        try:
+            return next(csv.reader([line]), [])
+        except csv.Error as err:
+            raise TableError(f"{path}:{lineno}: {err}") from None
+
+    rows = [fields(i, ln) for i, ln in lines]
+    header = [h.strip().lower() for h in rows[0]]
     missing = [c for c in required if c not in header]
     if missing:
         raise TableError(
             f"{path}:{lines[0][0]}: header lacks column(s) {', '.join(missing)} "
             f"(got {','.join(header)})"
         )
-    for (lineno, _), row in zip(lines[1:], reader, strict=True):
+    for (lineno, _), row in zip(lines[1:], rows[1:], strict=True):
         if len(row) != len(header):
             raise TableError(f"{path}:{lineno}: expected {len(header)} fields, got {len(row)}")
         yield lineno, dict(zip(header, (c.strip() for c in row), strict=True))

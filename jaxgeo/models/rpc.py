@@ -188,8 +188,19 @@ class RPC(AbstractSensorModel):
         }
 
     def normalize_ground(self, ground: Float[ArrayLike, "*batch 3"]) -> Float[Array, "*batch 3"]:
-        """``(lon_deg, lat_deg, h_m)`` -> normalised ``(L, P, H)``."""
-        return (jnp.asarray(ground, dtype=float) - self.ground_offset) / self.ground_scale
+        """``(lon_deg, lat_deg, h_m)`` -> normalised ``(L, P, H)``.
+
+        ``lon - lon_off`` is taken into (-180, 180] degrees first, so that a longitude written
+        360 degrees apart (an image across the antimeridian, lon_off near +-180) is the same
+        point, as in GDAL's RPC transformer.
+        """
+        ground = jnp.asarray(ground, dtype=float)
+        lon, lon_off = ground[..., 0], self.ground_offset[..., 0]
+        # the whole turns come off the longitude itself (exact near +-180 deg), not off the
+        # difference: lon and lon +- 360 then give bit-identical normalised values
+        lon = lon - 360.0 * jnp.ceil((lon - lon_off - 180.0) / 360.0)
+        ground = jnp.concatenate([lon[..., None], ground[..., 1:]], axis=-1)
+        return (ground - self.ground_offset) / self.ground_scale
 
     def project(self, ground: Float[ArrayLike, "*batch 3"]) -> Float[Array, "*batch 2"]:
         """Ground ``(lon_deg, lat_deg, h_m)`` -> image ``(x, y)`` px (RPC00B rational functions)."""
@@ -250,6 +261,10 @@ def check_rpc(rpc: RPC, source: str = "RPC") -> RPC:
     for name in ("ground_scale", "image_scale"):
         if np.any(np.asarray(getattr(rpc, name)) == 0.0):
             raise ValueError(f"{source}: RPC field {name} holds a zero scale")
-    if np.all(np.asarray(rpc.den) == 0.0):
-        raise ValueError(f"{source}: RPC denominators are all zero")
+    den = np.asarray(rpc.den)
+    for i, name in enumerate(("samp_den (SAMP_DEN_COEFF)", "line_den (LINE_DEN_COEFF)")):
+        if np.all(den[..., i, :] == 0.0):
+            raise ValueError(
+                f"{source}: RPC denominator {name} is all zero (the model divides by zero)"
+            )
     return rpc

@@ -13,6 +13,14 @@ the pass (pointing bias and drift, ephemeris offset) plus a per-scene pointing e
 discontinuities between scenes that the full-strip adjustment removes. Ground points are
 surveyed in every scene (``check``) and, as control, only in every ``gcp_every``-th scene and the
 last one (003_ section 9).
+
+The RMS error of a sub-scene's vendor RPC on its true points (:meth:`StripScene.accuracy`) lies
+in :data:`VENDOR_RMS_RANGE_PX` (1-100 px) for strips of 20 to 320 sub-scenes: the common pitch
+(18-30 px) and roll (10 px) dominate, and the drift (0.03 px/s) grows with the strip's duration
+(~1.4 min at 20 sub-scenes, ~22 min at 320). Measured with seeds 0-2 (min-max over sub-scenes):
+80 sub-scenes 11-41 px, 100: 13-31, 160: 17-44, 320: 3.5-75. (Until the measurements were
+projected through each sub-scene's own model, strips of 100 or more sub-scenes gave 1e4-1e8 px:
+the strip model's Newton in scan time diverges more than ~200 s from its centre line.)
 """
 
 from __future__ import annotations
@@ -22,6 +30,9 @@ import math
 import os
 import pathlib
 
+import equinox as eqx
+import jax
+import jax.numpy as jnp
 import numpy as np
 
 from ..io.tables import GroundPoints, Observations, write_ground, write_observations
@@ -44,6 +55,9 @@ STRIP_ERRORS = sc.VendorErrors(
 """Vendor errors of a strip: ~13-19 m direct-ortho errors (003_, table 1); the ``mount_*`` terms are
 the per-scene pointing errors."""
 
+VENDOR_RMS_RANGE_PX = (1.0, 100.0)
+"""Documented range of each sub-scene's vendor-RPC RMS error (px) for 20-320 sub-scenes."""
+
 
 def scene_names(n_scenes: int) -> tuple[str, ...]:
     """``scene_000``, ``scene_001``, ... (more digits past 1000 scenes)."""
@@ -56,6 +70,29 @@ def output_files(directory: os.PathLike, n_scenes: int) -> list[pathlib.Path]:
     d = pathlib.Path(directory)
     names = ["ground.csv", "observations.csv", "strip.json", "truth.json"]
     return [d / f"{n}.txt" for n in scene_names(n_scenes)] + [d / n for n in names]
+
+
+@eqx.filter_jit
+def _project_chunk_from(model: EphemerisModel, first_line_s, n_rows: int, ground):
+    def one(t_first, g):
+        return dataclasses.replace(model, first_line_time_s=t_first, n_rows=n_rows).project(g)
+
+    return jax.vmap(one)(first_line_s, ground)
+
+
+def _project_from_lines(model, first_line_s, n_rows: int, ground, chunk: int = 512) -> np.ndarray:
+    """``(n, 2)`` projections of ``ground`` ``(n, 3)``, point ``i`` through ``model`` cut to
+    ``n_rows`` lines from scan time ``first_line_s[i]`` (image rows relative to that cut)."""
+    n = len(ground)
+    n_pad = -(-max(n, 1) // chunk) * chunk
+    t = np.pad(np.asarray(first_line_s, float), (0, n_pad - n), mode="edge")
+    g = np.pad(np.asarray(ground, float), [(0, n_pad - n), (0, 0)], mode="edge")
+    out = [
+        np.asarray(_project_chunk_from(model, jnp.asarray(t[i : i + chunk]), n_rows,
+                                       jnp.asarray(g[i : i + chunk])))
+        for i in range(0, n_pad, chunk)
+    ]  # fmt: skip
+    return np.concatenate(out)[:n]
 
 
 @dataclasses.dataclass(frozen=True)
@@ -104,7 +141,7 @@ class StripScene:
         per_scene = {}
         for name in self.names:
             rows = [i for i, img in enumerate(self.image_true.images) if img == name]
-            if not rows:
+            if not rows or name not in self.vendor:
                 continue
             g = self.ground_true[[index[self.image_true.point_ids[i]] for i in rows]]
             res = sc.project(self.vendor[name], g) - self.image_true.xy[rows]
@@ -158,6 +195,12 @@ class StripScene:
         ``truth.json``; refuses to replace existing files unless ``overwrite``."""
         from ..io import write_rpc_text
 
+        missing = [n for n in self.names if n not in self.vendor]
+        if missing:
+            raise ValueError(
+                f"{len(missing)} sub-scene(s) have no vendor RPC (simulated with rpc_scenes): "
+                "nothing written"
+            )
         paths = self.files(directory)
         sc.check_writable(paths, overwrite)
         pathlib.Path(directory).mkdir(parents=True, exist_ok=True)
@@ -197,13 +240,15 @@ def carto2s_strip(
     attitude_order: int = 9,
     attitude_wobble_rad: float = 5e-6,
     rpc_grid: tuple[int, int, int] = (21, 21, 7),
+    rpc_scenes: tuple[int, ...] | None = None,
 ) -> StripScene:
     """Simulate a Carto-2S strip of ``n_scenes`` sub-scenes (see the module docstring).
 
     ``line_time_s`` defaults to square ground pixels at nadir; with the defaults a sub-scene is
     ~30 km x 15 km (48 000 x 24 000 px of 0.63 m). Sub-scenes ``0, gcp_every, 2 gcp_every, ...``
     and the last carry ``gcps_per_scene`` GCPs; every scene carries ``checks_per_scene`` check
-    points. Returns a :class:`StripScene`.
+    points. ``rpc_scenes`` fits vendor RPCs for those sub-scenes only (a quick look at a long
+    strip; such a strip cannot be saved). Returns a :class:`StripScene`.
     """
     n_scenes = int(n_scenes)
     if n_scenes < 1:
@@ -270,17 +315,25 @@ def carto2s_strip(
         tuple(ids), surveyed, tuple(roles), np.full((n_pts, 3), float(ground_sigma_m))
     )
 
-    # --- measurements: every sub-scene whose lines contain the point
-    xy = sc.project(strip, ground_true)
+    # --- measurements: every sub-scene whose lines contain the point, projected through that
+    # sub-scene's own model, whose Newton in scan time starts at that sub-scene's centre line. Not
+    # through the strip model: its Newton starts at the strip's centre line and, more than ~200 s
+    # (about 90 sub-scenes) away, no longer converges on the curved orbit (100-320 scenes gave
+    # truth coordinates wrong by 1e4-1e8 px, hence vendor RPCs "wrong" by as much).
+    home = np.concatenate(cand)[:, 1] // step  # the sub-scene each point was made in
+    home = np.minimum(home.astype(int), n_scenes - 1)
+    cut_first_s = sc.round_sig(strip.row_time(jnp.asarray(first_rows[home], float)))  # truth_model
+    xy_home = _project_from_lines(sc.quantize_model(strip), cut_first_s, scene_rows, ground_true)
+    strip_xy = xy_home + np.stack([np.zeros(n_pts), first_rows[home]], -1)
     obs_pid, obs_img, obs_xy = [], [], []
     for i in range(n_pts):
-        col, row = xy[i]
+        col, row = strip_xy[i]
         for k in np.flatnonzero((first_rows <= row) & (row <= first_rows + scene_rows - 1)):
             if 0.0 <= col <= n_cols - 1:
                 obs_pid.append(ids[i])
                 obs_img.append(names[k])
                 obs_xy.append((col, row - first_rows[k]))
-    true_xy = sc.quantize_image(np.asarray(obs_xy))
+    true_xy = sc.quantize_image(np.asarray(obs_xy, float).reshape(-1, 2))
     noisy_xy = sc.quantize_image(true_xy + rng.normal(0.0, image_noise_px, true_xy.shape))
     m = len(obs_pid)
     image_true = Observations(tuple(obs_pid), tuple(obs_img), true_xy, np.zeros(m))
@@ -297,11 +350,15 @@ def carto2s_strip(
         ground, ground_true, observations, image_true, terrain, sc.rounded(params, 12),
     )  # fmt: skip
     pad = 0.1 * (h_range_m[1] - h_range_m[0]) + 50.0
+    fitted = range(n_scenes) if rpc_scenes is None else sorted({int(k) for k in rpc_scenes})
+    if any(not 0 <= k < n_scenes for k in fitted):
+        raise ValueError(f"rpc_scenes must lie in [0, {n_scenes}), got {rpc_scenes}")
+    names_fitted = [names[k] for k in fitted]
     fits = fit_rpcs(
-        [partial.vendor_model(k) for k in range(n_scenes)],
+        [partial.vendor_model(k) for k in fitted],
         h_range=(h_range_m[0] - pad, h_range_m[1] + pad),
         grid=rpc_grid,
     )
-    vendor = {n: sc.quantize_model(rpc) for n, (rpc, _) in zip(names, fits, strict=False)}
-    reports = {n: rep for n, (_, rep) in zip(names, fits, strict=False)}
+    vendor = {n: sc.quantize_model(rpc) for n, (rpc, _) in zip(names_fitted, fits, strict=True)}
+    reports = {n: rep for n, (_, rep) in zip(names_fitted, fits, strict=True)}
     return dataclasses.replace(partial, vendor=vendor, fit_reports=reports)
