@@ -36,7 +36,7 @@ class GeoidGrid:
     dlon_deg: float
     dlat_deg: float  # negative for north-up grids
 
-    def __call__(self, lon_deg, lat_deg) -> np.ndarray:
+    def __call__(self, lon_deg, lat_deg) -> np.ndarray | float:
         lon = np.asarray(lon_deg, dtype=float)
         lat = np.asarray(lat_deg, dtype=float)
         rows, cols = self.values_m.shape
