@@ -1,0 +1,125 @@
+"""Many independent adjustments of one structure in one compiled call.
+
+Each problem has its own models, measurements, control and priors, but the same sparsity (the
+same images, points and observation pattern: e.g. 10 000 scenes each bias-adjusted with its 9
+GCPs, or Monte-Carlo draws of one block). :func:`solve_batch` stacks them leaf-wise and runs
+:func:`~jaxgeo.bundle.solve.solve` over them with ``jax.lax.map`` in vmapped chunks of
+``chunk`` problems: a chunk runs until its slowest member converges (a vmapped while-loop), so
+chunks confine stragglers and bound memory. The small factorisations are LAPACK-free
+(:mod:`~jaxgeo.bundle.factor`), which removes the hang of >= 1000 vmapped problems in jaxlib's
+batched LAPACK. With several local devices (``jax.local_device_count() > 1``) the problems are
+sharded over them (``jax.sharding``, one mesh axis): the results are those of one device.
+
+Example::
+
+    setups = [build(models_i, obs_i, gcps_i) for ...]
+    sol = solve_batch([s.problem for s in setups])
+    sol.theta[0][k], sol.result[k], sol.s0[k]   # problem k
+"""
+
+from __future__ import annotations
+
+from collections.abc import Sequence
+
+import equinox as eqx
+import jax
+import jax.numpy as jnp
+import numpy as np
+
+from .config import DEFAULT_SOLVER, SolverConfig
+from .problem import Problem
+from .solve import Solution, solve
+
+DEFAULT_CHUNK = 512
+"""Problems per vmapped chunk of :func:`solve_batch`."""
+
+
+def stack_problems(problems: Sequence[Problem]) -> Problem:
+    """Stack problems of one structure leaf-wise (leading axis = problem).
+
+    The :class:`~jaxgeo.bundle.problem.Structure` (index arrays) is shared, not stacked.
+    Raises ``ValueError`` naming the first problem whose structure or shapes differ from
+    problem 0's."""
+    problems = list(problems)
+    if not problems:
+        raise ValueError("solve_batch: no problems given")
+    first = problems[0]
+    ref_struct = jax.tree.map(np.asarray, first.structure)
+    dyn0, static0 = eqx.partition(_without_structure(first), eqx.is_array)
+    shapes0 = [x.shape for x in jax.tree.leaves(dyn0)]
+    dyns = []
+    for k, p in enumerate(problems):
+        same = jax.tree.structure(p.structure) == jax.tree.structure(first.structure) and all(
+            np.array_equal(a, np.asarray(b))
+            for a, b in zip(jax.tree.leaves(ref_struct), jax.tree.leaves(p.structure), strict=True)
+        )
+        dyn, static = eqx.partition(_without_structure(p), eqx.is_array)
+        if not same or jax.tree.structure(static) != jax.tree.structure(static0):
+            raise ValueError(
+                f"solve_batch: problem {k} has another structure than problem 0 (images, "
+                "points or observation pattern differ); batch only problems of one structure"
+            )
+        shapes = [x.shape for x in jax.tree.leaves(dyn)]
+        if shapes != shapes0:
+            raise ValueError(f"solve_batch: problem {k}'s array shapes differ from problem 0's")
+        dyns.append(dyn)
+    stacked = jax.tree.map(lambda *xs: jnp.stack([jnp.asarray(x) for x in xs]), *dyns)
+    return _with_structure(eqx.combine(stacked, static0), first.structure)
+
+
+def _without_structure(p: Problem) -> Problem:
+    return eqx.tree_at(lambda q: q.structure, p, None, is_leaf=lambda x: x is None)
+
+
+def _with_structure(p: Problem, structure) -> Problem:
+    return eqx.tree_at(lambda q: q.structure, p, structure, is_leaf=lambda x: x is None)
+
+
+@eqx.filter_jit
+def _solve_stacked(stacked: Problem, solver: SolverConfig, chunk: int, mesh) -> Solution:
+    structure = stacked.structure
+    dyn, static = eqx.partition(_without_structure(stacked), eqx.is_array)
+
+    def one(d):
+        return solve(_with_structure(eqx.combine(d, static), structure), solver)
+
+    def run(d):  # the problems of one device (all of them without a mesh)
+        n = jax.tree.leaves(d)[0].shape[0]
+        return jax.lax.map(one, d, batch_size=min(chunk, n))
+
+    if mesh is None:
+        return run(dyn)
+    spec = jax.sharding.PartitionSpec("problems")
+    return jax.shard_map(run, mesh=mesh, in_specs=spec, out_specs=spec)(dyn)
+
+
+def _mesh(n: int):
+    """A one-axis mesh over all local devices (problem axis), or ``None`` with one device or
+    a batch their number does not divide."""
+    devices = jax.local_devices()
+    if len(devices) < 2 or n % len(devices):
+        return None
+    return jax.sharding.Mesh(np.array(devices), ("problems",))
+
+
+def solve_batch(
+    problems: Sequence[Problem] | Problem,
+    solver: SolverConfig = DEFAULT_SOLVER,
+    *,
+    chunk: int = DEFAULT_CHUNK,
+    shard: bool = True,
+) -> Solution:
+    """Adjust many independent problems of one structure in one compiled call.
+
+    ``problems``: a sequence of :class:`~jaxgeo.bundle.problem.Problem` (e.g.
+    ``build(...).problem`` per scene) or one already stacked by :func:`stack_problems`.
+    Returns one :class:`~jaxgeo.bundle.solve.Solution` whose every array has a leading axis
+    of problems; ``result`` and ``num_steps`` are per problem (a failed problem does not stop
+    the others). ``chunk`` problems are vmapped together (see the module docstring);
+    ``shard=True`` spreads the problems over all local devices when there are several (and
+    their number divides the batch).
+    """
+    stacked = problems if isinstance(problems, Problem) else stack_problems(problems)
+    n = jax.tree.leaves(eqx.filter(_without_structure(stacked), eqx.is_array))[0].shape[0]
+    mesh = _mesh(n) if shard else None
+    return _solve_stacked(stacked, solver, int(chunk), mesh)
