@@ -84,13 +84,13 @@ def _solve_stacked(stacked: Problem, solver: SolverConfig, chunk: int, mesh) -> 
         return solve(_with_structure(eqx.combine(d, static), structure), solver)
 
     def run(d):  # the problems of one device (all of them without a mesh)
-        n = jax.tree.leaves(d)[0].shape[0]
-        return jax.lax.map(one, d, batch_size=min(chunk, n))
+        return jax.lax.map(one, d, batch_size=chunk)
 
     if mesh is None:
         return run(dyn)
     spec = jax.sharding.PartitionSpec("problems")
-    return jax.shard_map(run, mesh=mesh, in_specs=spec, out_specs=spec)(dyn)
+    # check_vma off: optimistix linearises inside, which the varying-axis types reject
+    return jax.shard_map(run, mesh=mesh, in_specs=spec, out_specs=spec, check_vma=False)(dyn)
 
 
 def _mesh(n: int):
@@ -122,4 +122,50 @@ def solve_batch(
     stacked = problems if isinstance(problems, Problem) else stack_problems(problems)
     n = jax.tree.leaves(eqx.filter(_without_structure(stacked), eqx.is_array))[0].shape[0]
     mesh = _mesh(n) if shard else None
-    return _solve_stacked(stacked, solver, int(chunk), mesh)
+    devices = 1 if mesh is None else mesh.size
+    chunk = max(1, min(int(chunk), n // devices))
+    # pad (repeating the last problem) to whole chunks per device: lax.map then compiles one
+    # body, and every batch size of a multiple of chunk * devices reuses one program
+    total = -(-n // (chunk * devices)) * chunk * devices
+    if total != n:
+        dyn, static = eqx.partition(_without_structure(stacked), eqx.is_array)
+        dyn = jax.tree.map(lambda x: jnp.concatenate([x, jnp.repeat(x[-1:], total - n, 0)]), dyn)
+        stacked = _with_structure(eqx.combine(dyn, static), stacked.structure)
+        mesh = _mesh(total) if shard else None
+    sol = _solve_stacked(stacked, solver, chunk, mesh)
+    if total == n:
+        return sol
+    arrays, rest = eqx.partition(sol, eqx.is_array)
+    return eqx.combine(jax.tree.map(lambda x: x[:n], arrays), rest)
+
+
+def solve_batch_distributed(
+    problems: Sequence[Problem] | Problem,
+    solver: SolverConfig = DEFAULT_SOLVER,
+    *,
+    chunk: int = DEFAULT_CHUNK,
+) -> Solution:
+    """:func:`solve_batch` over several hosts (processes) started with
+    ``jax.distributed.initialize``: every process passes the same problems, solves its share
+    (contiguous, ``process_index`` of ``process_count``; on its local devices) and receives
+    everyone's results (``multihost_utils.process_allgather``): the same :class:`Solution` as
+    one process would compute. The number of problems must be divisible by the number of
+    processes. With one process it is :func:`solve_batch`.
+    """
+    from jax.experimental import multihost_utils
+
+    stacked = problems if isinstance(problems, Problem) else stack_problems(problems)
+    count, index = jax.process_count(), jax.process_index()
+    if count == 1:
+        return solve_batch(stacked, solver, chunk=chunk)
+    dyn, static = eqx.partition(_without_structure(stacked), eqx.is_array)
+    n = jax.tree.leaves(dyn)[0].shape[0]
+    if n % count:
+        raise ValueError(f"solve_batch_distributed: {n} problems for {count} processes")
+    per = n // count
+    mine = jax.tree.map(lambda x: x[index * per : (index + 1) * per], dyn)
+    own = _with_structure(eqx.combine(mine, static), stacked.structure)
+    sol = solve_batch(own, solver, chunk=chunk, shard=False)
+    arrays, rest = eqx.partition(sol, eqx.is_array)
+    gathered = multihost_utils.process_allgather(arrays, tiled=True)
+    return eqx.combine(jax.tree.map(jnp.asarray, gathered), rest)
