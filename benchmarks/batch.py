@@ -23,7 +23,7 @@ import jax
 import numpy as np
 
 import jaxgeo
-from jaxgeo.bundle.batch import solve_batch, stack_problems
+from jaxgeo.bundle.batch import solve_batch, with_xy_batch
 from jaxgeo.bundle.build import build
 from jaxgeo.bundle.errors import RESULTS
 from jaxgeo.bundle.solve import solve_jit
@@ -62,8 +62,8 @@ def main() -> None:
     base = one_image_problem(args.bias)
     xy0 = np.concatenate([np.asarray(ob.xy) for ob in base.images])
     rng = np.random.default_rng(0)
-    noisy = [base.with_xy(xy0 + rng.normal(0.0, 0.5, xy0.shape)) for _ in range(args.problems)]
-    stacked = stack_problems(noisy)
+    xy = xy0 + rng.normal(0.0, 0.5, (args.problems, *xy0.shape))
+    stacked = with_xy_batch(base, xy)
 
     t0 = time.perf_counter()
     sol = jax.block_until_ready(solve_batch(stacked, chunk=args.chunk))
@@ -74,8 +74,9 @@ def main() -> None:
         sol = jax.block_until_ready(solve_batch(stacked, chunk=args.chunk))
         best = min(best, time.perf_counter() - t0)
 
-    jax.block_until_ready(solve_jit(noisy[0]))
     n_loop = min(args.loop, args.problems)
+    noisy = [base.with_xy(xy[k]) for k in range(n_loop)]
+    jax.block_until_ready(solve_jit(noisy[0]))
     t0 = time.perf_counter()
     singles = [jax.block_until_ready(solve_jit(p)) for p in noisy[:n_loop]]
     loop_s = (time.perf_counter() - t0) * args.problems / n_loop

@@ -67,6 +67,24 @@ def stack_problems(problems: Sequence[Problem]) -> Problem:
     return _with_structure(eqx.combine(stacked, static0), first.structure)
 
 
+def with_xy_batch(problem: Problem, xy) -> Problem:
+    """``B`` copies of ``problem`` stacked for :func:`solve_batch`, copy ``b`` with the image
+    measurements ``xy[b]`` (``(B, M, 2)``, all observation blocks concatenated in order, as
+    :meth:`~jaxgeo.bundle.problem.Problem.with_xy`): Monte-Carlo runs, or many scenes of one
+    layout. Far faster than stacking ``B`` separate problems."""
+    xy = jnp.asarray(xy, dtype=float)
+    m = sum(ob.xy.shape[0] for ob in problem.images)
+    if xy.ndim != 3 or xy.shape[1:] != (m, 2):
+        raise ValueError(f"with_xy_batch: xy must have shape (B, {m}, 2), got {xy.shape}")
+    dyn, static = eqx.partition(_without_structure(problem), eqx.is_array)
+    dyn = jax.tree.map(lambda x: jnp.broadcast_to(x, (xy.shape[0], *jnp.shape(x))), dyn)
+    stacked = eqx.combine(dyn, static)
+    sizes = np.cumsum([0] + [ob.xy.shape[0] for ob in problem.images])
+    parts = tuple(xy[:, a:b] for a, b in zip(sizes[:-1], sizes[1:], strict=True))
+    stacked = eqx.tree_at(lambda p: tuple(ob.xy for ob in p.images), stacked, parts)
+    return _with_structure(stacked, problem.structure)
+
+
 def _without_structure(p: Problem) -> Problem:
     return eqx.tree_at(lambda q: q.structure, p, None, is_leaf=lambda x: x is None)
 
