@@ -9,15 +9,12 @@ The public names below are imported on first use (PEP 562), so that ``jaxgeo --h
 
 import importlib
 import importlib.metadata
-import os
-import sys
 
-# float64 everywhere: jax reads JAX_ENABLE_X64 when it is first imported; if it already is,
-# switch the flag on now
-if "jax" in sys.modules:
-    sys.modules["jax"].config.update("jax_enable_x64", True)
-else:
-    os.environ["JAX_ENABLE_X64"] = "1"
+from ._jaxconfig import configure as _configure_jax
+
+# float64 everywhere and the persistent compilation cache, before any submodule imports jax
+# (environment variables jax reads when it starts; jax.config if it already has)
+_configure_jax()
 
 __version__ = importlib.metadata.version("jaxgeo")
 

@@ -2,7 +2,8 @@
 
 A ground point seen in ``N >= 2`` images is the weighted least-squares solution of
 ``project_i(ground) = image_i`` (001_5627e94f1608fac0.txt, sections 5.3 and 5.6), found by
-Gauss-Newton (optimistix) in local east/north/up metres, vmapped over points.
+Newton's method on the gradient (:func:`~jaxgeo.models.newton.newton_root`) in local
+east/north/up metres, vmapped over points.
 
 Initial values follow method III of section 5.5: the first-order (linear) terms of every model,
 taken at its reference ground point, give a linear least-squares system in the three ground
@@ -22,11 +23,11 @@ import equinox as eqx
 import jax
 import jax.numpy as jnp
 import numpy as np
-import optimistix as optx
 from jaxtyping import Array, ArrayLike, Bool, Float, Int
 
 from .geodesy import metres_per_unit
 from .models.base import AbstractSensorModel
+from .models.newton import newton_root
 
 INTERSECT_ATOL_M = 1e-9
 INTERSECT_MAX_STEPS = 20
@@ -90,6 +91,14 @@ def _residual_fn(models):
     return fn
 
 
+def _gradient(u, args):
+    """``J^T r`` of the weighted residuals; ``args = (models, residual args)`` (the models
+    travel in ``args``, not in a closure, so that the implicit derivative reaches them)."""
+    models, rest = args
+    r, vjp = jax.vjp(lambda v: _residual_fn(models)(v, rest), u)
+    return vjp(r)[0]
+
+
 def _weights(xy, sigma, mask):
     """Validity of each ray and its weight ``1 / sigma`` (0 where invalid); NaN-free ``xy``."""
     valid = jnp.all(jnp.isfinite(xy), axis=-1) & mask & jnp.isfinite(sigma) & (sigma > 0)
@@ -112,13 +121,10 @@ def _intersect_flat(models, xy, sigma, mask, max_steps, batch):
         g0 = jax.lax.stop_gradient(g0)
         mpu = metres_per_unit(g0)
         args = (g0, mpu, xy_i, w_i)
-        sol = optx.least_squares(
-            fn,
-            optx.GaussNewton(rtol=0.0, atol=INTERSECT_ATOL_M),
-            jnp.zeros(3),
-            args=args,
-            max_steps=max_steps,
-            throw=False,
+        # Newton on the gradient J^T r (the shared guarded Newton, implicit derivatives): a
+        # small while-loop traces ~10x faster than optimistix' least squares
+        sol = newton_root(
+            _gradient, jnp.zeros(3), (models, args), max_steps=max_steps, tol=INTERSECT_ATOL_M
         )
         u = sol.value
         ground = g0 + u / mpu
@@ -129,7 +135,7 @@ def _intersect_flat(models, xy, sigma, mask, max_steps, batch):
         s0 = jnp.where(dof > 0, jnp.sqrt(jnp.sum(r**2) / jnp.maximum(dof, 1)), jnp.nan)
         pred = jnp.stack([m.project(ground) for m in models])
         res = jnp.where(ok_i[:, None], pred - xy_i, jnp.nan)
-        ok = (sol.result == optx.RESULTS.successful) & enough & jnp.all(jnp.isfinite(ground))
+        ok = sol.converged & enough & jnp.all(jnp.isfinite(ground))
         nan = jnp.full(3, jnp.nan)
         return (
             jnp.where(enough, ground, nan),

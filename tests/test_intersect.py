@@ -6,8 +6,8 @@ import numpy as np
 import pytest
 from jax.test_util import check_grads
 
-from jaxgeo import Biased, Shift, geodesy, intersect
-from jaxgeo.intersect import intersect_linear
+from jaxgeo import Biased, Shift, geodesy
+from jaxgeo.intersect import intersect, intersect_linear
 from jaxgeo.io import read_rpc
 from tests.conftest import cube_points
 

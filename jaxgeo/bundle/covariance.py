@@ -13,6 +13,7 @@ import jax
 import jax.numpy as jnp
 from jaxtyping import Array, Bool, Float
 
+from .factor import cho_solve, cholesky
 from .problem import Problem, Structure
 from .schur import Jacobians, NormalBlocks, reduced_system
 
@@ -43,8 +44,7 @@ def cofactors(jac: Jacobians, blocks: NormalBlocks, s: Structure) -> Covariance:
     diagonal of ``J Q J^T`` per observation (for redundancy numbers / standardised residuals)."""
     n = s.n_params
     big_s, vinv, y = reduced_system(blocks, s, 0.0)
-    chol = jnp.linalg.cholesky(big_s)
-    qcc = jax.scipy.linalg.cho_solve((chol, True), jnp.eye(n + 1))
+    qcc = cho_solve(cholesky(big_s), jnp.eye(n + 1))
     pa, pb = s.obs_params[s.pair_a], s.obs_params[s.pair_b]
     qab = qcc[pa[:, :, None], pb[:, None, :]]  # (K, P, P)
     t = jnp.einsum("kpi,kpq,kqj->kij", y[s.pair_a], qab, y[s.pair_b])

@@ -25,6 +25,7 @@ import jax.numpy as jnp
 import optimistix as optx
 from jaxtyping import Array, Float, Int, PyTree
 
+from .factor import cho_solve, cholesky, inv3_spd
 from .problem import Structure
 
 NOISE_FLOOR = 1e-9
@@ -135,9 +136,9 @@ def normal_blocks(jac: Jacobians, s: Structure) -> NormalBlocks:
 
 
 def inv3(v: Float[Array, "n 3 3"]) -> Float[Array, "n 3 3"]:
-    """Batched inverse of symmetric 3x3 blocks (Cholesky; NaN where not positive definite)."""
-    chol = jnp.linalg.cholesky(v)
-    return jax.vmap(lambda c: jax.scipy.linalg.cho_solve((c, True), jnp.eye(3)))(chol)
+    """Batched inverse of symmetric 3x3 blocks (closed form, no LAPACK; NaN where not positive
+    definite)."""
+    return inv3_spd(v)
 
 
 def damped(blocks: NormalBlocks, s: Structure, lam) -> tuple[Array, Array]:
@@ -179,12 +180,12 @@ def schur_solve(
     n = s.n_params
     big_s, vinv, y = reduced_system(blocks, s, lam)
     u, v = damped(blocks, s, lam)
-    chol = jnp.linalg.cholesky(big_s)
+    chol = cholesky(big_s)
     idx, pt = s.obs_params, s.obs_point
 
     def solve(gc, gp):
         rhs = gc.at[idx].add(-jnp.einsum("mpj,mj->mp", y, gp[pt])).at[n].set(0.0)
-        dc = jax.scipy.linalg.cho_solve((chol, True), rhs)
+        dc = cho_solve(chol, rhs)
         back = jax.ops.segment_sum(jnp.einsum("mpj,mp->mj", blocks.w, dc[idx]), pt, s.n_points)
         return dc, jnp.einsum("nij,nj->ni", vinv, gp - back)
 

@@ -17,6 +17,7 @@ import numpy as np
 from jaxtyping import Array, ArrayLike, Bool, Float, PyTree
 
 from .base import AbstractSensorModel, nothing
+from .rpc_eval import is_concrete, localize_concrete, project_concrete, project_lph
 
 TermOrder = Literal["RPC00B", "RPC00A"]
 
@@ -76,15 +77,6 @@ def _monomial_list(normalized: Float[Array, "*batch 3"]) -> list[Float[Array, "*
 def monomials(normalized: Float[ArrayLike, "*batch 3"]) -> Float[Array, "*batch 20"]:
     """The 20 cubic monomials of normalised ``(L, P, H)`` in RPC00B order."""
     return jnp.stack(_monomial_list(jnp.asarray(normalized, dtype=float)), axis=-1)
-
-
-def _polynomial(coeffs: Float[Array, "20"], terms: list[Float[Array, "*batch"]]):
-    # written out term by term (not a stacked matmul) so that XLA fuses the whole rational
-    # function into one elementwise loop: ~4x faster on CPU than materialising (n, 20)
-    out = coeffs[0] * terms[0]
-    for k in range(1, 20):
-        out = out + coeffs[k] * terms[k]
-    return out
 
 
 class RPC(AbstractSensorModel):
@@ -204,15 +196,27 @@ class RPC(AbstractSensorModel):
 
     def project(self, ground: Float[ArrayLike, "*batch 3"]) -> Float[Array, "*batch 2"]:
         """Ground ``(lon_deg, lat_deg, h_m)`` -> image ``(x, y)`` px (RPC00B rational functions)."""
+        if is_concrete(self, ground):  # a compiled kernel; numpy in -> numpy out
+            return project_concrete(self, ground)
         ground = jnp.asarray(ground, dtype=float)
         if ground.shape[-1:] != (3,):
             raise ValueError(
                 f"ground coordinates must have a last axis of size 3, got {ground.shape}"
             )
-        terms = _monomial_list(self.normalize_ground(ground))
-        x = _polynomial(self.num[0], terms) / _polynomial(self.den[0], terms)
-        y = _polynomial(self.num[1], terms) / _polynomial(self.den[1], terms)
-        return self.image_offset + self.image_scale * jnp.stack([x, y], axis=-1)
+        x, y = project_lph(self, ground[..., 0], ground[..., 1], ground[..., 2])
+        return jnp.stack([x, y], axis=-1)
+
+    def localize(
+        self,
+        image: Float[ArrayLike, "*batch 2"],
+        h: Float[ArrayLike, "*batch"],
+        guess: Float[ArrayLike, "*batch 2"] | None = None,
+    ) -> Float[Array, "*batch 3"]:
+        """See :meth:`AbstractSensorModel.localize`; concrete calls without ``guess`` run a
+        compiled kernel (numpy in -> numpy out)."""
+        if guess is None and is_concrete(self, image, h):
+            return localize_concrete(self, image, h)
+        return super().localize(image, h, guess)
 
     def reference_ground(self) -> Float[Array, "3"]:
         return self.ground_offset

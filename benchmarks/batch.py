@@ -1,0 +1,113 @@
+"""Many independent bias adjustments in one call (``jaxgeo.bundle.batch.solve_batch``) against a
+loop of compiled single solves, same run.
+
+    python benchmarks/batch.py [--problems 10000] [--loop 200] [--bias shift] [--chunk 512]
+
+The problem is one image of the embedded demo scene (``jaxgeo demo``: the fore RPC, its 9 GCP
+measurements, GCPs as ground control) with an image-space bias; every problem gets its own
+Gaussian measurement noise (0.5 px) on the GCPs. Prints one JSON object: ``problems``,
+``jaxgeo_s`` (the batch call after compilation, best of ``--repeats``), ``loop_s`` (a Python
+loop of ``solve_jit`` over ``--loop`` problems, scaled to ``problems``: ``loop_measured``
+says how many were timed), the compile time, and how many problems converged.
+"""
+
+from __future__ import annotations
+
+import argparse
+import dataclasses
+import json
+import platform
+import time
+
+import jax
+import numpy as np
+
+import jaxgeo
+from jaxgeo.bundle.batch import solve_batch, with_xy_batch
+from jaxgeo.bundle.build import build
+from jaxgeo.bundle.errors import RESULTS
+from jaxgeo.bundle.solve import solve_jit
+from jaxgeo.io import read_ground, read_observations, read_rpc
+from jaxgeo.models import BIAS_KINDS, Biased
+from jaxgeo.simulate import demo_dir
+
+
+def one_image_problem(bias: str):
+    folder = demo_dir()
+    obs = read_observations(folder / "observations.csv")
+    ground = read_ground(folder / "ground.csv").select("gcp")
+    gcps = set(ground.ids)
+    keep = [i for i, (p, img) in enumerate(zip(obs.point_ids, obs.images, strict=True))
+            if img == "fore" and p in gcps]  # fmt: skip
+    obs = dataclasses.replace(
+        obs,
+        point_ids=tuple(obs.point_ids[i] for i in keep),
+        images=tuple(obs.images[i] for i in keep),
+        xy=obs.xy[keep],
+        sigma_px=obs.sigma_px[keep],
+    )
+    model = Biased(read_rpc(folder / "fore.txt"), BIAS_KINDS[bias]())
+    return build({"fore": model}, obs, ground).problem
+
+
+def main() -> None:
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("--problems", type=int, default=10_000)
+    parser.add_argument("--loop", type=int, default=200)
+    parser.add_argument("--bias", default="shift")
+    parser.add_argument("--chunk", type=int, default=512)
+    parser.add_argument("--repeats", type=int, default=3)
+    args = parser.parse_args()
+
+    base = one_image_problem(args.bias)
+    xy0 = np.concatenate([np.asarray(ob.xy) for ob in base.images])
+    rng = np.random.default_rng(0)
+    xy = xy0 + rng.normal(0.0, 0.5, (args.problems, *xy0.shape))
+    stacked = with_xy_batch(base, xy)
+
+    t0 = time.perf_counter()
+    sol = jax.block_until_ready(solve_batch(stacked, chunk=args.chunk))
+    compile_s = time.perf_counter() - t0
+    best = np.inf
+    for _ in range(args.repeats):
+        t0 = time.perf_counter()
+        sol = jax.block_until_ready(solve_batch(stacked, chunk=args.chunk))
+        best = min(best, time.perf_counter() - t0)
+
+    n_loop = min(args.loop, args.problems)
+    noisy = [base.with_xy(xy[k]) for k in range(n_loop)]
+    jax.block_until_ready(solve_jit(noisy[0]))
+    t0 = time.perf_counter()
+    singles = [jax.block_until_ready(solve_jit(p)) for p in noisy[:n_loop]]
+    loop_s = (time.perf_counter() - t0) * args.problems / n_loop
+    diff = max(
+        float(np.max(np.abs(np.asarray(sol.theta[0][k]) - np.asarray(s.theta[0]))))
+        for k, s in enumerate(singles)
+    )
+    ok = np.asarray(sol.result._value) == RESULTS.successful._value
+    print(
+        json.dumps(
+            {
+                "benchmark": "batch_bias_adjustment",
+                "problems": args.problems,
+                "jaxgeo_s": best,
+                "loop_s": loop_s,
+                "loop_measured": n_loop,
+                "ratio": loop_s / best,
+                "compile_s": compile_s,
+                "chunk": args.chunk,
+                "bias": args.bias,
+                "gcps_per_problem": int(xy0.shape[0]),
+                "converged": int(ok.sum()),
+                "max_theta_diff_vs_single": diff,
+                "devices": [str(d) for d in jax.devices()],
+                "cpu": platform.processor() or platform.machine(),
+                "jaxgeo": jaxgeo.__version__,
+            },
+            indent=1,
+        )
+    )
+
+
+if __name__ == "__main__":
+    main()

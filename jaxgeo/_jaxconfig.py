@@ -1,0 +1,90 @@
+"""JAX set-up shared by the library and the CLI: float64 and the persistent compilation cache.
+
+:func:`configure` runs when ``jaxgeo`` is imported, before any submodule imports jax. When jax is
+not yet imported it only sets environment variables (jax reads them when it starts, so
+``jaxgeo --help`` stays free of jax); when it is, it updates ``jax.config``.
+
+The compilation cache (XLA executables on disk, keyed by program, jax/jaxlib version, backend and
+flags) makes every run after the first skip XLA compilation: ``jaxgeo demo`` compiles some sixty
+small programs, each below jax's default thresholds (1 s of compile time), so the thresholds are
+lowered to cache them all. Location: ``$JAXGEO_CACHE_DIR``, else ``$XDG_CACHE_HOME/jaxgeo/jax``
+(``~/.cache/jaxgeo/jax``; ``~/Library/Caches`` on macOS, ``%LOCALAPPDATA%`` on Windows);
+``JAXGEO_CACHE_DIR=off`` turns it off. A user's own ``JAX_COMPILATION_CACHE_DIR`` (or a
+``jax_compilation_cache_dir`` set before jaxgeo is imported) is left as it is.
+
+Several processes may share the cache: jax writes an entry with a plain ``write_bytes`` (a reader
+could see half of it), so the size limit is set, which makes jax take a file lock
+(``filelock``) around every read and write and evict least-recently-used entries beyond
+``CACHE_MAX_BYTES``.
+"""
+
+from __future__ import annotations
+
+import os
+import sys
+from pathlib import Path
+
+CACHE_ENV = "JAXGEO_CACHE_DIR"
+"""Environment variable: the cache directory, or ``off``."""
+CACHE_MAX_BYTES = 2 * 1024**3
+"""Least-recently-used entries beyond this total size are evicted (jax's LRU cache)."""
+MIN_COMPILE_TIME_S = 0.0
+"""Cache every program, however fast it compiled (jax's default: 1 s)."""
+MIN_ENTRY_BYTES = 0
+"""Cache every program, however small (jax's default: 0; set explicitly)."""
+
+
+def default_cache_dir() -> Path:
+    """The per-user cache directory for compiled programs (see the module docstring)."""
+    if sys.platform == "win32":
+        base = Path(os.environ.get("LOCALAPPDATA", Path.home() / "AppData" / "Local"))
+    elif sys.platform == "darwin":
+        base = Path.home() / "Library" / "Caches"
+    else:
+        base = Path(os.environ.get("XDG_CACHE_HOME") or Path.home() / ".cache")
+    return base / "jaxgeo" / "jax"
+
+
+def cache_dir() -> Path | None:
+    """The cache directory in effect for jaxgeo, ``None`` when ``JAXGEO_CACHE_DIR=off``."""
+    value = os.environ.get(CACHE_ENV, "").strip()
+    if value.lower() in ("off", "0", "none", "false", "no"):
+        return None
+    return Path(value).expanduser() if value else default_cache_dir()
+
+
+def _settings(path: Path) -> dict[str, object]:
+    settings: dict[str, object] = {
+        "jax_compilation_cache_dir": str(path),
+        "jax_persistent_cache_min_compile_time_secs": MIN_COMPILE_TIME_S,
+        "jax_persistent_cache_min_entry_size_bytes": MIN_ENTRY_BYTES,
+    }
+    try:  # the file lock that makes a shared cache safe needs filelock
+        import filelock  # noqa: F401
+
+        settings["jax_compilation_cache_max_size"] = CACHE_MAX_BYTES
+    except ImportError:  # pragma: no cover - filelock is a dependency
+        pass
+    return settings
+
+
+def configure() -> None:
+    """float64 on; the persistent compilation cache on (unless off or set by the user)."""
+    jax = sys.modules.get("jax")
+    if jax is None:
+        os.environ["JAX_ENABLE_X64"] = "1"
+    else:
+        jax.config.update("jax_enable_x64", True)
+    path = cache_dir()
+    if path is None:
+        return
+    if jax is None:
+        if "JAX_COMPILATION_CACHE_DIR" in os.environ:
+            return
+        for name, value in _settings(path).items():
+            os.environ.setdefault(name.upper(), str(value))
+    else:
+        if jax.config.jax_compilation_cache_dir is not None:
+            return
+        for name, value in _settings(path).items():
+            jax.config.update(name, value)

@@ -1,0 +1,44 @@
+"""The persistent compilation cache is set up when jaxgeo is imported (fresh interpreters:
+jax reads the settings when it starts)."""
+
+import json
+import os
+import pathlib
+import subprocess
+import sys
+
+REPO = pathlib.Path(__file__).resolve().parents[1]
+PROBE = (
+    "import json, jaxgeo, jax; jax.jit(lambda x: x + 1)(1.0).block_until_ready(); "
+    "print(json.dumps({'dir': jax.config.jax_compilation_cache_dir, "
+    "'x64': jax.config.jax_enable_x64, "
+    "'min_s': jax.config.jax_persistent_cache_min_compile_time_secs}))"
+)
+
+
+def _probe(tmp_path, **env):
+    full = {k: v for k, v in os.environ.items() if k not in ("JAX_COMPILATION_CACHE_DIR",)}
+    full.update(env, PYTHONPATH=str(REPO), XDG_CACHE_HOME=str(tmp_path / "xdg"))
+    run = subprocess.run(
+        [sys.executable, "-c", PROBE], env=full, capture_output=True, text=True, timeout=300
+    )
+    assert run.returncode == 0, run.stderr[-2000:]
+    return json.loads(run.stdout.strip().splitlines()[-1])
+
+
+def test_cache_on_by_default_in_the_user_cache_dir(tmp_path):
+    out = _probe(tmp_path)
+    assert out["dir"] == str(tmp_path / "xdg" / "jaxgeo" / "jax")
+    assert out["x64"] and out["min_s"] == 0.0
+    assert any((tmp_path / "xdg" / "jaxgeo" / "jax").glob("*-cache"))  # the program is cached
+
+
+def test_cache_dir_overridable_and_off(tmp_path):
+    assert _probe(tmp_path, JAXGEO_CACHE_DIR=str(tmp_path / "c"))["dir"] == str(tmp_path / "c")
+    out = _probe(tmp_path, JAXGEO_CACHE_DIR="off")
+    assert out["dir"] is None and out["x64"]
+
+
+def test_a_users_own_jax_cache_dir_is_kept(tmp_path):
+    out = _probe(tmp_path, JAX_COMPILATION_CACHE_DIR=str(tmp_path / "mine"))
+    assert out["dir"] == str(tmp_path / "mine")
