@@ -219,7 +219,7 @@ class RPC(AbstractSensorModel):
         return super().localize(image, h, guess)
 
     def reference_ground(self) -> Float[Array, "3"]:
-        return self.ground_offset
+        return jnp.asarray(self.ground_offset)
 
     def adjustable_filter(self) -> PyTree[bool]:
         """Nothing: a bare RPC is adjusted through a :class:`~jaxgeo.models.Biased` wrapper."""
