@@ -202,7 +202,9 @@ def orthorectify(
     profile = dict(
         driver="GTiff", width=grid.width, height=grid.height, count=out_bands, dtype=dtype,
         crs=crs.to_wkt(), transform=grid.transform, nodata=nodata, tiled=True,
-        blockxsize=256, blockysize=256, compress="deflate", BIGTIFF="IF_SAFER",
+        # the temporary tiles only need to stay small on disk: fast ZSTD level 1 (the COG
+        # copy below compresses once more, with DEFLATE, for every reader)
+        blockxsize=256, blockysize=256, compress="zstd", zstd_level=1, BIGTIFF="IF_SAFER",
     )  # fmt: skip
     bar = None
     if progress:
