@@ -147,7 +147,7 @@ def _same_rpc(a: RPC, b: RPC) -> bool:
 def write_rpc_outputs(rpc: RPC, plan: RPCPlan, overwrite: bool = False) -> dict:
     """Write ``rpc`` as ``plan`` says; returns ``{"written": [paths], "direct_error_deg": ...}``
     (the DIMAP direct model's fit error, else ``None``). A copied image is checked with GDAL:
-    ``RuntimeError`` if GDAL does not return ``rpc`` for it."""
+    ``ValueError`` if GDAL does not return ``rpc`` for it."""
     written: list[pathlib.Path] = []
     direct_err = None
     if plan.image_copy is not None:
@@ -172,7 +172,7 @@ def write_rpc_outputs(rpc: RPC, plan: RPCPlan, overwrite: bool = False) -> dict:
     if plan.image_copy is not None and (plan.write_into or plan.fmt in ("txt", "rpb")):
         seen = _gdal_rpc(plan.image_copy)
         if seen is None or not _same_rpc(seen, rpc):
-            raise RuntimeError(
+            raise ValueError(
                 f"{plan.image_copy}: GDAL does not read the adjusted RPC just written for image "
                 f"{plan.name!r} (another RPC source takes precedence); use --rpc-format rpb"
             )
