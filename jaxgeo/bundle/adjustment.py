@@ -181,12 +181,16 @@ class FileAdjustment:
             lines.append(f"possible blunders (|w| > k): {', '.join(flagged)}")
         return "\n".join(lines)
 
-    def write(self, out_dir: os.PathLike, overwrite: bool = False) -> list[pathlib.Path]:
+    def write(
+        self, out_dir: os.PathLike, overwrite: bool = False, **rpc_options
+    ) -> list[pathlib.Path]:
         """Write the adjusted models, points, residuals and report (never over an input, nor
-        over an existing file unless ``overwrite``); returns the paths written."""
+        over an existing file unless ``overwrite``); returns the paths written. ``rpc_options``:
+        ``images``, ``rpc_format``, ``copy_images``, ``write_into`` of :func:`write_outputs`."""
         return write_outputs(
-            out_dir, self.result, self.format(), self.summary(), self.inputs, overwrite=overwrite
-        )
+            out_dir, self.result, self.format(), self.summary(), self.inputs, overwrite=overwrite,
+            **rpc_options,
+        )  # fmt: skip
 
 
 def adjust_files(

@@ -11,7 +11,7 @@ import io
 import json
 import os
 import pathlib
-from collections.abc import Iterable
+from collections.abc import Iterable, Mapping
 from typing import Any
 
 import jax
@@ -19,6 +19,7 @@ import numpy as np
 
 from ..io.atomic import atomic_write_text
 from ..io.rpc_common import vendor_values
+from ..io.rpc_place import image_stem, plan_rpc_outputs, write_rpc_outputs
 from ..io.rpc_text import format_rpc_txt
 from ..models import RPC, Biased, fit_rpc
 from .report import format_reports
@@ -37,6 +38,10 @@ def adjusted_rpc(model: Any, domain: RPC | None = None) -> tuple[RPC, float, str
     exact = model.exact_rpc()
     if exact is not None:
         return exact, 0.0, "exact"
+    inner = model
+    while domain is None and hasattr(inner, "model"):  # Biased(RPC, drift/affine): its RPC
+        inner = inner.model
+        domain = inner.exact_rpc()
     if domain is None:
         raise TypeError(f"no RPC form for a {type(model).__name__} model")
     off, scale = np.asarray(domain.image_offset), np.asarray(domain.image_scale)
@@ -101,13 +106,29 @@ def write_outputs(
     inputs: Iterable[os.PathLike] = (),
     overwrite: bool = False,
     rpc_files: bool = True,
+    images: Mapping[str, os.PathLike | str] | None = None,
+    rpc_format: str = "txt",
+    copy_images: bool = False,
+    write_into: bool = False,
 ) -> list[pathlib.Path]:
     """Write the adjustment into ``out_dir``; refuse to touch an input or (unless
-    ``overwrite``) an existing file. Returns the paths written."""
+    ``overwrite``) an existing file. Returns the paths written.
+
+    Without ``images`` each adjusted RPC is ``NAME_adjusted_RPC.TXT``. With ``images`` (image
+    name -> the image or RPC file it was read from) each goes where GDAL/OTB/shareloc find it
+    for that image (:mod:`jaxgeo.io.rpc_place`: ``<image stem>_RPC.TXT`` / ``.RPB`` / ``.geom`` /
+    ``RPC_<stem>.XML`` by ``rpc_format``, beside a copy of the image with ``copy_images``, or in
+    the tags of a copy of the GeoTIFF with ``write_into``). An RPC is folded exactly where the
+    bias allows, else refitted; the refit error is in ``report.txt`` and ``report.json``."""
     out = pathlib.Path(out_dir)
     files: dict[str, str] = {}
     notes = []
-    if rpc_files:
+    placed = []
+    if rpc_files and images is not None:
+        placed, notes, report = _place_rpcs(
+            result, images, out, rpc_format, copy_images, write_into, report
+        )
+    elif rpc_files:
         delivered = delivered_rpcs(result)
         for name, model in result.models.items():
             try:
@@ -151,12 +172,43 @@ def write_outputs(
     files["report.txt"] = report_text + ("\n\n" + "\n".join(notes) if notes else "") + "\n"
     targets = {n: (out / n).resolve() for n in files}
     given = {pathlib.Path(p).resolve() for p in inputs}
-    for path in targets.values():
+    for path in [*targets.values(), *(p.resolve() for _, plan in placed for p in plan.targets)]:
         if path in given:
             raise FileExistsError(f"{path}: refusing to write an adjusted file over an input")
         if path.exists() and not overwrite:
             raise FileExistsError(f"{path}: exists (choose another --out or pass --overwrite)")
-    return [atomic_write_text(targets[n], text, overwrite=overwrite) for n, text in files.items()]
+    written = []
+    for rpc, plan in placed:
+        written += write_rpc_outputs(rpc, plan, overwrite=overwrite)["written"]
+    return written + [
+        atomic_write_text(targets[n], text, overwrite=overwrite) for n, text in files.items()
+    ]
+
+
+def _place_rpcs(result, images, out, rpc_format, copy_images, write_into, report):
+    """Plan every image's adjusted RPC (exact or refitted) before anything is written."""
+    delivered = delivered_rpcs(result)
+    stems = {name: image_stem(images[name]) for name in result.models}
+    clash = {s for s in stems.values() if list(stems.values()).count(s) > 1}
+    placed, notes, info = [], [], {}
+    for name, model in result.models.items():
+        try:
+            rpc, err, how = adjusted_rpc(model, delivered[name])
+        except TypeError as e:
+            notes.append(f"{name}: no RPC written ({e})")
+            info[name] = {"how": "none", "reason": str(e)}
+            continue
+        plan = plan_rpc_outputs(
+            name, images[name], out, rpc_format,
+            stem=name if stems[name] in clash else None,  # same stem twice: the image names
+            copy_image=copy_images, write_into=write_into,
+        )  # fmt: skip
+        placed.append((rpc, plan))
+        where = ", ".join(p.name for p in plan.targets)
+        notes.append(f"{name} -> {where}: {how}" + (
+            f" (max error {err:.3g} px on the check grid)" if how == "refit" else ""))  # fmt: skip
+        info[name] = {"how": how, "max_error_px": err, "files": [str(p) for p in plan.targets]}
+    return placed, notes, {**report, "rpc_files": info}
 
 
 __all__ = ["adjusted_rpc", "delivered_rpcs", "format_reports", "models_json", "write_outputs"]

@@ -8,7 +8,10 @@ GROUND.csv: ``id,lon,lat,h,role[,sigma_e_m,sigma_n_m,sigma_h_m]`` (role gcp or c
 OBS.csv: ``id,image,x,y[,sigma_px]``; points in OBS but not in GROUND are tie points. The
 report compares direct georeferencing (forward intersection with the given RPCs, no GCP) with
 the adjustment, as tables 3 and 4 of 000_5aba1cb50921f3c6.txt. ``--out DIR`` writes the
-adjusted models (RPC files with the bias folded in, and a JSON with RPC + bias + sigmas), the
+adjusted models (per image an RPC where GDAL finds it for that image, ``<image stem>_RPC.TXT``
+or as ``--rpc-format`` says, beside a copy of the image with ``--copy-images`` or in a copied
+GeoTIFF's tags with ``--write-into``: the bias folded in exactly where it can be, else refitted
+with the refit error reported; and a JSON with RPC + bias + sigmas), the
 adjusted points, the residuals and the report; inputs and existing files are never replaced
 (``--overwrite`` allows replacing earlier outputs, never the inputs).
 """
@@ -60,6 +63,24 @@ def register(sub) -> None:
     parser.add_argument("--json", action="store_true", help="print one JSON object")
     parser.add_argument("--out", metavar="DIR", help="write adjusted models and the report here")
     parser.add_argument(
+        "--rpc-format",
+        choices=("txt", "rpb", "geom", "dimap"),
+        default="txt",
+        help="adjusted RPC per image in --out, named after the image: <stem>_RPC.TXT (default), "
+        "<stem>.RPB, OSSIM <stem>.geom or DIMAP v2 RPC_<stem>.XML",
+    )
+    parser.add_argument(
+        "--copy-images",
+        action="store_true",
+        help="also copy each image into --out beside its adjusted RPC (GDAL then opens the copy "
+        "with the adjusted model)",
+    )
+    parser.add_argument(
+        "--write-into",
+        action="store_true",
+        help="write each adjusted RPC into the tags of a copy of its GeoTIFF in --out",
+    )
+    parser.add_argument(
         "--overwrite",
         action="store_true",
         help="replace earlier outputs in --out (never the inputs)",
@@ -83,6 +104,7 @@ def _images(specs: list[str]) -> dict[str, str]:
 
 def run(args: argparse.Namespace) -> int:
     import json
+    import pathlib
     import sys
     import warnings
 
@@ -100,11 +122,23 @@ def run(args: argparse.Namespace) -> int:
         print(f"jaxgeo adjust: {prefix}: {w.message}", file=sys.stderr)
     data = run.summary()
     if args.out:
-        data["written"] = [str(p) for p in run.write(args.out, overwrite=args.overwrite)]
+        rpc_options = dict(images=_images(args.image), rpc_format=args.rpc_format,
+                           copy_images=args.copy_images, write_into=args.write_into)  # fmt: skip
+        written = run.write(args.out, overwrite=args.overwrite, **rpc_options)
+        data["written"] = [str(p) for p in written]
+        report = json.loads((pathlib.Path(args.out) / "report.json").read_text())
+        data["rpc_files"] = report.get("rpc_files", {})  # per image: exact or refit + error
     if args.json:
         print(json.dumps(data, indent=1))
     else:
         print(run.format())
         if args.out:
             print(f"\nwrote {len(data['written'])} files to {args.out}")
+            for name, info in data["rpc_files"].items():
+                err = (
+                    f", max refit error {info['max_error_px']:.3g} px"
+                    if info["how"] == "refit"
+                    else ""
+                )
+                print(f"  {name}: RPC {info['how']}{err}: {', '.join(info.get('files', []))}")
     return 0 if run.result.converged else 1

@@ -2,8 +2,8 @@
 
     jaxgeo strip STRIP [--ground CSV] [--observations CSV] [--ties-per-pair N]
                  [--tie-height M | --dem FILE] [--bias affine|shift-drift|shift]
-                 [--degree quadratic|affine|shift] [--json] [--out DIR [--rpc-format txt|rpb]]
-                 [--overwrite]
+                 [--degree quadratic|affine|shift] [--json]
+                 [--out DIR [--rpc-format txt|rpb|geom|dimap]] [--overwrite]
 
 STRIP is a folder holding ``strip.json`` (or the json file itself; see
 :func:`jaxgeo.strip.read_strip`) with the sub-scenes' vendor RPCs, ``ground.csv`` and
@@ -138,7 +138,8 @@ def register(sub) -> None:
         "--rpc-format",
         choices=tuple(SUFFIX),
         default="txt",
-        help="updated RPC files as NAME_RPC.TXT (default) or NAME.RPB",
+        help="updated RPC files as NAME_RPC.TXT (default), NAME.RPB, OSSIM NAME.geom or DIMAP v2 "
+        "RPC_NAME.XML",
     )
     out.add_argument(
         "--rpc-grid",

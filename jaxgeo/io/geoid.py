@@ -59,8 +59,9 @@ class GeoidGrid:
         tc, tr = c - c0, r - r0
         c1 = (c0 + 1) % cols if span >= 359.0 else c0 + 1
         z = self.values_m
-        return (1 - tr) * ((1 - tc) * z[r0, c0] + tc * z[r0, c1]) + tr * (
-            (1 - tc) * z[r0 + 1, c0] + tc * z[r0 + 1, c1]
+        return np.asarray(
+            (1 - tr) * ((1 - tc) * z[r0, c0] + tc * z[r0, c1])
+            + tr * ((1 - tc) * z[r0 + 1, c0] + tc * z[r0 + 1, c1])
         )
 
 

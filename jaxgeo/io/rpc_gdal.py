@@ -90,14 +90,14 @@ def to_rasterio_rpc(rpc: RPC):
     return RasterioRPC(**{theirs: value for _, theirs, value in items})
 
 
-def _tag_values(tag: np.ndarray) -> tuple[dict[str, float], dict[str, np.ndarray]]:
+def _tag_values(tag: np.ndarray) -> tuple[dict[str, float], dict[str, list[float]]]:
     """Scalars and coefficients of the 92 doubles of the RPCCoefficientTag."""
     scalars, coeffs, at = {}, {}, 0
     for name in GEOTIFF_TAG_ORDER:
         if name in COEFFS:
-            coeffs[name], at = tag[at : at + N_TERMS], at + N_TERMS
+            coeffs[name], at = [float(v) for v in tag[at : at + N_TERMS]], at + N_TERMS
         else:
-            scalars[name], at = tag[at], at + 1
+            scalars[name], at = float(tag[at]), at + 1
     return scalars, coeffs
 
 

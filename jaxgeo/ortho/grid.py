@@ -79,7 +79,7 @@ def rough_bounds(model, border_xy: np.ndarray, dh_m: float = 500.0, heights=None
     h0 = float(model.reference_ground()[2])
     pts = []
     for h in heights if heights is not None else (h0 - dh_m, h0, h0 + dh_m):
-        g = np.asarray(_at_height(model, border_xy, np.asarray(h)))
+        g = np.asarray(_at_height(model, border_xy, np.full(len(border_xy), float(h))))
         pts.append(g[:, :2])
     pts = np.concatenate(pts)
     if not np.all(np.isfinite(pts)):
@@ -137,7 +137,7 @@ def default_crs(lonlat: np.ndarray):
     import pyproj
 
     lon, lat = np.mean(lonlat[:, 0]), np.mean(lonlat[:, 1])
-    return pyproj.CRS.from_epsg(utm_epsg(utm_zone(lon), lat >= 0))
+    return pyproj.CRS.from_epsg(utm_epsg(utm_zone(float(lon)), bool(lat >= 0)))
 
 
 def ground_sample_distance(model, grid, crs, width: int, height: int) -> float:

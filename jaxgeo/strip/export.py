@@ -2,7 +2,8 @@
 
 :func:`output_paths` checks every destination before any work (inputs are never replaced,
 existing files only with ``overwrite``); :func:`write_outputs` writes one RPC per sub-scene
-refitted to its final model (``NAME_RPC.TXT`` or ``NAME.RPB``), ``report.json`` and
+refitted to its final model (``NAME_RPC.TXT``, ``NAME.RPB``, OSSIM ``NAME.geom`` or DIMAP v2
+``RPC_NAME.XML``), ``report.json`` and
 ``report.txt``, each atomically.
 """
 
@@ -19,6 +20,8 @@ import numpy as np
 
 from ..io import write_rpb, write_rpc_text
 from ..io.atomic import atomic_write_text
+from ..io.rpc_geom_dimap import write_dimap_rpc, write_ossim_geom
+from ..io.rpc_place import sidecar_name
 from .config import RefitConfig
 from .delivery import Strip
 from .errors import ConfigError, Setting
@@ -28,9 +31,15 @@ from .universal import TERM_NAMES
 REFIT_WARN_PX = 0.01
 """A refitted RPC whose check-grid error exceeds this (px) deserves a warning."""
 
-RPCFormat = Literal["txt", "rpb"]
-SUFFIX = {"txt": "_RPC.TXT", "rpb": ".RPB"}
-"""File name suffix of an updated RPC after the sub-scene name, per format."""
+RPCFormat = Literal["txt", "rpb", "geom", "dimap"]
+SUFFIX = {"txt": "_RPC.TXT", "rpb": ".RPB", "geom": ".geom", "dimap": ".XML (RPC_ prefix)"}
+"""The updated RPC formats (file names: :func:`jaxgeo.io.rpc_place.sidecar_name`)."""
+_WRITERS = {
+    "txt": write_rpc_text,
+    "rpb": write_rpb,
+    "geom": write_ossim_geom,
+    "dimap": lambda rpc, path, overwrite: write_dimap_rpc(rpc, path, overwrite=overwrite)[0],
+}
 
 
 def _finite(value):
@@ -137,7 +146,7 @@ def output_paths(
     if rpc_format not in SUFFIX:
         raise ConfigError(f"{{0}} must be one of {tuple(SUFFIX)}, got {rpc_format!r}",
                           Setting("rpc_format"))  # fmt: skip
-    files = [f"{n}{SUFFIX[rpc_format]}" for n in strip.names] + ["report.json", "report.txt"]
+    files = [sidecar_name(n, rpc_format) for n in strip.names] + ["report.json", "report.txt"]
     targets = {f: (out / f).resolve() for f in files}
     given = [*(strip.files.all() if strip.files is not None else ()), *inputs]
     given = {pathlib.Path(p).resolve() for p in given}
@@ -169,15 +178,14 @@ def write_outputs(
     updated = result.updated_rpcs(RefitConfig() if refit is None else refit)
     fits = {name: rep for name, (_, rep) in updated.items()}
     data = summary(result, fits)
-    suffix = SUFFIX[rpc_format]
     refit_lines = "\n".join(
-        f"{n}{suffix}: RPC refitted to the final model, RMS {r.check_rms_px:.2g} px, max "
-        f"{r.check_max_px:.2g} px on the check grid"
+        f"{sidecar_name(n, rpc_format)}: RPC refitted to the final model, RMS "
+        f"{r.check_rms_px:.2g} px, max {r.check_max_px:.2g} px on the check grid"
         for n, r in fits.items()
     )
-    write = write_rpc_text if rpc_format == "txt" else write_rpb
+    write = _WRITERS[rpc_format]
     written = [
-        write(rpc, targets[f"{name}{suffix}"], overwrite=overwrite)
+        write(rpc, targets[sidecar_name(name, rpc_format)], overwrite=overwrite)
         for name, (rpc, _) in updated.items()
     ]
     data["written"] = [str(p) for p in [*written, targets["report.json"], targets["report.txt"]]]

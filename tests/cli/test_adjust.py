@@ -48,8 +48,8 @@ def test_adjust_json_and_outputs(scene, tmp_path, capsys):
     assert data["direct"]["checkpoints"]["rms_m"][1] > 30.0  # before: tens of metres
     names = {p.split("/")[-1] for p in data["written"]}
     assert names == {
-        "fore_adjusted_RPC.TXT",
-        "aft_adjusted_RPC.TXT",
+        "fore_RPC.TXT",  # <image stem>_RPC.TXT: where GDAL looks for fore.tif's RPC
+        "aft_RPC.TXT",
         "adjusted_models.json",
         "ground_adjusted.csv",
         "residuals.csv",
@@ -60,7 +60,8 @@ def test_adjust_json_and_outputs(scene, tmp_path, capsys):
     models = json.loads((out / "adjusted_models.json").read_text())["images"]
     shift = np.array([models["fore"]["parameters"][f".bias.shift_px[{i}]"] for i in (0, 1)])
     vendor = read_rpc(scene / "fore.txt")
-    folded = read_rpc(out / "fore_adjusted_RPC.TXT")
+    assert data["rpc_files"]["fore"]["how"] == "exact"
+    folded = read_rpc(out / "fore_RPC.TXT")
     g = np.asarray(vendor.ground_offset)
     np.testing.assert_allclose(
         np.asarray(folded.project(g)), np.asarray(vendor.project(g)) - shift, atol=1e-6
@@ -101,3 +102,37 @@ def test_demo_compares_direct_and_adjusted(capsys):
     data = json.loads(capsys.readouterr().out)
     assert data["direct"]["checkpoints"]["rms_m"][1] > 30.0
     assert max(data["checkpoints"]["rms_m"][:2]) < 1.25
+
+
+def test_adjust_writes_rpcs_gdal_finds(scene, tmp_path, capsys):
+    """Images given as GeoTIFFs: ``--copy-images --rpc-format rpb`` puts each adjusted RPC
+    (a shift-drift bias: refitted, error reported) beside a copy of its image, where GDAL reads
+    it; ``--write-into`` puts it into the copy's tags; the inputs stay as they were."""
+    import rasterio
+
+    from jaxgeo.io import write_geotiff_rpc
+    from jaxgeo.io.rpc_gdal import from_rasterio_rpc
+
+    for name in ("fore", "aft"):
+        write_geotiff_rpc(read_rpc(scene / f"{name}.txt"), scene / f"{name}.tif", shape=(64, 64))
+    args = _args(scene, "--bias", "shift-drift", "--json", "--copy-images", "--rpc-format", "rpb")
+    args = [a.replace(".txt", ".tif") for a in args]
+    out = tmp_path / "out"
+    assert main([*args, "--out", str(out)]) == 0
+    data = json.loads(capsys.readouterr().out)
+    for name in ("fore", "aft"):
+        info = data["rpc_files"][name]
+        assert info["how"] == "refit" and info["max_error_px"] < 0.01
+        assert {p.split("/")[-1] for p in info["files"]} == {f"{name}.RPB", f"{name}.tif"}
+        with rasterio.open(out / f"{name}.tif") as src:
+            gdal = from_rasterio_rpc(src.rpcs)
+        mine = read_rpc(out / f"{name}.RPB")
+        assert np.allclose(np.asarray(gdal.num), np.asarray(mine.num), rtol=1e-12)
+        assert read_rpc(out / f"{name}.tif").image_offset[0] == mine.image_offset[0]
+        original = read_rpc(scene / f"{name}.txt")
+        assert read_rpc(scene / f"{name}.tif").image_offset[0] == original.image_offset[0]
+    out2 = tmp_path / "into"
+    assert main([*args[:-2], "--write-into", "--out", str(out2)]) == 0
+    data = json.loads(capsys.readouterr().out)
+    assert {p.split("/")[-1] for p in data["rpc_files"]["fore"]["files"]} == {"fore.tif"}
+    assert not list(out2.glob("*.RPB"))

@@ -114,15 +114,15 @@ def test_json_and_refusals(strip_dir, adjusted, tmp_path, capsys):
     data = json.loads(capsys.readouterr().out)
     assert data["report"]["strip"]["converged"] and "written" not in data
     assert [r["name"] for r in data["report"]["scenes"]] == NAMES
-    rpb = tmp_path / "rpb"
-    assert main(["strip", str(strip_dir), "--json", "--out", str(rpb), "--rpc-format", "rpb",
+    geom = tmp_path / "geom"  # OSSIM .geom (OTB, shareloc/CARS)
+    assert main(["strip", str(strip_dir), "--json", "--out", str(geom), "--rpc-format", "geom",
                  *FAST]) == 0  # fmt: skip
     data = json.loads(capsys.readouterr().out)
     assert sorted(pathlib.Path(p).name for p in data["written"]) == sorted(
-        [f"{n}.RPB" for n in NAMES] + ["report.json", "report.txt"]
+        [f"{n}.geom" for n in NAMES] + ["report.json", "report.txt"]
     )
     g = read_ground(strip_dir / "ground.csv").lonlath[:3]
-    a, b = read_rpc(rpb / "scene_001.RPB"), read_rpc(out / "scene_001_RPC.TXT")
+    a, b = read_rpc(geom / "scene_001.geom"), read_rpc(out / "scene_001_RPC.TXT")
     np.testing.assert_allclose(np.asarray(a.project(g)), np.asarray(b.project(g)), atol=1e-3)
 
 
