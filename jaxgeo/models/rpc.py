@@ -194,7 +194,9 @@ class RPC(AbstractSensorModel):
         ground = jnp.concatenate([lon[..., None], ground[..., 1:]], axis=-1)
         return (ground - self.ground_offset) / self.ground_scale
 
-    def project(self, ground: Float[ArrayLike, "*batch 3"]) -> Float[Array, "*batch 2"]:
+    def project(
+        self, ground: Float[ArrayLike, "*batch 3"]
+    ) -> Float[Array | np.ndarray, "*batch 2"]:
         """Ground ``(lon_deg, lat_deg, h_m)`` -> image ``(x, y)`` px (RPC00B rational functions)."""
         if is_concrete(self, ground):  # a compiled kernel; numpy in -> numpy out
             return project_concrete(self, ground)
@@ -208,10 +210,10 @@ class RPC(AbstractSensorModel):
 
     def localize(
         self,
-        image: Float[ArrayLike, "*batch 2"],
-        h: Float[ArrayLike, "*batch"],
-        guess: Float[ArrayLike, "*batch 2"] | None = None,
-    ) -> Float[Array, "*batch 3"]:
+        image: Float[ArrayLike, "*ibatch 2"],
+        h: Float[ArrayLike, "*hbatch"],
+        guess: Float[ArrayLike, "*gbatch 2"] | None = None,
+    ) -> Float[Array | np.ndarray, "... 3"]:
         """See :meth:`AbstractSensorModel.localize`; concrete calls without ``guess`` run a
         compiled kernel (numpy in -> numpy out)."""
         if guess is None and is_concrete(self, image, h):
