@@ -29,7 +29,7 @@ from .config import DEFAULT_SOLVER, SolverConfig
 from .export import write_outputs
 from .report import AccuracyReport, direct_georeferencing, format_reports
 from .result import AdjustResult, finish
-from .solve import solve_jit
+from .snooping import snoop
 
 BIAS_CHOICES = ("none", *BIAS_KINDS)
 """Names accepted for ``bias``: ``"none"`` and the kinds of
@@ -102,8 +102,8 @@ def adjust(
         initial=initial,
         check_control=check,
     )
-    sol = solve_jit(setup.problem, solver)
-    return finish(setup, sol, observations, ground, solver)
+    sol, rem_i, rem_g, rounds = snoop(setup, solver)
+    return finish(setup, sol, observations, ground, solver, (rem_i, rem_g), rounds)
 
 
 @dataclasses.dataclass(frozen=True)
