@@ -20,6 +20,8 @@ import pathlib
 from collections.abc import Mapping, Sequence
 from typing import Any
 
+import numpy as np
+
 from ..io import read_rpc
 from ..io.tables import GroundPoints, Observations, read_ground, read_observations
 from ..models import AbstractSensorModel, Biased
@@ -152,6 +154,13 @@ class FileAdjustment:
             "checkpoints": rep["checkpoints"] if rep else empty,
             "images": images,
             "blunders": blunders,
+            "removed": int(result.removed.sum()) if result.removed is not None else 0,
+            "gcp_flagged": [
+                {"id": p, "w": w, "removed": p in result.gcp_removed}
+                for p, w in zip(result.gcp_flagged, result.gcp_w, strict=True)
+            ],
+            "checks_excluded": list(result.checks_excluded),
+            "snooping_rounds": result.snooping_rounds,
             "direct": direct.to_dict() if direct is not None else None,
         }
 
@@ -178,7 +187,24 @@ class FileAdjustment:
             if b
         ]
         if flagged:
-            lines.append(f"possible blunders (|w| > k): {', '.join(flagged)}")
+            gone = result.removed if result.removed is not None else np.zeros(len(flagged))
+            what = "gross errors removed" if np.any(gone) else "possible gross errors (|w| > k)"
+            lines.append(f"{what} ({len(flagged)} observations): {', '.join(flagged)}")
+        for p, w in zip(result.gcp_flagged, result.gcp_w, strict=True):
+            j = result.gcp_ids.index(p)
+            off = np.linalg.norm(np.nan_to_num(result.ground_residuals_m[j]))
+            how = "removed (adjusted as a tie point)" if p in result.gcp_removed else "flagged"
+            lines.append(
+                f"GCP {p!r}: ground coordinates {off:.1f} m from the adjusted point "
+                f"(w = {w:.1f}): {how}"
+            )
+        if result.checks_excluded:
+            lines.append(
+                f"check points excluded from the statistics (an observation flagged): "
+                f"{len(result.checks_excluded)} ({', '.join(result.checks_excluded[:20])}"
+                + (" ..." if len(result.checks_excluded) > 20 else "")
+                + ")"
+            )
         return "\n".join(lines)
 
     def write(self, out_dir: os.PathLike, overwrite: bool = False) -> list[pathlib.Path]:

@@ -19,7 +19,14 @@ from .build import Setup
 from .config import DEFAULT_SOLVER, SolverConfig
 from .covariance import undetermined_unknowns
 from .diagnose import undetermined
-from .errors import RESULTS, NotConvergedWarning, SingularNormalEquations, describe
+from .errors import (
+    RESULTS,
+    S0_WARN,
+    NotConvergedWarning,
+    PoorFitWarning,
+    SingularNormalEquations,
+    describe,
+)
 from .report import AccuracyReport, accuracy
 from .snooping import standardized
 from .solve import Solution
@@ -155,7 +162,49 @@ def finish(
             stacklevel=3,
         )
     out = _result(setup, sol, theta, s0, converged, message, solver, observations, ground, removed)
+    if np.isfinite(s0) and s0 > S0_WARN:
+        warnings.warn(poor_fit_message(out), PoorFitWarning, stacklevel=3)
     return dataclasses.replace(out, snooping_rounds=int(rounds))
+
+
+def poor_fit_message(res: AdjustResult) -> str:
+    """Why s0 is far above 1: the worst images (RMS and mean residual) and points, and the
+    likely cause read from the image-space residual pattern."""
+    keep = ~res.removed if res.removed is not None else np.ones(len(res.observation_ids), bool)
+    imgs = np.asarray(res.observation_images)
+    rows = []
+    for name in dict.fromkeys(res.observation_images):
+        sel = keep & (imgs == name)
+        if not sel.any():
+            continue
+        r = res.residuals_px[sel]
+        rms = float(np.sqrt(np.nanmean(np.sum(r**2, axis=1))))
+        mean = np.nanmean(r, axis=0)
+        rows.append((rms, name, mean))
+    rows.sort(reverse=True)
+    worst_img = ", ".join(
+        f"{n!r} (RMS {rms:.1f} px, mean residual {m[0]:+.1f}, {m[1]:+.1f} px)"
+        for rms, n, m in rows[:3]
+    )
+    w = np.max(np.abs(np.nan_to_num(res.standardized)), axis=1)
+    order = [i for i in np.argsort(-w) if keep[i]][:5]
+    worst_pts = ", ".join(
+        f"{res.observation_ids[i]}@{res.observation_images[i]} (w {w[i]:.1f})" for i in order
+    )
+    systematic = any(np.linalg.norm(m) > 0.5 * rms for rms, _, m in rows[:2])
+    cause = (
+        "the residuals are systematic within images: a model that does not belong to its "
+        "image (e.g. two RPC files swapped, or a model of another scene), or a bias the chosen "
+        "bias model cannot absorb"
+        if systematic
+        else "the residuals are not systematic: a priori sigmas too optimistic, or many "
+        "gross errors left"
+    )
+    return (
+        f"s0 = {res.s0:.3g} is far above 1 (> {S0_WARN:g}): the observations do not fit the "
+        f"models. Worst images: {worst_img}. Worst observations: {worst_pts}. Likely cause: "
+        f"{cause}."
+    )
 
 
 def _final_y(problem, sol):

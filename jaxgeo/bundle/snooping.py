@@ -19,16 +19,19 @@ images or more (it then becomes a tie point); otherwise they are flagged only.
 
 from __future__ import annotations
 
+import dataclasses
+
 import equinox as eqx
 import jax.numpy as jnp
 import numpy as np
 
 from .build import Setup
-from .config import DEFAULT_SOLVER, SolverConfig
+from .config import BLUNDER_K, DEFAULT_SOLVER, SolverConfig
 from .errors import RESULTS
 from .report import enu_errors as enu
 from .solve import Solution, solve_jit
 
+DEFAULT_ROUNDS = SolverConfig().snooping_rounds
 ROBUST_FRACTION = 0.5
 """With a robust loss, a round removes the flagged observations with ``|w|`` at least this
 fraction of the largest."""
@@ -52,6 +55,14 @@ def _largest(w: np.ndarray) -> np.ndarray:
     return np.max(np.abs(np.nan_to_num(w)), axis=1) if w.size else np.zeros(w.shape[0])
 
 
+def solve_settings(solver: SolverConfig) -> SolverConfig:
+    """``solver`` with the fields the compiled solve does not use at their defaults (one
+    compilation whatever the snooping settings)."""
+    return dataclasses.replace(
+        solver, blunder_k=BLUNDER_K, remove_blunders=True, snooping_rounds=DEFAULT_ROUNDS
+    )
+
+
 def snoop(
     setup: Setup, solver: SolverConfig = DEFAULT_SOLVER
 ) -> tuple[Solution, np.ndarray, np.ndarray, int]:
@@ -62,6 +73,7 @@ def snoop(
     non-finite).
     """
     problem = setup.problem
+    compiled = solve_settings(solver)
     point = np.asarray(problem.structure.obs_point)
     m, c = point.shape[0], int(problem.ground.point.shape[0])
     gcp_point = np.zeros(problem.structure.n_points, dtype=bool)
@@ -74,7 +86,7 @@ def snoop(
     w_xy = np.concatenate([np.asarray(ob.weight) for ob in problem.images] + [np.zeros(0)])
     g0 = np.asarray(problem.ground.lonlath)
     xy, g = xy0.copy(), g0.copy()
-    sol = solve_jit(problem, solver, removed_image=rem_i, removed_ground=rem_g)
+    sol = solve_jit(problem, compiled, removed_image=rem_i, removed_ground=rem_g)
     rounds = 0
     limit = solver.snooping_rounds if solver.remove_blunders else 0
     # a robust solve whose weights still move (not_converged) is snooped on: removing the gross
@@ -94,15 +106,19 @@ def snoop(
         # a point without ground coordinates left in < 2 images goes as a whole
         left = np.bincount(point[~(rem_i | pick_i)], minlength=problem.structure.n_points)
         short = (left < 2) & ~gcp_point
-        pick_i |= np.isin(point, np.flatnonzero(short & np.isin(np.arange(short.size), point[pick_i])))
+        hit = np.zeros(short.size, dtype=bool)
+        hit[point[pick_i]] = True
+        pick_i |= np.isin(point, np.flatnonzero(short & hit))
         new_i, new_g = pick_i & ~rem_i, pick_g & ~rem_g
         # removed measurements sit at the last prediction: (project - xy) = r sigma
         r_px = np.asarray(sol.residuals_image) / w_xy[:, None]
         xy[new_i] = xy0[new_i] + r_px[new_i]
         g[new_g] = np.asarray(sol.ground)[np.asarray(problem.ground.point)[new_g]]
         rem_i, rem_g = rem_i | pick_i, rem_g | pick_g
-        moved = eqx.tree_at(lambda p: p.ground.lonlath, problem.with_xy(jnp.asarray(xy)), jnp.asarray(g))
-        sol = solve_jit(moved, solver, removed_image=rem_i, removed_ground=rem_g)
+        moved = eqx.tree_at(
+            lambda p: p.ground.lonlath, problem.with_xy(jnp.asarray(xy)), jnp.asarray(g)
+        )
+        sol = solve_jit(moved, compiled, removed_image=rem_i, removed_ground=rem_g)
         rounds += 1
     if rounds:  # residuals against the measurements as given
         r_img = np.asarray(sol.residuals_image) + (xy - xy0) * w_xy[:, None]

@@ -213,7 +213,8 @@ def _weighted(problem: Problem, w_img, w_gnd) -> Problem:
         parts.append(ob.weight * jnp.sqrt(w_img[start : start + n]))
         start += n
     out = eqx.tree_at(lambda p: tuple(ob.weight for ob in p.images), problem, tuple(parts))
-    return eqx.tree_at(lambda p: p.ground.weight, out, problem.ground.weight * jnp.sqrt(w_gnd)[:, None])
+    gw = problem.ground.weight * jnp.sqrt(w_gnd)[:, None]
+    return eqx.tree_at(lambda p: p.ground.weight, out, gw)
 
 
 def solve(
