@@ -162,12 +162,25 @@ def finish(
             stacklevel=3,
         )
     out = _result(setup, sol, theta, s0, converged, message, solver, observations, ground, removed)
-    if np.isfinite(s0) and s0 > S0_WARN:
-        warnings.warn(poor_fit_message(out), PoorFitWarning, stacklevel=3)
+    plain = plain_s0(sol, removed)
+    if np.isfinite(plain) and plain > S0_WARN:
+        warnings.warn(poor_fit_message(out, plain), PoorFitWarning, stacklevel=3)
     return dataclasses.replace(out, snooping_rounds=int(rounds))
 
 
-def poor_fit_message(res: AdjustResult) -> str:
+def plain_s0(sol: Solution, removed=None) -> float:
+    """s0 of the least-squares residuals (no robust weights) of the observations kept: the fit
+    a robust loss would hide (Cauchy's weighted cost stays near ``c^2`` per observation
+    however far off the model is)."""
+    r_i, r_g = np.asarray(sol.residuals_image), np.asarray(sol.residuals_ground)
+    if removed is not None:
+        r_i, r_g = r_i[~np.asarray(removed[0])], r_g[~np.asarray(removed[1])]
+    red = int(sol.redundancy)
+    cost = float(np.sum(r_i**2) + np.sum(r_g**2))
+    return float(np.sqrt(cost / red)) if red > 0 else float("nan")
+
+
+def poor_fit_message(res: AdjustResult, s0: float) -> str:
     """Why s0 is far above 1: the worst images (RMS and mean residual) and points, and the
     likely cause read from the image-space residual pattern."""
     keep = ~res.removed if res.removed is not None else np.ones(len(res.observation_ids), bool)
@@ -201,7 +214,8 @@ def poor_fit_message(res: AdjustResult) -> str:
         "gross errors left"
     )
     return (
-        f"s0 = {res.s0:.3g} is far above 1 (> {S0_WARN:g}): the observations do not fit the "
+        f"s0 = {s0:.3g} (least squares; {res.s0:.3g} robust) is far above 1 (> {S0_WARN:g}): "
+        "the observations do not fit the "
         f"models. Worst images: {worst_img}. Worst observations: {worst_pts}. Likely cause: "
         f"{cause}."
     )

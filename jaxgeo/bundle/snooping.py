@@ -32,6 +32,10 @@ from .report import enu_errors as enu
 from .solve import Solution, solve_jit
 
 DEFAULT_ROUNDS = SolverConfig().snooping_rounds
+MAX_REMOVED_FRACTION = 0.2
+"""Snooping stops rather than remove more than this fraction of the image observations: so many
+"gross errors" are a model that does not fit (e.g. two RPC files swapped), which the s0 warning
+then reports, not something to cut away."""
 ROBUST_FRACTION = 0.5
 """With a robust loss, a round removes the flagged observations with ``|w|`` at least this
 fraction of the largest."""
@@ -109,6 +113,8 @@ def snoop(
         hit = np.zeros(short.size, dtype=bool)
         hit[point[pick_i]] = True
         pick_i |= np.isin(point, np.flatnonzero(short & hit))
+        if np.sum(rem_i | pick_i) > MAX_REMOVED_FRACTION * m:
+            break
         new_i, new_g = pick_i & ~rem_i, pick_g & ~rem_g
         # removed measurements sit at the last prediction: (project - xy) = r sigma
         r_px = np.asarray(sol.residuals_image) / w_xy[:, None]

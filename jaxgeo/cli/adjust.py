@@ -84,6 +84,18 @@ def register(sub) -> None:
         action="store_true",
         help="flag gross errors (w-test) but do not remove them and re-solve",
     )
+    parser.add_argument(
+        "--bias-prior-shift-px",
+        type=float,
+        metavar="S",
+        help="prior sigma (px) of every image's bias shift (fixes what GCPs and ties leave open)",
+    )
+    parser.add_argument(
+        "--bias-prior-matrix",
+        type=float,
+        metavar="M",
+        help="prior sigma (px/px) of the affine matrix (or shift-drift drift) terms",
+    )
     parser.add_argument("--max-steps", type=int, default=50, help="solver steps (default 50)")
     parser.add_argument("--json", action="store_true", help="print one JSON object")
     parser.add_argument("--out", metavar="DIR", help="write adjusted models and the report here")
