@@ -204,14 +204,15 @@ def poor_fit_message(res: AdjustResult, s0: float) -> str:
     worst_pts = ", ".join(
         f"{res.observation_ids[i]}@{res.observation_images[i]} (w {w[i]:.1f})" for i in order
     )
-    systematic = any(np.linalg.norm(m) > 0.5 * rms for rms, _, m in rows[:2])
+    misfit = float(np.mean(w[keep] > 3.29)) if keep.any() else 0.0
+    systematic = misfit > 0.2 or any(np.linalg.norm(m) > 0.5 * rms for rms, _, m in rows[:2])
     cause = (
-        "the residuals are systematic within images: a model that does not belong to its "
-        "image (e.g. two RPC files swapped, or a model of another scene), or a bias the chosen "
-        "bias model cannot absorb"
+        f"the residuals are systematic ({100 * misfit:.0f} % of the observations beyond 3.29 "
+        "sigma): a model that does not belong to its image (e.g. two RPC files swapped, or a "
+        "model of another scene), or a bias the chosen bias model cannot absorb"
         if systematic
-        else "the residuals are not systematic: a priori sigmas too optimistic, or many "
-        "gross errors left"
+        else f"a few observations dominate ({100 * misfit:.0f} % beyond 3.29 sigma): gross "
+        "errors left, or a priori sigmas too optimistic"
     )
     return (
         f"s0 = {s0:.3g} (least squares; {res.s0:.3g} robust) is far above 1 (> {S0_WARN:g}): "

@@ -185,7 +185,7 @@ class Sources:
 
     def obs(self, i: int) -> str:
         if self.observations and i < len(self.observation_lines):
-            return f"{self.observations}:{self.observation_lines[i]}: observation"
+            return f"{self.observations}:{self.observation_lines[i]}: observation {i}"
         return f"observation {i}"
 
     def point(self, i: int) -> str:
@@ -217,8 +217,8 @@ def check_duplicates(obs: Observations, ground: GroundPoints, src: Sources = Sou
                 f"contradictory: x, y = {obs.xy[j].tolist()} and {obs.xy[i].tolist()}"
             )  # fmt: skip
             raise AdjustmentError(
-                f"{src.obs(i)} {i}: point {key[0]!r} is measured twice in image {key[1]!r} "
-                f"(also {src.obs(j)} {j}; {what})"
+                f"{src.obs(i)}: point {key[0]!r} is measured twice in image {key[1]!r} "
+                f"(also {src.obs(j)}; {what})"
             )
         first[key] = i
     seen: dict[str, int] = {}
@@ -254,7 +254,7 @@ def check_domains(
             lo, hi = ioff - iscale, ioff + iscale
             out = float(np.max(np.abs(obs.xy[i] - ioff) - iscale))
             raise AdjustmentError(
-                f"{src.obs(i)} {i}: point {pid!r} at x, y = {obs.xy[i].tolist()} lies {out:.0f} px "
+                f"{src.obs(i)}: point {pid!r} at x, y = {obs.xy[i].tolist()} lies {out:.0f} px "
                 f"outside image {img!r} (x {lo[0]:.0f}..{hi[0]:.0f}, y {lo[1]:.0f}..{hi[1]:.0f} px "
                 "from its RPC)"
             )
