@@ -14,7 +14,9 @@ Removal is a weight (:data:`~.solve.REMOVED_WEIGHT`), with the measurement moved
 solution's prediction (a point left with removed observations only then stays where it was and
 costs nothing), so that the compiled solve is reused; the residuals reported are against the
 measurements as given. A GCP's coordinates are removed only where the point is measured in two
-images or more (it then becomes a tie point); otherwise they are flagged only.
+images or more (it then becomes a tie point); otherwise they are flagged only. When every ray of
+a GCP is flagged, the rays agree with each other and the coordinates do not: the coordinates
+are removed instead.
 """
 
 from __future__ import annotations
@@ -107,6 +109,13 @@ def snoop(
         else:
             cut = max(solver.blunder_k, ROBUST_FRACTION * worst)
             pick_i, pick_g = w_i >= cut, w_g >= cut
+        # every ray of a GCP flagged: the rays agree with each other, its coordinates do not
+        gpts = np.asarray(problem.ground.point)
+        for p in np.unique(point[pick_i]):
+            own = point == p
+            if gcp_point[p] and own.sum() >= 2 and np.all((pick_i | rem_i)[own]):
+                pick_i &= ~own
+                pick_g |= (gpts == p) & removable_g
         # a point without ground coordinates left in < 2 images goes as a whole
         left = np.bincount(point[~(rem_i | pick_i)], minlength=problem.structure.n_points)
         short = (left < 2) & ~gcp_point
