@@ -173,9 +173,15 @@ def plain_s0(sol: Solution, removed=None) -> float:
     a robust loss would hide (Cauchy's weighted cost stays near ``c^2`` per observation
     however far off the model is)."""
     r_i, r_g = np.asarray(sol.residuals_image), np.asarray(sol.residuals_ground)
+    red = int(sol.redundancy)
     if removed is not None:
         r_i, r_g = r_i[~np.asarray(removed[0])], r_g[~np.asarray(removed[1])]
-    red = int(sol.redundancy)
+        w_i = standardized(sol)[0][~np.asarray(removed[0])]
+        # observations flagged but kept (--keep-blunders) are gross errors, reported as such;
+        # only when they are many they are the misfit itself
+        flagged = np.any(np.abs(np.nan_to_num(w_i)) > 3.29, axis=1)
+        if flagged.size and flagged.mean() <= 0.2:
+            r_i, red = r_i[~flagged], red - 2 * int(flagged.sum())
     cost = float(np.sum(r_i**2) + np.sum(r_g**2))
     return float(np.sqrt(cost / red)) if red > 0 else float("nan")
 

@@ -112,13 +112,15 @@ def snoop(
         # every ray of a GCP flagged: the rays agree with each other, its coordinates do not
         gpts = np.asarray(problem.ground.point)
         for p in np.unique(point[pick_i]):
-            own = point == p
-            if gcp_point[p] and own.sum() >= 2 and np.all((pick_i | rem_i)[own]):
+            own = (point == p) & ~rem_i
+            if gcp_point[p] and own.sum() >= 2 and np.all(pick_i[own]):
                 pick_i &= ~own
                 pick_g |= (gpts == p) & removable_g
-        # a point without ground coordinates left in < 2 images goes as a whole
+        # a point without (kept) ground coordinates left in < 2 images goes as a whole
         left = np.bincount(point[~(rem_i | pick_i)], minlength=problem.structure.n_points)
-        short = (left < 2) & ~gcp_point
+        controlled = gcp_point.copy()  # a GCP whose coordinates go is a tie point now
+        controlled[gpts[rem_g | pick_g]] = False
+        short = (left < 2) & ~controlled
         hit = np.zeros(short.size, dtype=bool)
         hit[point[pick_i]] = True
         pick_i |= np.isin(point, np.flatnonzero(short & hit))
