@@ -20,6 +20,7 @@ from .config import SolverConfig as SolverConfig
 from .errors import RESULTS as RESULTS
 from .errors import AdjustmentError as AdjustmentError
 from .errors import NotConvergedWarning as NotConvergedWarning
+from .errors import PoorFitWarning as PoorFitWarning
 from .errors import SingularNormalEquations as SingularNormalEquations
 from .errors import TooFewControlPoints as TooFewControlPoints
 from .problem import Problem as Problem

@@ -20,16 +20,21 @@ import pathlib
 from collections.abc import Mapping, Sequence
 from typing import Any
 
+import equinox as eqx
+import jax
+import numpy as np
+
 from ..io import read_rpc
-from ..io.tables import GroundPoints, Observations, read_ground, read_observations
+from ..io.tables import GroundPoints, Observations, read_ground, read_observations, table_lines
 from ..models import AbstractSensorModel, Biased
 from ..models.bias import BIAS_KINDS, AbstractBias
 from .build import build
+from .build.checks import Sources
 from .config import DEFAULT_SOLVER, SolverConfig
 from .export import write_outputs
 from .report import AccuracyReport, direct_georeferencing, format_reports
 from .result import AdjustResult, finish
-from .solve import solve_jit
+from .snooping import snoop
 
 BIAS_CHOICES = ("none", *BIAS_KINDS)
 """Names accepted for ``bias``: ``"none"`` and the kinds of
@@ -56,6 +61,31 @@ def with_bias(models: Mapping[str, Any], bias: str | type[AbstractBias] | None) 
     }
 
 
+def bias_prior_sigma(
+    models: Mapping[Any, Any], shift_px: float | None, matrix: float | None
+) -> dict[Any, Any] | None:
+    """Prior sigmas of the image biases as :func:`adjust` takes them (per model key): ``shift_px``
+    (px) on every bias shift, ``matrix`` (px/px) on the other bias terms (drift or affine
+    matrix); ``None`` for no prior. The names of ``jaxgeo strip``'s ``--bias-prior-*``."""
+    if shift_px is None and matrix is None:
+        return None
+    out = {}
+    for key, m in models.items():
+        if not isinstance(m, Biased):
+            continue
+        sigma = jax.tree.map(lambda x: np.full(np.shape(x), np.inf), m)
+        for name in m.bias.__dataclass_fields__:
+            value = shift_px if name == "shift_px" else matrix
+            leaf = getattr(m.bias, name)
+            if value is None or not eqx.is_array(leaf):
+                continue
+            sigma = eqx.tree_at(
+                lambda t, n=name: getattr(t.bias, n), sigma, np.full(np.shape(leaf), value)
+            )
+        out[key] = sigma
+    return out
+
+
 def adjust(
     models: Mapping[Any, Any],
     observations: Observations,
@@ -66,7 +96,8 @@ def adjust(
     prior_sigma: Any = None,
     initial: Mapping[str, Any] | None = None,
     solver: SolverConfig = DEFAULT_SOLVER,
-    check: bool = True,
+    check: bool = False,
+    sources: Sources | None = None,
 ) -> AdjustResult:
     """Bundle block adjustment.
 
@@ -84,9 +115,21 @@ def adjust(
             a pytree like the model, one for all or per model key (``inf`` = no prior).
         initial: optional initial ground points ``{id: (lon, lat, h)}`` (else intersection).
         solver: method, loss, tolerances, blunder threshold (:class:`~.config.SolverConfig`).
-        check: check the GCP count of every image against its adjustable parameters before
-            solving (the models' ``required_gcps``: 1 shift, 2 shift+drift, 3 affine, 4
-            non-coplanar for the 3D affine model).
+        check: also apply the per-image GCP-count rule before solving (the models'
+            ``required_gcps``: 1 shift, 2 shift+drift, 3 affine, 4 non-coplanar for the 3D
+            affine model). Off by default: an image without GCPs of its own is adjusted when tie
+            points connect it to controlled images; what is actually determined is checked on
+            the normal equations (rank, null space), and what GCPs and ties leave open raises
+            :class:`~.errors.SingularNormalEquations` naming the parameters (fix it with
+            bias priors, ``prior_sigma``, see :func:`bias_prior_sigma`).
+
+        sources: the files and lines the tables were read from, named in messages
+            (:class:`~.build.checks.Sources`; :func:`adjust_files` fills it).
+
+    Pre-flight checks (:mod:`~.build.checks`) refuse, naming the observation or point (and
+    file and line with ``sources``): a point measured twice in one image, a ground id given
+    twice, a measurement outside its image, a GCP or check point outside the validity cube of
+    the RPC of an image it is measured in.
 
     Raises :class:`~.errors.AdjustmentError` (bad input, too few GCPs) before solving, and
     :class:`~.errors.SingularNormalEquations` naming the undetermined parameters or points.
@@ -101,9 +144,10 @@ def adjust(
         prior_sigma=prior_sigma,
         initial=initial,
         check_control=check,
+        sources=sources,
     )
-    sol = solve_jit(setup.problem, solver)
-    return finish(setup, sol, observations, ground, solver)
+    sol, rem_i, rem_g, rounds = snoop(setup, solver)
+    return finish(setup, sol, observations, ground, solver, (rem_i, rem_g), rounds)
 
 
 @dataclasses.dataclass(frozen=True)
@@ -152,6 +196,13 @@ class FileAdjustment:
             "checkpoints": rep["checkpoints"] if rep else empty,
             "images": images,
             "blunders": blunders,
+            "removed": int(result.removed.sum()) if result.removed is not None else 0,
+            "gcp_flagged": [
+                {"id": p, "w": w, "removed": p in result.gcp_removed}
+                for p, w in zip(result.gcp_flagged, result.gcp_w, strict=True)
+            ],
+            "checks_excluded": list(result.checks_excluded),
+            "snooping_rounds": result.snooping_rounds,
             "direct": direct.to_dict() if direct is not None else None,
         }
 
@@ -178,7 +229,24 @@ class FileAdjustment:
             if b
         ]
         if flagged:
-            lines.append(f"possible blunders (|w| > k): {', '.join(flagged)}")
+            gone = result.removed if result.removed is not None else np.zeros(len(flagged))
+            what = "gross errors removed" if np.any(gone) else "possible gross errors (|w| > k)"
+            lines.append(f"{what} ({len(flagged)} observations): {', '.join(flagged)}")
+        for p, w in zip(result.gcp_flagged, result.gcp_w, strict=True):
+            j = result.gcp_ids.index(p)
+            off = np.linalg.norm(np.nan_to_num(result.ground_residuals_m[j]))
+            how = "removed (adjusted as a tie point)" if p in result.gcp_removed else "flagged"
+            lines.append(
+                f"GCP {p!r}: ground coordinates {off:.1f} m from the adjusted point "
+                f"(w = {w:.1f}): {how}"
+            )
+        if result.checks_excluded:
+            lines.append(
+                f"check points excluded from the statistics (an observation flagged): "
+                f"{len(result.checks_excluded)} ({', '.join(result.checks_excluded[:20])}"
+                + (" ..." if len(result.checks_excluded) > 20 else "")
+                + ")"
+            )
         return "\n".join(lines)
 
     def write(
@@ -200,17 +268,29 @@ def adjust_files(
     *,
     bias: str = "affine",
     solver: SolverConfig = DEFAULT_SOLVER,
+    bias_prior_shift_px: float | None = None,
+    bias_prior_matrix: float | None = None,
     direct_roles: Sequence[str] = ("gcp", "check"),
 ) -> FileAdjustment:
     """Read the RPC files (image name -> path), OBS.csv and GROUND.csv, adjust with an image
-    bias per image (a name of :data:`BIAS_CHOICES`), and intersect the ``direct_roles`` points
+    bias per image (a name of :data:`BIAS_CHOICES`; optional priors on it,
+    :func:`bias_prior_sigma`), and intersect the ``direct_roles`` points
     with the given RPCs for comparison (tables 3 and 4 of 000_)."""
     if bias not in BIAS_CHOICES:
         raise ValueError(f"unknown bias {bias!r}; expected one of {', '.join(BIAS_CHOICES)}")
     models = {name: read_rpc(path) for name, path in images.items()}
     obs = read_observations(observations)
     points = read_ground(ground) if ground is not None else None
-    result = adjust(models, obs, points, bias=bias, solver=solver)
+    sources = Sources(
+        str(observations),
+        table_lines(observations),
+        str(ground) if ground is not None else None,
+        table_lines(ground) if ground is not None else (),
+    )
+    if bias != "none":
+        models = with_bias(models, bias)
+    prior = bias_prior_sigma(models, bias_prior_shift_px, bias_prior_matrix)
+    result = adjust(models, obs, points, prior_sigma=prior, solver=solver, sources=sources)
     direct = None
     if points is not None and len(models) >= 2:
         direct = direct_georeferencing(models, obs, points, roles=tuple(direct_roles))

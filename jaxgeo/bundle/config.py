@@ -30,20 +30,37 @@ class SolverConfig(eqx.Module):
     Fields:
         method: ``"lm"`` (Levenberg-Marquardt over the Schur complement, default), ``"gn"``
             (Gauss-Newton, same descent) or ``"dense"`` (optimistix LM, dense QR).
-        loss: ``"l2"``, ``"huber"`` or ``"cauchy"`` on the image observations.
-        loss_scale: the robust loss' threshold in a priori sigmas (> 0).
+        loss: ``"l2"``, ``"huber"`` or ``"cauchy"`` (default) on the image observations and
+            the GCP coordinates, solved by iteratively reweighted least squares
+            (:func:`jaxgeo.bundle.solve.solve`). Cauchy, as ASP's bundle_adjust: its influence
+            falls off as ``c^2 / r`` beyond the threshold, so that a 100 px gross error pulls no
+            harder than a 3 sigma residual (Huber's influence stays at ``c``: 10 % gross errors
+            still bias a Huber solution), while residuals within ``c`` keep ~90 % of their weight
+            (on clean data the solution is that of least squares within a fraction of sigma).
+        loss_scale: the robust loss' threshold ``c`` in a priori sigmas (> 0; default 3: a
+            clean observation is rarely beyond it).
+        irls_iterations: reweighted solves at most after the least-squares start (>= 1).
+        irls_tol: stop reweighting when no weight changes by more than this (> 0).
         tol: stop when the remaining Gauss-Newton step is below ``tol`` of its standard
             deviation (``"dense"``: optimistix' rtol = atol = ``tol``); >= 0.
         max_steps: solver steps at most (>= 1; a robust loss' least-squares start counts too).
         blunder_k: flag observations whose standardised residual exceeds this (> 0).
+        remove_blunders: data snooping (:mod:`jaxgeo.bundle.snooping`): remove the flagged
+            observations (the worst first) and re-solve until none is flagged (default); with
+            False they are flagged only.
+        snooping_rounds: re-solves at most while removing gross errors (>= 0).
     """
 
     method: Method = eqx.field(static=True, default="lm")
-    loss: Loss = eqx.field(static=True, default="l2")
+    loss: Loss = eqx.field(static=True, default="cauchy")
     loss_scale: float = eqx.field(static=True, default=3.0)
     tol: float = eqx.field(static=True, default=1e-6)
     max_steps: int = eqx.field(static=True, default=50)
     blunder_k: float = eqx.field(static=True, default=BLUNDER_K)
+    irls_iterations: int = eqx.field(static=True, default=20)
+    irls_tol: float = eqx.field(static=True, default=1e-3)
+    remove_blunders: bool = eqx.field(static=True, default=True)
+    snooping_rounds: int = eqx.field(static=True, default=30)
 
     def __check_init__(self):
         if self.method not in METHODS:
@@ -60,7 +77,14 @@ class SolverConfig(eqx.Module):
             raise ValueError(f"max_steps must be >= 1, got {self.max_steps}")
         if not (isinstance(self.blunder_k, numbers.Real) and self.blunder_k > 0):
             raise ValueError(f"blunder_k must be a positive number, got {self.blunder_k!r}")
+        for name, low in (("irls_iterations", 1), ("snooping_rounds", 0)):
+            v = getattr(self, name)
+            if isinstance(v, bool) or not isinstance(v, numbers.Integral) or v < low:
+                raise ValueError(f"{name} must be an integer >= {low}, got {v!r}")
+        if not (isinstance(self.irls_tol, numbers.Real) and self.irls_tol > 0):
+            raise ValueError(f"irls_tol must be a positive number, got {self.irls_tol!r}")
 
 
 DEFAULT_SOLVER = SolverConfig()
-"""The default settings: Levenberg-Marquardt, least squares, ``tol`` 1e-6, 50 steps."""
+"""The default settings: Levenberg-Marquardt, Cauchy loss at 3 sigma (IRLS), ``tol`` 1e-6, 50
+steps per solve, gross errors removed by data snooping."""

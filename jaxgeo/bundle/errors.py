@@ -33,6 +33,15 @@ class NotConvergedWarning(JaxgeoWarning):
     """The solver stopped before convergence; the result holds the last state."""
 
 
+class PoorFitWarning(JaxgeoWarning):
+    """s0 far above 1 (above ``S0_WARN``) after the adjustment: the observations do not fit
+    the models; the message names the worst images and points and the likely cause."""
+
+
+S0_WARN = 3.0
+"""s0 above which :class:`PoorFitWarning` is emitted (``jaxgeo adjust`` then exits 3)."""
+
+
 class RESULTS(optx.RESULTS):  # pyright: ignore
     """Outcomes of :func:`jaxgeo.bundle.solve.solve`: optimistix' and lineax' own, plus the
     engine's. ``RESULTS[result]`` is the message; under ``vmap`` each problem has its own."""

@@ -98,6 +98,40 @@ def models_json(result) -> dict[str, Any]:
     return {"images": images}
 
 
+FIXED_OUTPUTS = (
+    "adjusted_models.json", "ground_adjusted.csv", "residuals.csv", "report.json", "report.txt",
+)  # fmt: skip
+
+
+def check_out_dir(
+    out_dir: os.PathLike,
+    image_names: Iterable[str],
+    inputs: Iterable[os.PathLike] = (),
+    overwrite: bool = False,
+) -> None:
+    """Before any computation: ``out_dir`` is (or can be created as) a writable folder, and no
+    file :func:`write_outputs` may write is an input or (unless ``overwrite``) exists. Raises
+    ``FileExistsError`` / ``PermissionError`` / ``NotADirectoryError`` naming the path."""
+    out = pathlib.Path(out_dir)
+    if out.exists() and not out.is_dir():
+        raise NotADirectoryError(f"{out}: --out exists and is not a folder")
+    base = out
+    while not base.exists():
+        base = base.parent if base.parent != base else base
+        if base == base.parent:
+            break
+    if not os.access(base, os.W_OK | os.X_OK):
+        raise PermissionError(f"{out}: cannot write there ({base} is not writable)")
+    names = [*FIXED_OUTPUTS, *(f"{n}_adjusted_RPC.TXT" for n in image_names)]
+    given = {pathlib.Path(p).resolve() for p in inputs}
+    for name in names:
+        path = (out / name).resolve()
+        if path in given:
+            raise FileExistsError(f"{path}: refusing to write an adjusted file over an input")
+        if path.exists() and not overwrite:
+            raise FileExistsError(f"{path}: exists (choose another --out or pass --overwrite)")
+
+
 def write_outputs(
     out_dir: os.PathLike,
     result,
@@ -211,4 +245,11 @@ def _place_rpcs(result, images, out, rpc_format, copy_images, write_into, report
     return placed, notes, {**report, "rpc_files": info}
 
 
-__all__ = ["adjusted_rpc", "delivered_rpcs", "format_reports", "models_json", "write_outputs"]
+__all__ = [
+    "adjusted_rpc",
+    "check_out_dir",
+    "delivered_rpcs",
+    "format_reports",
+    "models_json",
+    "write_outputs",
+]

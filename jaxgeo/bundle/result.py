@@ -19,8 +19,16 @@ from .build import Setup
 from .config import DEFAULT_SOLVER, SolverConfig
 from .covariance import undetermined_unknowns
 from .diagnose import undetermined
-from .errors import RESULTS, NotConvergedWarning, SingularNormalEquations, describe
-from .report import AccuracyReport, accuracy, project
+from .errors import (
+    RESULTS,
+    S0_WARN,
+    NotConvergedWarning,
+    PoorFitWarning,
+    SingularNormalEquations,
+    describe,
+)
+from .report import AccuracyReport, accuracy
+from .snooping import standardized
 from .solve import Solution
 
 
@@ -39,6 +47,11 @@ class AdjustResult:
     (residual / (sigma sqrt(redundancy number))),
     ``blunders`` ``(m,)`` where ``|standardized| > blunder_k``; ``ground_residuals_m``
     ``(c, 3)`` adjusted - given ENU for the GCPs ``gcp_ids``.
+    Gross errors (:mod:`~.snooping`): ``removed`` ``(m,)`` observations removed (``blunders``
+    includes them); ``gcp_flagged`` GCPs whose ground coordinates are flagged, ``gcp_removed``
+    those removed (the point then adjusted as a tie point), ``gcp_w`` the largest standardised
+    residual of each flagged GCP; ``checks_excluded`` check points left out of ``report``
+    because an observation of theirs is flagged; ``snooping_rounds`` re-solves.
     Statistics: ``s0``, ``redundancy``, ``cost`` (sum of squared weighted residuals),
     ``converged``, ``message`` (short), ``result`` (:class:`~.errors.RESULTS`), ``num_steps``;
     ``report`` (check points, tables 2-6 of 000_)
@@ -73,6 +86,12 @@ class AdjustResult:
     report: AccuracyReport | None
     setup: Setup = dataclasses.field(repr=False)
     solution: Solution = dataclasses.field(repr=False)
+    removed: np.ndarray | None = None
+    gcp_flagged: tuple[str, ...] = ()
+    gcp_removed: tuple[str, ...] = ()
+    gcp_w: tuple[float, ...] = ()
+    checks_excluded: tuple[str, ...] = ()
+    snooping_rounds: int = 0
 
     def parameters(self, key: Any) -> dict[str, tuple[float, float]]:
         """``{leaf path: (value, sigma)}`` of one model key (image name or tuple of names)."""
@@ -111,12 +130,15 @@ def finish(
     observations: Observations,
     ground: GroundPoints | None,
     solver: SolverConfig = DEFAULT_SOLVER,
+    removed: tuple[np.ndarray, np.ndarray] | None = None,
+    rounds: int = 0,
 ) -> AdjustResult:
     """The :class:`AdjustResult` of a solved :class:`~.build.Setup` (``build`` +
     :func:`~.solve.solve` with ``solver``, e.g. inside a larger jitted function): raises
     :class:`~.errors.SingularNormalEquations` naming the undetermined unknowns when the result is
     ``RESULTS.undetermined``, warns :class:`~.errors.NotConvergedWarning` if the solve did not
-    converge."""
+    converge. ``removed``: ``(image (M,), ground (c,))`` masks of the observations removed as
+    gross errors (problem order, :func:`~.snooping.snoop`), ``rounds`` its re-solves."""
     problem = setup.problem
     converged, message = describe(sol.result)
     theta = tuple(np.asarray(t) for t in sol.theta)
@@ -139,7 +161,71 @@ def finish(
             NotConvergedWarning,
             stacklevel=3,
         )
-    return _result(setup, sol, theta, s0, converged, message, solver, observations, ground)
+    out = _result(setup, sol, theta, s0, converged, message, solver, observations, ground, removed)
+    plain = plain_s0(sol, removed)
+    if np.isfinite(plain) and plain > S0_WARN:
+        warnings.warn(poor_fit_message(out, plain), PoorFitWarning, stacklevel=3)
+    return dataclasses.replace(out, snooping_rounds=int(rounds))
+
+
+def plain_s0(sol: Solution, removed=None) -> float:
+    """s0 of the least-squares residuals (no robust weights) of the observations kept: the fit
+    a robust loss would hide (Cauchy's weighted cost stays near ``c^2`` per observation
+    however far off the model is)."""
+    r_i, r_g = np.asarray(sol.residuals_image), np.asarray(sol.residuals_ground)
+    red = int(sol.redundancy)
+    if removed is not None:
+        r_i, r_g = r_i[~np.asarray(removed[0])], r_g[~np.asarray(removed[1])]
+        w_i = standardized(sol)[0][~np.asarray(removed[0])]
+        # observations flagged but kept (--keep-blunders) are gross errors, reported as such;
+        # only when they are many they are the misfit itself
+        flagged = np.any(np.abs(np.nan_to_num(w_i)) > 3.29, axis=1)
+        if flagged.size and flagged.mean() <= 0.2:
+            r_i, red = r_i[~flagged], red - 2 * int(flagged.sum())
+    cost = float(np.sum(r_i**2) + np.sum(r_g**2))
+    return float(np.sqrt(cost / red)) if red > 0 else float("nan")
+
+
+def poor_fit_message(res: AdjustResult, s0: float) -> str:
+    """Why s0 is far above 1: the worst images (RMS and mean residual) and points, and the
+    likely cause read from the image-space residual pattern."""
+    keep = ~res.removed if res.removed is not None else np.ones(len(res.observation_ids), bool)
+    imgs = np.asarray(res.observation_images)
+    rows = []
+    for name in dict.fromkeys(res.observation_images):
+        sel = keep & (imgs == name)
+        if not sel.any():
+            continue
+        r = res.residuals_px[sel]
+        rms = float(np.sqrt(np.nanmean(np.sum(r**2, axis=1))))
+        mean = np.nanmean(r, axis=0)
+        rows.append((rms, name, mean))
+    rows.sort(reverse=True)
+    worst_img = ", ".join(
+        f"{n!r} (RMS {rms:.1f} px, mean residual {m[0]:+.1f}, {m[1]:+.1f} px)"
+        for rms, n, m in rows[:3]
+    )
+    w = np.max(np.abs(np.nan_to_num(res.standardized)), axis=1)
+    order = [i for i in np.argsort(-w) if keep[i]][:5]
+    worst_pts = ", ".join(
+        f"{res.observation_ids[i]}@{res.observation_images[i]} (w {w[i]:.1f})" for i in order
+    )
+    misfit = float(np.mean(w[keep] > 3.29)) if keep.any() else 0.0
+    systematic = misfit > 0.2 or any(np.linalg.norm(m) > 0.5 * rms for rms, _, m in rows[:2])
+    cause = (
+        f"the residuals are systematic ({100 * misfit:.0f} % of the observations beyond 3.29 "
+        "sigma): a model that does not belong to its image (e.g. two RPC files swapped, or a "
+        "model of another scene), or a bias the chosen bias model cannot absorb"
+        if systematic
+        else f"a few observations dominate ({100 * misfit:.0f} % beyond 3.29 sigma): gross "
+        "errors left, or a priori sigmas too optimistic"
+    )
+    return (
+        f"s0 = {s0:.3g} (least squares; {res.s0:.3g} robust) is far above 1 (> {S0_WARN:g}): "
+        "the observations do not fit the "
+        f"models. Worst images: {worst_img}. Worst observations: {worst_pts}. Likely cause: "
+        f"{cause}."
+    )
 
 
 def _final_y(problem, sol):
@@ -148,7 +234,7 @@ def _final_y(problem, sol):
     return z, u
 
 
-def _result(setup, sol, theta, s0, converged, message, solver, observations, ground):
+def _result(setup, sol, theta, s0, converged, message, solver, observations, ground, removed):
     problem = setup.problem
     var = s0**2 if np.isfinite(s0) else 1.0
     q = np.asarray(sol.q_params)
@@ -156,27 +242,39 @@ def _result(setup, sol, theta, s0, converged, message, solver, observations, gro
     m = len(observations.point_ids)
     img_r = np.asarray(sol.residuals_image)
     weights = np.concatenate([np.asarray(ob.weight) for ob in problem.images] + [np.zeros(0)])
+    w_img, w_gnd = standardized(sol)
+    rem_i = np.zeros(img_r.shape[0], dtype=bool) if removed is None else np.asarray(removed[0])
+    rem_g = np.zeros(w_gnd.shape[0], dtype=bool) if removed is None else np.asarray(removed[1])
     res_px = np.full((m, 2), np.nan)
     std = np.full((m, 2), np.nan)
-    red = np.asarray(sol.redundancy_image)
     res_px[order] = img_r / weights[:, None]
-    with np.errstate(invalid="ignore", divide="ignore"):
-        std[order] = np.where(red > 1e-10, img_r / np.sqrt(np.maximum(red, 1e-300)), np.nan)
-    if solver.loss != "l2":  # report plain residuals, not the robust-scaled ones
-        models = setup.image_models(problem.groups, theta)
-        res_px = _plain_residuals(models, observations, sol, setup)
-    blunders = np.any(np.abs(np.nan_to_num(std)) > solver.blunder_k, axis=1)
+    std[order] = w_img
+    gone = np.zeros(m, dtype=bool)
+    gone[order] = rem_i
+    blunders = np.any(np.abs(np.nan_to_num(std)) > solver.blunder_k, axis=1) | gone
     gw = np.asarray(problem.ground.weight)
     role = dict(zip(setup.point_ids, setup.point_role, strict=True))
     is_gcp = np.array([role[p] == "gcp" for p in setup.ground_ids], dtype=bool)
     with np.errstate(invalid="ignore", divide="ignore"):
         g_res = np.where(gw > 0, np.asarray(sol.residuals_ground) / gw, np.nan)[is_gcp]
+    g_w = np.max(np.abs(np.nan_to_num(w_gnd)), axis=1) if w_gnd.size else np.zeros(0)
+    g_flag = (g_w > solver.blunder_k) | rem_g
+    gcp_flagged = tuple(p for p, f in zip(setup.ground_ids, g_flag, strict=True) if f)
+    gcp_removed = tuple(p for p, f in zip(setup.ground_ids, rem_g, strict=True) if f)
+    gcp_w = tuple(float(w) for w, f in zip(g_w, g_flag, strict=True) if f)
     flat = np.concatenate([t.reshape(-1) for t in theta] + [np.zeros(0)])
     qpp = np.asarray(sol.q_points)
-    report = None
+    report, excluded = None, ()
     if ground is not None and "check" in setup.point_role:
         models = setup.image_models(problem.groups, theta)
-        est = {p: g for p, g in zip(setup.point_ids, np.asarray(sol.ground), strict=True)}
+        bad = {p for p, b in zip(observations.point_ids, blunders, strict=True) if b}
+        excluded = tuple(p for p, r in zip(setup.point_ids, setup.point_role, strict=True)
+                         if r == "check" and p in bad)  # fmt: skip
+        est = {
+            p: g
+            for p, g in zip(setup.point_ids, np.asarray(sol.ground), strict=True)
+            if p not in bad or role[p] != "check"
+        }
         report = accuracy(models, observations, ground, est, s0=s0, title="adjusted")
     return AdjustResult(
         models=setup.image_models(problem.groups, theta),
@@ -198,7 +296,7 @@ def _result(setup, sol, theta, s0, converged, message, solver, observations, gro
         gcp_ids=tuple(p for p, k in zip(setup.ground_ids, is_gcp, strict=True) if k),
         ground_residuals_m=g_res,
         s0=s0,
-        redundancy=problem.redundancy,
+        redundancy=int(sol.redundancy),
         cost=float(sol.cost),
         converged=converged,
         message=message,
@@ -207,17 +305,9 @@ def _result(setup, sol, theta, s0, converged, message, solver, observations, gro
         report=report,
         setup=setup,
         solution=sol,
+        removed=gone,
+        gcp_flagged=gcp_flagged,
+        gcp_removed=gcp_removed,
+        gcp_w=gcp_w,
+        checks_excluded=excluded,
     )
-
-
-def _plain_residuals(models, observations, sol, setup) -> np.ndarray:
-    ground = np.asarray(sol.ground)
-    pidx = {p: j for j, p in enumerate(setup.point_ids)}
-    out = np.zeros((len(observations.point_ids), 2))
-    for name, model in models.items():
-        sel = [i for i, img in enumerate(observations.images) if img == name]
-        if not sel:
-            continue
-        g = ground[[pidx[observations.point_ids[i]] for i in sel]]
-        out[sel] = np.asarray(project(model, g)) - observations.xy[sel]
-    return out

@@ -15,7 +15,7 @@ import jax
 import jax.numpy as jnp
 import lineax as lx
 import optimistix as optx
-from jaxtyping import Array, Float, Int
+from jaxtyping import Array, Bool, Float, Int
 
 from .. import geodesy
 from .config import DEFAULT_SOLVER, SolverConfig
@@ -111,9 +111,9 @@ class Solution(eqx.Module):
     Fields:
         theta: per group ``(n_blocks, n_params)`` adjusted parameters.
         ground: ``(n_points, 3)`` adjusted ground points ``(lon_deg, lat_deg, h_m)``.
-        residuals_image: ``(M, 2)`` weighted image residuals, observation blocks concatenated
-            (``project - measured``, divided by sigma; robust-rescaled if a loss is set).
-        residuals_ground: ``(c, 3)`` weighted ground residuals (ENU adjusted - given, / sigma).
+        residuals_image: ``(M, 2)`` image residuals divided by their a priori sigma,
+            observation blocks concatenated (``project - measured``; not robust-weighted).
+        residuals_ground: ``(c, 3)`` ground residuals divided by sigma (ENU adjusted - given).
         q_params: ``(N, N)`` cofactor matrix of all parameters (a priori sigma 1; multiply
             by ``s0**2`` for the a posteriori covariance), groups in order, raveled.
         q_points: ``(n_points, 3, 3)`` cofactor matrices of the points, ENU metres.
@@ -126,7 +126,12 @@ class Solution(eqx.Module):
         s0: a posteriori standard deviation of unit weight (NaN without redundancy).
         result: :class:`~jaxgeo.bundle.errors.RESULTS`: ``successful``, ``undetermined`` (some
             unknowns not determined; takes precedence), ``not_converged`` (maximum number of
-            steps), or optimistix' own (``nonfinite``...); ``num_steps``: solver steps taken.
+            steps, or IRLS weights still changing), or optimistix' own (``nonfinite``...);
+            ``num_steps``: solver steps taken (all IRLS solves).
+        weight_image, weight_ground: ``(M,)``, ``(c,)`` final IRLS weights (1 for ``"l2"``);
+            ``cost``, ``s0``, the covariance and redundancy numbers are those of the problem
+            weighted with them.
+        redundancy: rows minus unknowns, without the removed observations' rows.
     """
 
     theta: tuple[Float[Array, "b p"], ...]
@@ -143,6 +148,9 @@ class Solution(eqx.Module):
     s0: Float[Array, ""]
     result: RESULTS
     num_steps: Int[Array, ""]
+    weight_image: Float[Array, " M"]
+    weight_ground: Float[Array, " c"]
+    redundancy: Int[Array, ""]
 
 
 def initial_unknowns(problem: Problem):
@@ -177,10 +185,44 @@ def parameter_scales(
     return jax.lax.stop_gradient(split_params(sc, problem.structure))
 
 
+REMOVED_WEIGHT = 1e-8
+"""Weight factor of an observation removed as a gross error: it keeps the arrays (and the
+compiled solve) of the same shape while its influence (``1e-16`` of the normal equations) is
+nil; its rows leave the redundancy. (:func:`~.snooping.snoop` also moves its measurement to the
+last solution's prediction, so that a point left with removed observations only stays put.)"""
+
+
+def irls_weights(s: Float[Array, " m"], loss: str, c: float) -> Float[Array, " m"]:
+    """IRLS weights ``rho'(s)`` of squared residual norms ``s`` (in a priori sigmas): Huber
+    ``min(1, c / sqrt(s))``, Cauchy ``1 / (1 + s / c^2)``; ``c`` the threshold in sigmas."""
+    if loss == "l2":
+        return jnp.ones_like(s)
+    if loss == "huber":
+        return jnp.where(s <= c**2, 1.0, c / jnp.sqrt(jnp.maximum(s, c**2)))
+    if loss == "cauchy":
+        return 1.0 / (1.0 + s / c**2)
+    raise ValueError(f"unknown loss {loss!r}; expected 'l2', 'huber' or 'cauchy'")
+
+
+def _weighted(problem: Problem, w_img, w_gnd) -> Problem:
+    """``problem`` with its image weights times ``sqrt(w_img)`` (M,) (blocks concatenated) and
+    its ground weights times ``sqrt(w_gnd)`` (c,)."""
+    sizes = [ob.xy.shape[0] for ob in problem.images]
+    parts, start = [], 0
+    for ob, n in zip(problem.images, sizes, strict=True):
+        parts.append(ob.weight * jnp.sqrt(w_img[start : start + n]))
+        start += n
+    out = eqx.tree_at(lambda p: tuple(ob.weight for ob in p.images), problem, tuple(parts))
+    gw = problem.ground.weight * jnp.sqrt(w_gnd)[:, None]
+    return eqx.tree_at(lambda p: p.ground.weight, out, gw)
+
+
 def solve(
     problem: Problem,
     solver: SolverConfig = DEFAULT_SOLVER,
     *,
+    removed_image: Bool[Array, " M"] | None = None,
+    removed_ground: Bool[Array, " c"] | None = None,
     throw: bool = False,
     verbose: bool = False,
 ) -> Solution:
@@ -189,68 +231,114 @@ def solve(
     ``solver.method``: ``"lm"`` Levenberg-Marquardt over the Schur-complement descent
     (default), ``"gn"`` Gauss-Newton over the same descent, ``"dense"`` optimistix' own
     Levenberg-Marquardt with a dense QR on Jacobi-scaled parameters (small problems and
-    cross-checks only). A robust ``solver.loss`` first solves least squares, then re-weights
-    from there. The outcome is ``Solution.result`` (see :class:`Solution`): singular normal
-    equations are detected here, inside the compiled solve. ``throw=True`` raises (an
-    ``equinox`` runtime error with the :class:`~jaxgeo.bundle.errors.RESULTS` message) on any
-    result other than ``successful``; under ``vmap`` each problem has its own result.
+    cross-checks only).
+
+    A robust ``solver.loss`` (on the image observations and the GCP coordinates) is solved by
+    iteratively reweighted least squares: least squares first, then up to
+    ``solver.irls_iterations`` weighted least-squares solves, each with the weights
+    ``rho'(|r|^2)`` of the previous solution held fixed and started from it, until no weight
+    changes by more than ``solver.irls_tol`` (else ``RESULTS.not_converged``). Each inner solve
+    is an ordinary least-squares problem, on which the trust region works as designed.
+
+    ``removed_image`` (M,, blocks concatenated) / ``removed_ground`` (c,): observations taken
+    out as gross errors (weight ``REMOVED_WEIGHT``, rows out of the redundancy); arrays, so that
+    removing observations does not recompile.
+
+    The outcome is ``Solution.result`` (see :class:`Solution`): singular normal equations are
+    detected here, inside the compiled solve. ``throw=True`` raises (an ``equinox`` runtime
+    error with the :class:`~jaxgeo.bundle.errors.RESULTS` message) on any result other than
+    ``successful``; under ``vmap`` each problem has its own result.
     """
     s = problem.structure
     loss, c = solver.loss, float(solver.loss_scale)
+    m, n_g = s.obs_point.shape[0], problem.ground.point.shape[0]
+    rem_i = jnp.zeros(m, bool) if removed_image is None else jnp.asarray(removed_image)
+    rem_g = jnp.zeros(n_g, bool) if removed_ground is None else jnp.asarray(removed_ground)
+    base_i = jnp.where(rem_i, REMOVED_WEIGHT**2, 1.0)
+    base_g = jnp.where(rem_g, REMOVED_WEIGHT**2, 1.0)
     y0 = initial_unknowns(problem)
     if solver.method == "dense":
-        scales = parameter_scales(problem, loss, c)
+        scales = parameter_scales(problem, "l2", c)
         optimiser = optx.LevenbergMarquardt(
             rtol=solver.tol, atol=solver.tol, linear_solver=lx.QR(), verbose=verbose
         )
     else:
         scales = unit_scales(problem)
         optimiser = StructuredGaussNewton(s, tol=solver.tol, method=solver.method, verbose=verbose)
-    steps = jnp.zeros((), int)
-    if loss != "l2":
-        # a robust loss starts from the least-squares solution: from far away every residual
-        # sits in the loss' linear part, where Gauss-Newton on sqrt(rho) crawls
-        first = optx.least_squares(
+
+    def inner(y, w_i, w_g):
+        sol = optx.least_squares(
             residuals,
             optimiser,
-            y0,
-            args=(problem, scales, "l2", c),
+            y,
+            args=(_weighted(problem, base_i * w_i, base_g * w_g), scales, "l2", c),
             max_steps=solver.max_steps,
             throw=False,
         )
-        y0, steps = first.value, first.stats["num_steps"]
-    sol = optx.least_squares(
-        residuals,
-        optimiser,
-        y0,
-        args=(problem, scales, loss, c),
-        max_steps=solver.max_steps,
-        throw=False,
-    )
-    y = sol.value
-    if solver.method == "dense":
-        jac, blocks = blocks_at(problem, scales, y, loss, c)
-    else:  # the descent's blocks are those of the last accepted point, i.e. of y
-        jac, blocks = sol.state.descent_state.jac, sol.state.descent_state.blocks
+        return sol.value, RESULTS.promote(sol.result), sol.stats["num_steps"]
+
+    def reweight(y):
+        img, gnd, _ = residuals(y, (problem, scales, "l2", c))
+        r = jnp.concatenate(img) if img else jnp.zeros((0, 2))
+        return (
+            irls_weights(jnp.sum(r**2, axis=-1), loss, c),
+            irls_weights(jnp.sum(gnd**2, axis=-1), loss, c),
+        )
+
+    ones_i, ones_g = jnp.ones(m), jnp.ones(n_g)
+    y, result, steps = inner(y0, ones_i, ones_g)
+    w_i, w_g = ones_i, ones_g
+    if loss != "l2":
+
+        def cond(carry):
+            _, _, _, res, _, k, change = carry
+            go = (k < solver.irls_iterations) & (change > solver.irls_tol)
+            return go & (res == RESULTS.successful)
+
+        def body(carry):
+            y, _, _, _, steps, k, _ = carry
+            wi, wg = reweight(y)
+            y, res, st = inner(y, wi, wg)
+            # the weights' change across this solve decides whether another one is needed
+            wi2, wg2 = reweight(y)
+            change = jnp.maximum(
+                jnp.max(jnp.abs(wi2 - wi), initial=0.0), jnp.max(jnp.abs(wg2 - wg), initial=0.0)
+            )
+            return y, wi, wg, res, steps + st, k + 1, change
+
+        carry = (y, ones_i, ones_g, result, steps, jnp.array(0), jnp.array(jnp.inf))
+        y, w_i, w_g, result, steps, k, change = jax.lax.while_loop(cond, body, carry)
+        result = RESULTS.where(
+            (change > solver.irls_tol) & (result == RESULTS.successful),
+            RESULTS.not_converged,
+            result,
+        )
+    weighted = _weighted(problem, base_i * w_i, base_g * w_g)
+    jac, blocks = blocks_at(weighted, scales, y, "l2", c)
     cov = cofactors(jac, blocks, s)
     flat_scale = jnp.concatenate([x.reshape(-1) for x in scales] + [jnp.zeros(0)])
     q_params = cov.cc * flat_scale[:, None] * flat_scale[None, :]
     cost = sum_squares((jac.r, jac.rg, jac.rpr))
-    red = problem.redundancy
-    s0 = jnp.sqrt(cost / red) if red > 0 else jnp.full((), jnp.nan)
+    gw = problem.ground.weight
+    red = (
+        problem.redundancy
+        - 2 * jnp.sum(rem_i)
+        - jnp.sum(jnp.where(rem_g[:, None] & (gw > 0), 1, 0))
+    )
+    s0 = jnp.where(red > 0, jnp.sqrt(cost / jnp.maximum(red, 1)), jnp.nan)
     bad_params, bad_points = undetermined_unknowns(
         problem, q_params, cov.inflation_params, cov.inflation_points
     )
-    result = RESULTS.promote(sol.result)
     result = RESULTS.where(
         result == RESULTS.nonlinear_max_steps_reached, RESULTS.not_converged, result
     )
     result = RESULTS.where(jnp.any(bad_params) | jnp.any(bad_points), RESULTS.undetermined, result)
+    plain_img, plain_gnd, _ = residuals(y, (problem, scales, "l2", c))
     out = Solution(
         theta=thetas(problem, y[0], scales),
         ground=problem.ground_points(y[1]),
-        residuals_image=jac.r,
-        residuals_ground=jac.rg,
+        residuals_image=jnp.concatenate(plain_img) if plain_img else jnp.zeros((0, 2)),
+        residuals_ground=plain_gnd,
         q_params=q_params,
         q_points=cov.pp,
         redundancy_image=1.0 - cov.obs,
@@ -260,7 +348,10 @@ def solve(
         cost=cost,
         s0=s0,
         result=result,
-        num_steps=steps + sol.stats["num_steps"],
+        num_steps=steps,
+        weight_image=w_i,
+        weight_ground=w_g,
+        redundancy=red,
     )
     if throw:
         out = result.error_if(out, result != RESULTS.successful)

@@ -13,12 +13,26 @@ or as ``--rpc-format`` says, beside a copy of the image with ``--copy-images`` o
 GeoTIFF's tags with ``--write-into``: the bias folded in exactly where it can be, else refitted
 with the refit error reported; and a JSON with RPC + bias + sigmas), the
 adjusted points, the residuals and the report; inputs and existing files are never replaced
-(``--overwrite`` allows replacing earlier outputs, never the inputs).
+(``--overwrite`` allows replacing earlier outputs, never the inputs); ``--out`` is checked
+before any computation, and the report is printed before anything is written.
+
+Gross errors: by default the image observations and GCP coordinates get a Cauchy loss at 3 a
+priori sigmas (solved by iteratively reweighted least squares), then data snooping (Baarda's
+w-test, iterated) removes the flagged observations and re-solves (``--keep-blunders``: flag
+only). Check-point statistics leave out the points with a flagged observation.
 """
 
 from __future__ import annotations
 
 import argparse
+
+EXIT_CODES = """exit status:
+  0  adjusted (gross errors, if any, removed and listed)
+  1  the solve did not converge (the last state is reported)
+  2  bad input or options (the file, line or point is named)
+  3  adjusted, but s0 > 3: the observations do not fit the models (see the warning naming the
+     worst images and points, e.g. two RPC files swapped)
+  4  the adjustment ran but --out could not be written (the report is printed first)"""
 
 
 def register(sub) -> None:
@@ -29,6 +43,8 @@ def register(sub) -> None:
         "adjust",
         help="bundle block adjustment of RPC images (bias compensation)",
         description=__doc__.split("\n\n")[0],
+        epilog=EXIT_CODES,
+        formatter_class=argparse.RawDescriptionHelpFormatter,
     )
     parser.add_argument(
         "--image",
@@ -56,8 +72,32 @@ def register(sub) -> None:
     parser.add_argument(
         "--loss",
         choices=LOSSES,
-        default="l2",
-        help="robust loss on image observations (default l2)",
+        default="cauchy",
+        help="loss on image observations and GCP coordinates (default cauchy, IRLS)",
+    )
+    parser.add_argument(
+        "--loss-scale",
+        type=float,
+        default=3.0,
+        metavar="C",
+        help="robust loss threshold in a priori sigmas (default 3)",
+    )
+    parser.add_argument(
+        "--keep-blunders",
+        action="store_true",
+        help="flag gross errors (w-test) but do not remove them and re-solve",
+    )
+    parser.add_argument(
+        "--bias-prior-shift-px",
+        type=float,
+        metavar="S",
+        help="prior sigma (px) of every image's bias shift (fixes what GCPs and ties leave open)",
+    )
+    parser.add_argument(
+        "--bias-prior-matrix",
+        type=float,
+        metavar="M",
+        help="prior sigma (px/px) of the affine matrix (or shift-drift drift) terms",
     )
     parser.add_argument("--max-steps", type=int, default=50, help="solver steps (default 50)")
     parser.add_argument("--json", action="store_true", help="print one JSON object")
@@ -110,35 +150,62 @@ def run(args: argparse.Namespace) -> int:
 
     from ..bundle import NotConvergedWarning, SolverConfig
     from ..bundle.adjustment import adjust_files
+    from ..bundle.errors import PoorFitWarning
+    from ..bundle.export import check_out_dir
 
-    solver = SolverConfig(method=args.method, loss=args.loss, max_steps=args.max_steps)
+    images = _images(args.image)
+    solver = SolverConfig(
+        method=args.method,
+        loss=args.loss,
+        loss_scale=args.loss_scale,
+        max_steps=args.max_steps,
+        remove_blunders=not args.keep_blunders,
+    )
+    if args.out:  # before any computation
+        inputs = [*images.values(), args.observations] + ([args.ground] if args.ground else [])
+        try:
+            check_out_dir(args.out, images, inputs, overwrite=args.overwrite)
+        except OSError as err:
+            raise CommandErrorOut(str(err)) from None
     with warnings.catch_warnings(record=True) as caught:
         warnings.simplefilter("always")
-        run = adjust_files(
-            _images(args.image), args.observations, args.ground, bias=args.bias, solver=solver
-        )
+        run = adjust_files(images, args.observations, args.ground, bias=args.bias, solver=solver)
+    poor = False
     for w in caught:
-        prefix = "warning" if issubclass(w.category, NotConvergedWarning) else "note"
-        print(f"jaxgeo adjust: {prefix}: {w.message}", file=sys.stderr)
+        poor |= issubclass(w.category, PoorFitWarning)
+        warn = issubclass(w.category, (NotConvergedWarning, PoorFitWarning))
+        print(f"jaxgeo adjust: {'warning' if warn else 'note'}: {w.message}", file=sys.stderr)
     data = run.summary()
+    if not args.json:
+        print(run.format(), flush=True)  # the report first: a failed write cannot lose it
     if args.out:
-        rpc_options = dict(images=_images(args.image), rpc_format=args.rpc_format,
+        rpc_options = dict(images=images, rpc_format=args.rpc_format,
                            copy_images=args.copy_images, write_into=args.write_into)  # fmt: skip
-        written = run.write(args.out, overwrite=args.overwrite, **rpc_options)
+        try:
+            written = run.write(args.out, overwrite=args.overwrite, **rpc_options)
+        except OSError as err:
+            if args.json:
+                print(json.dumps(data, indent=1))
+            print(f"jaxgeo adjust: error: writing --out failed: {err}", file=sys.stderr)
+            return 4
         data["written"] = [str(p) for p in written]
         report = json.loads((pathlib.Path(args.out) / "report.json").read_text())
         data["rpc_files"] = report.get("rpc_files", {})  # per image: exact or refit + error
     if args.json:
         print(json.dumps(data, indent=1))
-    else:
-        print(run.format())
-        if args.out:
-            print(f"\nwrote {len(data['written'])} files to {args.out}")
-            for name, info in data["rpc_files"].items():
-                err = (
-                    f", max refit error {info['max_error_px']:.3g} px"
-                    if info["how"] == "refit"
-                    else ""
-                )
-                print(f"  {name}: RPC {info['how']}{err}: {', '.join(info.get('files', []))}")
-    return 0 if run.result.converged else 1
+    elif args.out:
+        print(f"\nwrote {len(data['written'])} files to {args.out}")
+        for name, info in data["rpc_files"].items():
+            err = (
+                f", max refit error {info['max_error_px']:.3g} px" if info["how"] == "refit" else ""
+            )
+            print(f"  {name}: RPC {info['how']}{err}: {', '.join(info.get('files', []))}")
+    if not run.result.converged:
+        return 1
+    return 3 if poor else 0
+
+
+def CommandErrorOut(message: str):  # noqa: N802 - an error factory
+    from . import CommandError
+
+    return CommandError(f"--out: {message}")

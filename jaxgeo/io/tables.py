@@ -92,6 +92,12 @@ def _rows(path: pathlib.Path, required: tuple[str, ...]):
         yield lineno, dict(zip(header, (c.strip() for c in row), strict=True))
 
 
+def table_lines(path: str | os.PathLike) -> list[int]:
+    """The line number of every data row of a table (as read by :func:`read_ground` /
+    :func:`read_observations`, in order), for messages that name the line at fault."""
+    return [lineno for lineno, _ in _rows(pathlib.Path(path), ("id",))]
+
+
 def read_ground(
     path: str | os.PathLike, default_sigma_m: float = DEFAULT_GROUND_SIGMA_M
 ) -> GroundPoints:

@@ -30,7 +30,8 @@ def _true_params():
 
 
 def test_bias_is_recovered(block, result):
-    assert result.converged and result.num_steps <= 10
+    # default Cauchy loss: least squares (~5 steps), then a few reweighted solves
+    assert result.converged and result.num_steps <= 30
     assert result.param_names[:2] == ("left.bias.shift_px[0]", "left.bias.shift_px[1]")
     z = (result.params - _true_params()) / result.param_sigma
     assert np.abs(z).max() < 4.0  # every parameter within 4 sigma of the truth
@@ -66,11 +67,10 @@ def test_check_points_fall_to_the_noise_level(block, result):
 def test_schur_solver_equals_dense_levenberg_marquardt(block, result):
     setup = build(with_bias(block.models, "affine"), block.obs, block.ground)
     problem = setup.problem
-    a = solve_jit(
-        problem, SolverConfig()
-    )  # compiled by the `result` fixture's adjust: same structure
-    b = solve(problem, SolverConfig(method="dense", tol=1e-12, max_steps=100))
-    c = solve(problem, SolverConfig(method="gn", tol=1e-9))  # stops at the cost's noise floor
+    # the solvers compared on least squares (IRLS would add its own 1e-3 weight tolerance)
+    a = solve_jit(problem, SolverConfig(loss="l2"))
+    b = solve(problem, SolverConfig(method="dense", tol=1e-12, max_steps=100, loss="l2"))
+    c = solve(problem, SolverConfig(method="gn", tol=1e-9, loss="l2"))  # to the noise floor
     assert all(bool(s.result == RESULTS.successful) for s in (a, b, c))
     sigma = np.sqrt(np.diag(np.asarray(b.q_params))) * float(b.s0)
     for other in (a, c):

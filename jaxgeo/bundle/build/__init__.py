@@ -21,15 +21,18 @@ from ..errors import AdjustmentError
 from ..observations import GroundObs, ImageObs
 from ..problem import ModelGroup, Problem, make_structure
 from .checks import (
-    check_control as check_control_points,
-)
-from .checks import (
+    Sources,
+    check_domains,
+    check_duplicates,
     check_ground,
     check_models,
     check_observations,
     check_points,
     image_names,
     label,
+)
+from .checks import (
+    check_control as check_control_points,
 )
 from .grouping import make_group, partition_block, per_key, shared_leaves, signature
 from .points import initial_points
@@ -84,9 +87,12 @@ def build(
     prior_sigma: Any = None,
     initial: Mapping[str, Any] | None = None,
     check_control: bool = True,
+    sources: Sources | None = None,
 ) -> Setup:
     """Check the input and build the array problem (arguments as :func:`jaxgeo.adjust`;
-    ``check_control``: check every image's GCP count against its adjustable parameters)."""
+    ``check_control``: check every image's GCP count against its adjustable parameters;
+    ``sources``: the files and lines of the tables, named in messages)."""
+    src = sources if sources is not None else Sources()
     image_of = check_models(models)
     ground = (
         ground if ground is not None else GroundPoints((), np.zeros((0, 3)), (), np.zeros((0, 3)))
@@ -127,6 +133,7 @@ def build(
     check_observations(obs, image_index, xy, sig_px)
     lonlath = np.asarray(ground.lonlath, dtype=float)
     check_ground(ground, lonlath)
+    check_duplicates(obs, ground, src)
     gindex = {pid: i for i, pid in enumerate(ground.ids)}
     point_ids = list(dict.fromkeys(obs.point_ids))
     pindex = {pid: j for j, pid in enumerate(point_ids)}
@@ -140,6 +147,7 @@ def build(
         name: groups[g].image_model(groups[g].block_at(groups[g].theta0, k), slot)
         for name, (g, k, slot) in image_index.items()
     }
+    check_domains(image_models, obs, ground, lonlath, src)
     origin = initial_points(
         point_ids, role, initial, lonlath, gindex, obs, xy, sig_px, image_models
     )

@@ -3,6 +3,7 @@ or parameter at fault (:class:`~jaxgeo.bundle.errors.AdjustmentError`)."""
 
 from __future__ import annotations
 
+import dataclasses
 import warnings
 from collections.abc import Mapping, Sequence
 from typing import Any
@@ -163,4 +164,112 @@ def check_control(
             raise TooFewControlPoints(
                 f"image {name!r}: the GCPs {listing(gcps)} are (near-)coplanar; the 3D affine "
                 "model needs at least 4 non-coplanar GCPs"
+            )
+
+
+DOMAIN_TOLERANCE = 1.5
+"""A ground point whose normalised RPC coordinate exceeds this (1 = the edge of the validity
+cube) is refused: RPCs extrapolate wildly outside their fitting cube."""
+IMAGE_MARGIN = 0.02
+"""Image measurements may lie this fraction of the image size (plus one pixel) outside it."""
+
+
+@dataclasses.dataclass(frozen=True)
+class Sources:
+    """Where the tables came from, for messages: the files and the line of each row."""
+
+    observations: str | None = None
+    observation_lines: Sequence[int] = ()
+    ground: str | None = None
+    ground_lines: Sequence[int] = ()
+
+    def obs(self, i: int) -> str:
+        if self.observations and i < len(self.observation_lines):
+            return f"{self.observations}:{self.observation_lines[i]}: observation {i}"
+        return f"observation {i}"
+
+    def point(self, i: int) -> str:
+        if self.ground and i < len(self.ground_lines):
+            return f"{self.ground}:{self.ground_lines[i]}: ground point"
+        return "ground point"
+
+
+def rpc_frame(model: Any) -> Any | None:
+    """The RPC under a (biased) model, whose validity cube and image extent apply; None if the
+    model has none."""
+    seen = 0
+    while model is not None and seen < 8:
+        if all(hasattr(model, a) for a in ("ground_offset", "ground_scale", "image_scale")):
+            return model
+        model, seen = getattr(model, "model", None), seen + 1
+    return None
+
+
+def check_duplicates(obs: Observations, ground: GroundPoints, src: Sources = Sources()) -> None:
+    """The same point twice in one image (contradictory when the coordinates differ), or the
+    same ground point id twice."""
+    first: dict[tuple[str, str], int] = {}
+    for i, key in enumerate(zip(obs.point_ids, obs.images, strict=True)):
+        if key in first:
+            j = first[key]
+            same = np.allclose(obs.xy[i], obs.xy[j])
+            what = "duplicate" if same else (
+                f"contradictory: x, y = {obs.xy[j].tolist()} and {obs.xy[i].tolist()}"
+            )  # fmt: skip
+            raise AdjustmentError(
+                f"{src.obs(i)}: point {key[0]!r} is measured twice in image {key[1]!r} "
+                f"(also {src.obs(j)}; {what})"
+            )
+        first[key] = i
+    seen: dict[str, int] = {}
+    for i, pid in enumerate(ground.ids):
+        if pid in seen:
+            raise AdjustmentError(
+                f"{src.point(i)} {pid!r} is given twice (also {src.point(seen[pid])}): "
+                f"{ground.lonlath[seen[pid]].tolist()} and {ground.lonlath[i].tolist()}"
+            )
+        seen[pid] = i
+
+
+def check_domains(
+    image_models: Mapping[str, Any],
+    obs: Observations,
+    ground: GroundPoints,
+    lonlath: np.ndarray,
+    src: Sources = Sources(),
+) -> None:
+    """Ground points (GCPs, check points) measured in an image lie inside (within
+    ``DOMAIN_TOLERANCE``) the validity cube of its RPC, and every measurement inside the image
+    (``IMAGE_MARGIN``); the messages say by how much."""
+    gindex = {pid: i for i, pid in enumerate(ground.ids)}
+    frames = {name: rpc_frame(m) for name, m in image_models.items()}
+    axes = (("longitude", "deg"), ("latitude", "deg"), ("height", "m"))
+    for i, (pid, img) in enumerate(zip(obs.point_ids, obs.images, strict=True)):
+        rpc = frames.get(img)
+        if rpc is None:
+            continue
+        ioff, iscale = np.asarray(rpc.image_offset, float), np.asarray(rpc.image_scale, float)
+        beyond = np.abs(obs.xy[i] - ioff) - iscale * (1.0 + IMAGE_MARGIN) - 1.0
+        if np.any(beyond > 0):
+            lo, hi = ioff - iscale, ioff + iscale
+            out = float(np.max(np.abs(obs.xy[i] - ioff) - iscale))
+            raise AdjustmentError(
+                f"{src.obs(i)}: point {pid!r} at x, y = {obs.xy[i].tolist()} lies {out:.0f} px "
+                f"outside image {img!r} (x {lo[0]:.0f}..{hi[0]:.0f}, y {lo[1]:.0f}..{hi[1]:.0f} px "
+                "from its RPC)"
+            )
+        k = gindex.get(pid)
+        if k is None:
+            continue
+        goff, gscale = np.asarray(rpc.ground_offset, float), np.asarray(rpc.ground_scale, float)
+        norm = np.abs(lonlath[k] - goff) / gscale
+        if np.any(norm > DOMAIN_TOLERANCE):
+            a = int(np.argmax(norm))
+            name, unit = axes[a]
+            out = abs(lonlath[k, a] - goff[a]) - gscale[a]
+            raise AdjustmentError(
+                f"{src.point(k)} {pid!r} ({ground.role[k]}) lies outside the validity domain of "
+                f"the RPC of image {img!r}: its {name} {lonlath[k, a]:.6g} {unit} is {out:.4g} "
+                f"{unit} beyond {goff[a] - gscale[a]:.6g}..{goff[a] + gscale[a]:.6g} {unit} "
+                "(check its coordinates, or the image it is measured in)"
             )

@@ -1,0 +1,80 @@
+"""``jaxgeo adjust`` on messy input: a GCP 1 km off is named; --out checked before computing;
+exit codes documented in --help."""
+
+import csv
+import os
+import shutil
+
+import pytest
+
+from jaxgeo.cli import main
+from jaxgeo.simulate import demo_dir
+from tests.cli.test_adjust import _args
+
+
+@pytest.fixture()
+def scene(tmp_path):
+    d = tmp_path / "in"
+    shutil.copytree(demo_dir(), d)
+    return d
+
+
+def test_help_documents_exit_codes(capsys):
+    with pytest.raises(SystemExit):
+        main(["adjust", "--help"])
+    text = capsys.readouterr().out
+    assert "exit status:" in text and "--keep-blunders" in text
+    assert all(f"\n  {k}  " in text for k in range(5))
+
+
+@pytest.mark.skipif(os.geteuid() == 0, reason="root writes into read-only folders")
+def test_read_only_out_refused_before_computing(scene, tmp_path, capsys):
+    ro = tmp_path / "ro"
+    ro.mkdir()
+    ro.chmod(0o500)
+    try:
+        assert main(_args(scene, "--out", str(ro / "res"))) == 2
+    finally:
+        ro.chmod(0o700)
+    err = capsys.readouterr().err
+    assert "--out" in err and "not writable" in err and "Traceback" not in err
+
+
+def test_out_that_is_a_file_refused_before_computing(scene, capsys):
+    assert main(_args(scene, "--out", str(scene / "truth.json"))) == 2
+    err = capsys.readouterr().err
+    assert "--out" in err and "not a folder" in err and "Traceback" not in err
+
+
+def test_out_over_an_input_refused_before_computing(scene, capsys):
+    # an input named like an output in the --out folder
+    shutil.copy(scene / "ground.csv", scene / "report.txt")
+    args = _args(scene, "--out", str(scene))
+    args[args.index(str(scene / "ground.csv"))] = str(scene / "report.txt")
+    assert main(args) == 2
+    assert "over an input" in capsys.readouterr().err
+
+
+def test_failed_write_keeps_the_report(scene, tmp_path, capsys, monkeypatch):
+    import jaxgeo.bundle.adjustment as adjustment
+
+    def fail(*args, **kwargs):
+        raise PermissionError("disk says no")
+
+    monkeypatch.setattr(adjustment, "write_outputs", fail)
+    assert main(_args(scene, "--bias", "shift", "--out", str(tmp_path / "o"))) == 4
+    cap = capsys.readouterr()
+    assert "RMS_E" in cap.out and "writing --out failed: disk says no" in cap.err
+
+
+def test_gcp_a_kilometre_off_is_named(scene, capsys):
+    path = scene / "ground.csv"
+    rows = list(csv.reader(path.read_text().splitlines()))
+    header = rows[0]
+    i = next(k for k, r in enumerate(rows[1:], 1) if r[header.index("role")] == "gcp")
+    pid = rows[i][0]
+    rows[i][header.index("lat")] = f"{float(rows[i][header.index('lat')]) + 0.009:.9f}"
+    path.write_text("\n".join(",".join(r) for r in rows) + "\n")
+    assert main(_args(scene, "--bias", "shift")) == 0
+    out = capsys.readouterr().out
+    assert f"GCP {pid!r}: ground coordinates" in out and "removed" in out
