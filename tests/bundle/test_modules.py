@@ -17,13 +17,16 @@ MODULES = (
     "config",
     "covariance",
     "diagnose",
+    "batch",
     "errors",
     "export",
+    "factor",
     "observations",
     "problem",
     "report",
     "result",
     "schur",
+    "snooping",
     "solve",
 )
 

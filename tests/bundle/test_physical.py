@@ -6,7 +6,7 @@ import jax
 import numpy as np
 import pytest
 
-from jaxgeo.bundle import AdjustmentError, adjust
+from jaxgeo.bundle import AdjustmentError, SolverConfig, adjust
 from jaxgeo.io.metadata import read_metadata
 from jaxgeo.io.tables import GroundPoints, Observations
 from jaxgeo.models.kepler import KeplerSequence
@@ -41,7 +41,10 @@ def test_shared_orbit_model_is_adjusted_as_one_block(kepler):
     truth, start, ground, obs = kepler
     spec = jax.tree.map(lambda _: False, start)
     spec = eqx.tree_at(lambda s: s.attitude, spec, tuple(True for _ in start.attitude))
-    res = adjust({("fore", "aft"): start}, obs, ground, filters=spec)
+    # plain least squares: the step count below is the LM's (the default robust loss adds its
+    # reweighting passes on top, ~2-5x the steps on clean data)
+    l2 = SolverConfig(loss="l2")
+    res = adjust({("fore", "aft"): start}, obs, ground, filters=spec, solver=l2)
     assert res.converged and res.num_steps <= 10
     assert res.param_names[0] == "(fore, aft).attitude[0][0]" and len(res.params) == 6
     true = np.concatenate([np.asarray(a) for a in truth.attitude])
