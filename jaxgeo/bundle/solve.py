@@ -266,7 +266,7 @@ def solve(
         scales = unit_scales(problem)
         optimiser = StructuredGaussNewton(s, tol=solver.tol, method=solver.method, verbose=verbose)
 
-    def inner(y, w_i, w_g):
+    def inner(y, w_i, w_g, problem=problem):
         sol = optx.least_squares(
             residuals,
             optimiser,
@@ -277,7 +277,7 @@ def solve(
         )
         return sol.value, RESULTS.promote(sol.result), sol.stats["num_steps"]
 
-    def reweight(y):
+    def reweight(y, problem=problem):
         img, gnd, _ = residuals(y, (problem, scales, "l2", c))
         r = jnp.concatenate(img) if img else jnp.zeros((0, 2))
         return (
@@ -286,9 +286,15 @@ def solve(
         )
 
     ones_i, ones_g = jnp.ones(m), jnp.ones(n_g)
-    y, result, steps = inner(y0, ones_i, ones_g)
     w_i, w_g = ones_i, ones_g
-    if loss != "l2":
+    if loss == "l2":
+        y, result, steps = inner(y0, ones_i, ones_g)
+    else:
+        # the reweighting loop (a while_loop: no reverse-mode derivative) runs on a copy of the
+        # problem cut from the autodiff graph; one final solve of the robust objective from its
+        # answer carries the derivatives (implicit function theorem through optimistix)
+        outer = jax.tree.map(lambda x: jax.lax.stop_gradient(x) if eqx.is_array(x) else x, problem)
+        y, result, steps = inner(y0, ones_i, ones_g, outer)
 
         def cond(carry):
             _, _, _, res, _, k, change = carry
@@ -297,10 +303,10 @@ def solve(
 
         def body(carry):
             y, _, _, _, steps, k, _ = carry
-            wi, wg = reweight(y)
-            y, res, st = inner(y, wi, wg)
+            wi, wg = reweight(y, outer)
+            y, res, st = inner(y, wi, wg, outer)
             # the weights' change across this solve decides whether another one is needed
-            wi2, wg2 = reweight(y)
+            wi2, wg2 = reweight(y, outer)
             change = jnp.maximum(
                 jnp.max(jnp.abs(wi2 - wi), initial=0.0), jnp.max(jnp.abs(wg2 - wg), initial=0.0)
             )
@@ -313,6 +319,21 @@ def solve(
             RESULTS.not_converged,
             result,
         )
+        y, w_i, w_g = jax.lax.stop_gradient((y, w_i, w_g))
+        # the final solve minimises sum rho(|r|^2) over the image residuals itself (IRLS' fixed
+        # point, so one or two steps from there), with the ground weights held: its implicit
+        # derivative is that of the M-estimate, not of a weighted least-squares problem
+        last = optx.least_squares(
+            residuals,
+            optimiser,
+            y,
+            args=(_weighted(problem, base_i, base_g * w_g), scales, loss, c),
+            max_steps=solver.max_steps,
+            throw=False,
+        )
+        y = last.value
+        result = RESULTS.where(result == RESULTS.successful, RESULTS.promote(last.result), result)
+        steps = steps + last.stats["num_steps"]
     weighted = _weighted(problem, base_i * w_i, base_g * w_g)
     jac, blocks = blocks_at(weighted, scales, y, "l2", c)
     cov = cofactors(jac, blocks, s)
