@@ -250,7 +250,7 @@ class FileAdjustment:
         return "\n".join(lines)
 
     def write(
-        self, out_dir: os.PathLike, overwrite: bool = False, **rpc_options
+        self, out_dir: str | os.PathLike, overwrite: bool = False, **rpc_options
     ) -> list[pathlib.Path]:
         """Write the adjusted models, points, residuals and report (never over an input, nor
         over an existing file unless ``overwrite``); returns the paths written. ``rpc_options``:
@@ -262,9 +262,9 @@ class FileAdjustment:
 
 
 def adjust_files(
-    images: Mapping[str, os.PathLike | str],
-    observations: os.PathLike | str,
-    ground: os.PathLike | str | None = None,
+    images: Mapping[str, str | os.PathLike | str],
+    observations: str | os.PathLike | str,
+    ground: str | os.PathLike | str | None = None,
     *,
     bias: str = "affine",
     solver: SolverConfig = DEFAULT_SOLVER,

@@ -104,9 +104,9 @@ FIXED_OUTPUTS = (
 
 
 def check_out_dir(
-    out_dir: os.PathLike,
+    out_dir: str | os.PathLike,
     image_names: Iterable[str],
-    inputs: Iterable[os.PathLike] = (),
+    inputs: Iterable[str | os.PathLike] = (),
     overwrite: bool = False,
 ) -> None:
     """Before any computation: ``out_dir`` is (or can be created as) a writable folder, and no
@@ -133,14 +133,14 @@ def check_out_dir(
 
 
 def write_outputs(
-    out_dir: os.PathLike,
+    out_dir: str | os.PathLike,
     result,
     report_text: str,
     report: dict[str, Any],
-    inputs: Iterable[os.PathLike] = (),
+    inputs: Iterable[str | os.PathLike] = (),
     overwrite: bool = False,
     rpc_files: bool = True,
-    images: Mapping[str, os.PathLike | str] | None = None,
+    images: Mapping[str, str | os.PathLike | str] | None = None,
     rpc_format: str = "txt",
     copy_images: bool = False,
     write_into: bool = False,

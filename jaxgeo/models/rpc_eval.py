@@ -46,6 +46,9 @@ def rational(c, lon, lat, h):
 def project_lph(rpc, lon, lat, h):
     """``(x, y)`` px of ground ``lon_deg, lat_deg, h_m`` given as separate arrays."""
     go, gs = rpc.ground_offset, rpc.ground_scale
+    # lon - lon_off into (-180, 180] (antimeridian; see RPC.normalize_ground): whole turns come
+    # off the longitude itself, so lon and lon +- 360 give bit-identical values
+    lon = lon - 360.0 * jnp.ceil((lon - go[0] - 180.0) / 360.0)
     ln, pn, hn = (lon - go[0]) / gs[0], (lat - go[1]) / gs[1], (h - go[2]) / gs[2]
     x = rational(rpc.num[0], ln, pn, hn) / rational(rpc.den[0], ln, pn, hn)
     y = rational(rpc.num[1], ln, pn, hn) / rational(rpc.den[1], ln, pn, hn)

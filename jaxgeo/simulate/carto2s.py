@@ -65,7 +65,7 @@ def scene_names(n_scenes: int) -> tuple[str, ...]:
     return tuple(f"scene_{k:0{width}d}" for k in range(n_scenes))
 
 
-def output_files(directory: os.PathLike, n_scenes: int) -> list[pathlib.Path]:
+def output_files(directory: str | os.PathLike, n_scenes: int) -> list[pathlib.Path]:
     """The files :meth:`StripScene.save` writes for ``n_scenes`` sub-scenes."""
     d = pathlib.Path(directory)
     names = ["ground.csv", "observations.csv", "strip.json", "truth.json"]
@@ -150,7 +150,7 @@ class StripScene:
         all_rms = [v["rms"] for v in per_scene.values()]
         return sc.rounded({"image_px": per_scene, "rms_min": min(all_rms), "rms_max": max(all_rms)})
 
-    def files(self, directory: os.PathLike) -> list[pathlib.Path]:
+    def files(self, directory: str | os.PathLike) -> list[pathlib.Path]:
         return output_files(directory, len(self.names))
 
     def strip_json(self) -> dict:
@@ -189,7 +189,7 @@ class StripScene:
             **sc.truth_tail(self),
         }
 
-    def save(self, directory: os.PathLike, overwrite: bool = False) -> list[pathlib.Path]:
+    def save(self, directory: str | os.PathLike, overwrite: bool = False) -> list[pathlib.Path]:
         """Write ``scene_000.txt`` ... (RPC text), ``ground.csv``, ``observations.csv``,
         ``strip.json`` (each sub-scene's name, RPC file, first strip line, size) and
         ``truth.json``; refuses to replace existing files unless ``overwrite``."""

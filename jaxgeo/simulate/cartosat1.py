@@ -37,7 +37,7 @@ SITES = {
 NAMES = ("fore", "aft")
 
 
-def output_files(directory: os.PathLike) -> list[pathlib.Path]:
+def output_files(directory: str | os.PathLike) -> list[pathlib.Path]:
     """The files :meth:`StereoScene.save` writes."""
     d = pathlib.Path(directory)
     return [d / f"{n}.txt" for n in NAMES] + [
@@ -98,10 +98,10 @@ class StereoScene:
     def _measured(self, name: str) -> np.ndarray:
         return self._rows(self.observations, name)
 
-    def files(self, directory: os.PathLike) -> list[pathlib.Path]:
+    def files(self, directory: str | os.PathLike) -> list[pathlib.Path]:
         return output_files(directory)
 
-    def save(self, directory: os.PathLike, overwrite: bool = False) -> list[pathlib.Path]:
+    def save(self, directory: str | os.PathLike, overwrite: bool = False) -> list[pathlib.Path]:
         """Write ``fore.txt``, ``aft.txt`` (Cartosat-1 ``_RPC.TXT`` layout), ``ground.csv``,
         ``observations.csv`` and ``truth.json`` into ``directory``; refuses to replace any
         existing file unless ``overwrite`` (checked before anything is written)."""

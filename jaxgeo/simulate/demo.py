@@ -28,6 +28,6 @@ def demo_scene() -> StereoScene:
     return cartosat1_stereo(DEMO_SEED, site="hobart")
 
 
-def write_demo(directory: os.PathLike, overwrite: bool = False) -> list[pathlib.Path]:
+def write_demo(directory: str | os.PathLike, overwrite: bool = False) -> list[pathlib.Path]:
     """(Re)generate the demo files into ``directory``."""
     return demo_scene().save(directory, overwrite=overwrite)

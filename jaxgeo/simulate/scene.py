@@ -221,7 +221,7 @@ def check_writable(paths: list[pathlib.Path], overwrite: bool) -> None:
         )
 
 
-def write_json(path: os.PathLike, obj, overwrite: bool) -> pathlib.Path:
+def write_json(path: str | os.PathLike, obj, overwrite: bool) -> pathlib.Path:
     text = json.dumps(obj, indent=1, sort_keys=False, allow_nan=False) + "\n"
     return atomic_write_text(path, text, overwrite=overwrite)
 
