@@ -86,7 +86,7 @@ print(f"{len(layouts)} layouts")
 # `undetermined`, from the covariance of that very solve).
 
 # %%
-SOLVER = SolverConfig(max_steps=60)
+SOLVER = SolverConfig(max_steps=60, loss="l2")  # least squares, as the paper
 
 
 def sweep(models, counts=COUNTS, prior_sigma=None, prior_weights=None):

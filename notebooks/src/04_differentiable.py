@@ -37,7 +37,8 @@ names = ("fore", "aft")
 vendor_rpcs = {n: read_rpc(d / f"{n}.txt") for n in names}
 obs, ground = read_observations(d / "observations.csv"), read_ground(d / "ground.csv")
 terrain = Terrain.from_dict(json.loads((d / "truth.json").read_text())["terrain"])
-SOLVER = SolverConfig(tol=1e-10, max_steps=100)  # tight: finite differences need it
+# tight tolerance: finite differences need it; least squares, as in the papers
+SOLVER = SolverConfig(tol=1e-10, max_steps=100, loss="l2")
 res = adjust(vendor_rpcs, obs, ground, bias="affine", solver=SOLVER)
 setup = res.setup
 problem = setup.problem
