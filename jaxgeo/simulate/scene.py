@@ -203,7 +203,7 @@ def enu_errors(estimate: np.ndarray, truth: np.ndarray) -> np.ndarray:
     return np.einsum("nij,nj->ni", rot, d)
 
 
-def rms(x: np.ndarray, axis=0) -> np.ndarray:
+def rms(x: np.ndarray, axis=0) -> np.ndarray | float:
     return np.sqrt(np.mean(np.square(x), axis=axis))
 
 

@@ -17,6 +17,7 @@ import dataclasses
 import json
 import os
 import pathlib
+from collections.abc import Iterable
 
 import numpy as np
 
@@ -100,7 +101,7 @@ class Strip:
                                       strict=True) if p in gcp}
         )  # fmt: skip
 
-    def with_gcp_scenes(self, keep: set[int] | list[int]) -> Strip:
+    def with_gcp_scenes(self, keep: Iterable[int]) -> Strip:
         """A copy where GCPs measured only outside the sub-scenes ``keep`` become check points."""
         keep_names = {self.names[k] for k in keep}
         seen_in: dict[str, set[str]] = {}
