@@ -17,6 +17,12 @@ if "xla_cpu_multi_thread_eigen" not in os.environ.get("XLA_FLAGS", ""):
         os.environ.get("XLA_FLAGS", "") + " --xla_cpu_multi_thread_eigen=false"
     ).strip()
 
+# The persistent compilation cache is off in the suite: a CI machine starts with an empty one, so
+# writing every test's programs costs time and pays nothing back, and one full-suite run here
+# aborted inside jaxlib's executable serialisation (put_executable_and_time). The cache itself
+# is tested in subprocesses (tests/test_jaxconfig.py).
+os.environ.setdefault("JAXGEO_CACHE_DIR", "off")
+
 # Runtime shape/type checks of every jaxgeo function (jaxtyping + beartype), as equinox and
 # optimistix test themselves; the hook must be installed before jaxgeo is first imported.
 # JAXGEO_TYPECHECK=0 switches it off (e.g. to time a test).

@@ -17,7 +17,9 @@ PROBE = (
 
 
 def _probe(tmp_path, **env):
-    full = {k: v for k, v in os.environ.items() if k not in ("JAX_COMPILATION_CACHE_DIR",)}
+    # the suite itself runs with the cache off (tests/conftest.py): the probe starts clean
+    drop = ("JAX_COMPILATION_CACHE_DIR", "JAXGEO_CACHE_DIR")
+    full = {k: v for k, v in os.environ.items() if k not in drop}
     full.update(env, PYTHONPATH=str(REPO), XDG_CACHE_HOME=str(tmp_path / "xdg"))
     run = subprocess.run(
         [sys.executable, "-c", PROBE], env=full, capture_output=True, text=True, timeout=300
