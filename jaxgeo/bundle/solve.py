@@ -331,9 +331,11 @@ def solve(
             max_steps=solver.max_steps,
             throw=False,
         )
-        y = last.value
-        result = RESULTS.where(result == RESULTS.successful, RESULTS.promote(last.result), result)
-        steps = steps + last.stats["num_steps"]
+        # only a converged reweighting is polished; a failed one is returned as it stopped
+        ok = result == RESULTS.successful
+        y = jax.tree.map(lambda a, b: jnp.where(ok, a, b), last.value, y)
+        result = RESULTS.where(ok, RESULTS.promote(last.result), result)
+        steps = steps + jnp.where(ok, last.stats["num_steps"], 0)
     weighted = _weighted(problem, base_i * w_i, base_g * w_g)
     jac, blocks = blocks_at(weighted, scales, y, "l2", c)
     cov = cofactors(jac, blocks, s)
