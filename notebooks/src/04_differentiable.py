@@ -156,8 +156,11 @@ def layout_problem(n_gcp):
     """A problem with ``n_gcp`` GCPs and the 49 check points (structure only: the positions
     are replaced below)."""
     ids = [f"G{i}" for i in range(n_gcp)] + [f"C{i:02d}" for i in range(len(grid_ll))]
-    g = np.concatenate([np.tile(grid_ll[:1], (n_gcp, 1)), grid_ll])
-    g[:n_gcp, :2] += np.linspace(-0.01, 0.01, n_gcp)[:, None]  # distinct, for the build
+    # distinct places inside both images for the build (its checks refuse points outside
+    # an image): inner grid nodes, moved slightly
+    inner = np.linspace(8, 40, n_gcp).astype(int)
+    g = np.concatenate([grid_ll[inner], grid_ll])
+    g[:n_gcp, :2] += 1e-5
     gp = GroundPoints(tuple(ids), g, tuple(["gcp"] * n_gcp + ["check"] * len(grid_ll)),
                       np.full((len(ids), 3), 0.3))  # fmt: skip
     xy = np.concatenate([np.asarray(m.project(g)) for m in vendor])
