@@ -146,8 +146,13 @@ print("most influential GCP:", gcp_ids[int(np.argmax(sens_gcp))],
 # %%
 vendor = [vendor_rpcs[n] for n in names]
 common = np.array(ground.lonlath)
-grid_px = np.stack(np.meshgrid(np.linspace(600, 11400, 7), np.linspace(600, 11400, 7)), -1)
-grid_ll = np.asarray(vendor[0].localize(grid_px.reshape(-1, 2), float(np.mean(common[:, 2]))))
+for margin in (600, 1200, 1800, 2400, 3000):  # the grid must lie inside both images
+    side = np.linspace(margin, 12000 - margin, 7)
+    grid_px = np.stack(np.meshgrid(side, side), -1)
+    grid_ll = np.asarray(vendor[0].localize(grid_px.reshape(-1, 2), float(np.mean(common[:, 2]))))
+    aft_xy = np.asarray(vendor[1].project(grid_ll))
+    if np.all((aft_xy > 0) & (aft_xy < 11999)):
+        break
 lo, hi = grid_ll[:, :2].min(axis=0), grid_ll[:, :2].max(axis=0)
 N_GCP = 4
 
