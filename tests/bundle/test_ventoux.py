@@ -30,8 +30,9 @@ def _true_params():
 
 
 def test_bias_is_recovered(block, result):
-    # default Cauchy loss: least squares (~5 steps), then a few reweighted solves
-    assert result.converged and result.num_steps <= 30
+    # default Cauchy loss: least squares (~5 steps), then a few reweighted solves (24 steps in
+    # all), then the final solve of the robust objective that carries the derivatives (~10)
+    assert result.converged and result.num_steps <= 40
     assert result.param_names[:2] == ("left.bias.shift_px[0]", "left.bias.shift_px[1]")
     z = (result.params - _true_params()) / result.param_sigma
     assert np.abs(z).max() < 4.0  # every parameter within 4 sigma of the truth
