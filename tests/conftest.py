@@ -39,7 +39,13 @@ import pytest  # noqa: E402
 jax.config.update("jax_enable_x64", True)
 
 REPO = pathlib.Path(__file__).resolve().parents[1]
-REAL_DATA = pathlib.Path(os.environ.get("JAXGEO_REAL_DATA", REPO / "tests" / "data" / "real"))
+VENDORED_DATA = REPO / "tests" / "data" / "real"
+# JAXGEO_REAL_DATA may point at another copy of the real files; one that does not exist (e.g. the
+# old ../shared default on a bare clone) falls back to the vendored files, which every clone has
+_env_real = os.environ.get("JAXGEO_REAL_DATA")
+REAL_DATA = (
+    pathlib.Path(_env_real) if _env_real and pathlib.Path(_env_real).is_dir() else VENDORED_DATA
+)
 SHARED_DATA = pathlib.Path(
     os.environ.get("JAXGEO_SHARED_DATA", REPO.parent / "shared" / "data" / "real")
 )
