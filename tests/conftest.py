@@ -33,10 +33,15 @@ if os.environ.get("JAXGEO_TYPECHECK", "1") != "0":
 
     install_import_hook("jaxgeo", "tests.typecheck.typechecker")
 
+import gc  # noqa: E402
+
 import jax  # noqa: E402
 import pytest  # noqa: E402
 
 jax.config.update("jax_enable_x64", True)
+# jax computes a persistent-cache key (a hash of the serialised program) for every compilation
+# whenever this flag is on, even with no cache directory set: pure cost in the suite
+jax.config.update("jax_enable_compilation_cache", False)
 
 REPO = pathlib.Path(__file__).resolve().parents[1]
 VENDORED_DATA = REPO / "tests" / "data" / "real"
@@ -56,6 +61,20 @@ def pytest_configure(config):
     # filterwarnings mark); added here, not in pyproject.toml, because resolving the category
     # imports jaxgeo, which must come after the type-checking hook above
     config.addinivalue_line("filterwarnings", "error::jaxgeo.errors.JaxgeoWarning")
+
+
+@pytest.fixture(autouse=True, scope="module")
+def _release_compiled_programs():
+    """Free every compiled program after each test module.
+
+    XLA's CPU backend maps ~3 memory regions per compiled executable and jax keeps them all
+    alive in its caches; the suite compiles tens of thousands of programs (one module alone
+    ~4 000), so a single process reached Linux's ``vm.max_map_count`` (65 530) two thirds of the
+    way through and segfaulted inside XLA's compiler (CI run of stop 16).
+    """
+    yield
+    jax.clear_caches()
+    gc.collect()
 
 
 @pytest.fixture(scope="session")

@@ -82,7 +82,11 @@ def test_notebook_runs(name, kernel_env, tmp_path):
         resources={"metadata": {"path": str(tmp_path)}},
     )
     t = time.perf_counter()
-    client.execute()
+    try:
+        client.execute()
+    finally:  # nbclient leaves a kernel it was handed running (each held 1-3 GB)
+        if km.has_kernel:
+            km.shutdown_kernel(now=True)
     print(f"{name}: {time.perf_counter() - t:.0f} s")
     out = tmp_path / f"{name}.ipynb"
     nbformat.write(nb, out)  # executed copy, for a look when a number changes
