@@ -162,7 +162,8 @@ def seam_offsets(strip: Strip, inp: Level1Input) -> np.ndarray:
 
 
 def suspect_offsets(strip: Strip, seams: np.ndarray, limit_px: float = SEAM_LIMIT_PX) -> list[dict]:
-    """The broken seams (beyond ``limit_px`` from the strip's median seam), each
+    """The broken seams (beyond ``limit_px`` from the strip's median seam, or from 0 with fewer
+    than 3 seams), each
     ``{a, b, col_px, row_px, scene}``: ``scene`` the sub-scene whose line offset is likely wrong
     (both its seams broken with opposite row signs, or a broken seam at an end of the strip
     whose neighbour is fine), else ``None`` (a step: every sub-scene after the seam shifted).
@@ -171,7 +172,9 @@ def suspect_offsets(strip: Strip, seams: np.ndarray, limit_px: float = SEAM_LIMI
     names = strip.names
     if not len(seams):
         return []
-    dev = seams - np.nanmedian(seams, axis=0)
+    # beyond the strip's median seam (a convention shared by every offset is no error); with
+    # fewer than 3 seams the median is no reference: the seams themselves
+    dev = seams - np.nanmedian(seams, axis=0) if len(seams) >= 3 else seams
     broken = np.nan_to_num(np.hypot(*dev.T)) > limit_px
     out = []
     for k in np.flatnonzero(broken):

@@ -17,6 +17,8 @@ import jaxgeo.strip.adjustment as strip_adjustment
 from jaxgeo.io import Observations
 from jaxgeo.strip import LineOffsetWarning, adjust_strip
 from jaxgeo.strip.level1 import level1_input
+from jaxgeo.strip.report import line_offset_message
+from jaxgeo.strip.snooping import suspect_offsets
 from tests.strip.conftest import strip_config
 
 FRACTION = 0.1
@@ -176,3 +178,25 @@ def test_wrong_line_offset_is_named(strip_quarter):
     # not, and no observation was flagged
     rows = {r["name"]: r["level2"]["plan"] for r in res.report.scenes}
     assert rows["scene_005"] > 50.0 and rows["scene_004"] < 3 * GSD_M
+
+
+def test_broken_seams_are_attributed(strip_quarter):
+    """A spike (two seams, opposite signs) names its sub-scene, a broken seam at an end the end
+    sub-scene, one broken seam inside a step (every sub-scene after it); small seams pass."""
+    seams = np.random.default_rng(0).normal(0.0, 2.0, (11, 2))
+    assert suspect_offsets(strip_quarter, seams) == []
+    seams[4, 1] += 200.0
+    seams[5, 1] -= 200.0
+    seams[0, 1] -= 150.0
+    seams[8, 0] += 60.0
+    found = suspect_offsets(strip_quarter, seams)
+    assert [(s["a"], s["b"], s["scene"]) for s in found] == [
+        ("scene_000", "scene_001", "scene_000"),
+        ("scene_004", "scene_005", "scene_005"),
+        ("scene_005", "scene_006", "scene_005"),
+        ("scene_008", "scene_009", None),
+    ]
+    assert found[1]["row_px"] == pytest.approx(200.0, abs=10.0)
+    text = line_offset_message(found)
+    assert "scene_005 is probably wrong by +20" in text and "too large" in text
+    assert "scene_000 is probably wrong by +15" in text and "from there on" in text
