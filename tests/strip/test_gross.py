@@ -9,6 +9,7 @@ snooping removes the tie (both rays), so ties are scored per tie point, GCP meas
 """
 
 import dataclasses
+import re
 
 import numpy as np
 import pytest
@@ -198,5 +199,6 @@ def test_broken_seams_are_attributed(strip_quarter):
     ]
     assert found[1]["row_px"] == pytest.approx(200.0, abs=10.0)
     text = line_offset_message(found)
-    assert "scene_005 is probably wrong by +20" in text and "too large" in text
-    assert "scene_000 is probably wrong by +15" in text and "from there on" in text
+    assert re.search(r"scene_005 is probably wrong by \+(19\d|20\d) lines \(too large\)", text)
+    assert re.search(r"scene_000 is probably wrong by \+1[45]\d lines", text), text
+    assert "scene_008 | scene_009" in text and "from there on" in text
