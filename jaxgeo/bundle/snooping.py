@@ -9,14 +9,17 @@ spreads into its neighbours' residuals), with a robust loss every flagged observ
 factor 2 of the worst (the robust solution already isolates them; rounds repeat for the
 smaller ones). An image observation of a point without ground coordinates (tie or check) whose
 removal leaves the point in fewer than two images takes the point's other observations with it
-(a two-ray point's gross error cannot be told from its partner: the point group is removed).
+(a two-ray point's gross error cannot be told from its partner: the point group is removed,
+with its height-only ground observation if it has one; such an observation flagged takes its
+point's rays with it).
 Removal is a weight (:data:`~.solve.REMOVED_WEIGHT`), with the measurement moved to the last
 solution's prediction (a point left with removed observations only then stays where it was and
 costs nothing), so that the compiled solve is reused; the residuals reported are against the
 measurements as given. A GCP's coordinates are removed only where the point is measured in two
 images or more (it then becomes a tie point); otherwise they are flagged only. When every ray of
 a GCP is flagged, the rays agree with each other and the coordinates do not: the coordinates
-are removed instead.
+are removed instead (a height-only ground observation, a DEM height on a tie, is not a GCP:
+its point's rays are removed as a tie point's).
 """
 
 from __future__ import annotations
@@ -76,7 +79,8 @@ def snoop(
 
     Returns ``(solution, removed image observations (M,), removed ground observations (c,),
     rounds)``, the masks in problem order. Stops early when a solve fails (singular,
-    non-finite).
+    non-finite), and before a removal that would leave unknowns undetermined (those
+    observations stay, flagged only).
     """
     problem = setup.problem
     compiled = solve_settings(solver)
@@ -84,10 +88,13 @@ def snoop(
     m, c = point.shape[0], int(problem.ground.point.shape[0])
     gcp_point = np.zeros(problem.structure.n_points, dtype=bool)
     gw = np.asarray(problem.ground.weight)
-    gcp_point[np.asarray(problem.ground.point)[np.any(gw > 0, axis=1)]] = True
+    # control in plan: a height-only prior (a DEM height on a tie) does not make a GCP, whose
+    # rays could all disagree with its coordinates
+    gcp_point[np.asarray(problem.ground.point)[np.any(gw[:, :2] > 0, axis=1)]] = True
     rem_i, rem_g = np.zeros(m, dtype=bool), np.zeros(c, dtype=bool)
     rays = np.bincount(point, minlength=problem.structure.n_points)
     removable_g = rays[np.asarray(problem.ground.point)] >= 2
+    height_only = ~np.any(gw[:, :2] > 0, axis=1) & (gw[:, 2] > 0)
     xy0 = np.concatenate([np.asarray(ob.xy) for ob in problem.images] + [np.zeros((0, 2))])
     w_xy = np.concatenate([np.asarray(ob.weight) for ob in problem.images] + [np.zeros(0)])
     g0 = np.asarray(problem.ground.lonlath)
@@ -116,6 +123,10 @@ def snoop(
             if gcp_point[p] and own.sum() >= 2 and np.all(pick_i[own]):
                 pick_i &= ~own
                 pick_g |= (gpts == p) & removable_g
+        # a height-only ground observation (a DEM height on a tie) flagged: its rays disagree
+        # with it, and without it they (near-parallel along a strip) leave the point
+        # undetermined: the point goes as a whole
+        pick_i |= np.isin(point, gpts[pick_g & height_only]) & ~rem_i
         # a point without (kept) ground coordinates left in < 2 images goes as a whole
         left = np.bincount(point[~(rem_i | pick_i)], minlength=problem.structure.n_points)
         controlled = gcp_point.copy()  # a GCP whose coordinates go is a tie point now
@@ -123,19 +134,31 @@ def snoop(
         short = (left < 2) & ~controlled
         hit = np.zeros(short.size, dtype=bool)
         hit[point[pick_i]] = True
-        pick_i |= np.isin(point, np.flatnonzero(short & hit))
+        whole = np.flatnonzero(short & hit)
+        pick_i |= np.isin(point, whole)
+        # with its height prior, if any (a DEM height on a tie): a point kept by that alone at
+        # full weight, its rays at the removed weight, would be undetermined in plan
+        pick_g |= np.isin(gpts, whole) & removable_g
         if np.sum(rem_i | pick_i) > MAX_REMOVED_FRACTION * m:
             break
         new_i, new_g = pick_i & ~rem_i, pick_g & ~rem_g
         # removed measurements sit at the last prediction: (project - xy) = r sigma
         r_px = np.asarray(sol.residuals_image) / w_xy[:, None]
-        xy[new_i] = xy0[new_i] + r_px[new_i]
-        g[new_g] = np.asarray(sol.ground)[np.asarray(problem.ground.point)[new_g]]
-        rem_i, rem_g = rem_i | pick_i, rem_g | pick_g
+        xy_try, g_try = xy.copy(), g.copy()
+        xy_try[new_i] = xy0[new_i] + r_px[new_i]
+        g_try[new_g] = np.asarray(sol.ground)[np.asarray(problem.ground.point)[new_g]]
         moved = eqx.tree_at(
-            lambda p: p.ground.lonlath, problem.with_xy(jnp.asarray(xy)), jnp.asarray(g)
+            lambda p: p.ground.lonlath, problem.with_xy(jnp.asarray(xy_try)), jnp.asarray(g_try)
         )
-        sol = solve_jit(moved, compiled, removed_image=rem_i, removed_ground=rem_g)
+        tried = solve_jit(
+            moved, compiled, removed_image=rem_i | pick_i, removed_ground=rem_g | pick_g
+        )
+        if bool(tried.result == RESULTS.undetermined):
+            # these removals would leave unknowns undetermined (the control of an image): they
+            # stay, flagged only, and the snooping stops here
+            break
+        sol, xy, g = tried, xy_try, g_try
+        rem_i, rem_g = rem_i | pick_i, rem_g | pick_g
         rounds += 1
     if rounds:  # residuals against the measurements as given
         r_img = np.asarray(sol.residuals_image) + (xy - xy0) * w_xy[:, None]

@@ -2,7 +2,8 @@
 
     jaxgeo strip STRIP [--ground CSV] [--observations CSV] [--ties-per-pair N]
                  [--tie-height M | --dem FILE] [--bias affine|shift-drift|shift]
-                 [--degree quadratic|affine|shift] [--json]
+                 [--degree quadratic|affine|shift] [--loss l2|huber|cauchy]
+                 [--loss-scale C] [--keep-blunders] [--json]
                  [--out DIR [--rpc-format txt|rpb|geom|dimap]] [--overwrite]
 
 STRIP is a folder holding ``strip.json`` (or the json file itself; see
@@ -17,6 +18,13 @@ the other. ``--out DIR`` writes one RPC per sub-scene refitted to its final mode
 (``NAME_RPC.TXT`` or ``NAME.RPB``), ``report.json`` and ``report.txt``; every destination is
 checked before anything is written, inputs are never replaced and existing files only with
 ``--overwrite``.
+
+Gross errors, as ``jaxgeo adjust``: by default a Cauchy loss at 3 a priori sigmas (``--loss``,
+``--loss-scale``; IRLS) at both levels, then data snooping (Baarda's w-test with redundancy
+numbers, iterated) removes the flagged observations and re-solves (``--keep-blunders``: flag
+only); the report lists them (level, point, sub-scene, w). A sub-scene whose line offset is
+wrong shows at its seams (the vendor RPCs disagree at its formed ties) and is named in a
+warning: its bias would absorb it silently.
 
 The command parses, builds a :class:`jaxgeo.strip.StripConfig`, calls the library and prints;
 the checks and their messages are the library's (settings named by their flags, :data:`FLAGS`).
@@ -52,8 +60,16 @@ FLAGS = {
 
 
 def register(sub) -> None:
+    from ..bundle.config import LOSSES
     from ..models.bias import BIAS_KINDS
-    from ..strip.config import DEGREES, Level1Config, Level2Config, RefitConfig, TieConfig
+    from ..strip.config import (
+        DEGREES,
+        STRIP_SOLVER,
+        Level1Config,
+        Level2Config,
+        RefitConfig,
+        TieConfig,
+    )
     from ..strip.export import SUFFIX
 
     ties0, level1, refit0 = TieConfig(), Level1Config(), RefitConfig()
@@ -124,6 +140,25 @@ def register(sub) -> None:
     ties.add_argument(
         "--max-steps", type=int, default=50, metavar="N", help="level-1 solver steps (50)"
     )
+    gross = parser.add_argument_group("gross errors (both levels, as jaxgeo adjust)")
+    gross.add_argument(
+        "--loss",
+        choices=LOSSES,
+        default=STRIP_SOLVER.loss,
+        help=f"loss on image measurements and GCP coordinates (default {STRIP_SOLVER.loss}, IRLS)",
+    )
+    gross.add_argument(
+        "--loss-scale",
+        type=float,
+        default=STRIP_SOLVER.loss_scale,
+        metavar="C",
+        help=f"robust loss threshold in a priori sigmas (default {STRIP_SOLVER.loss_scale:g})",
+    )
+    gross.add_argument(
+        "--keep-blunders",
+        action="store_true",
+        help="flag gross errors (w-test) but do not remove them and re-solve",
+    )
     parser.add_argument(
         "--degree",
         choices=DEGREES,
@@ -176,7 +211,14 @@ def strip_config(args: argparse.Namespace, tie_height=None):
         bias_prior_shift_px=args.bias_prior_shift_px,
         bias_prior_matrix=args.bias_prior_matrix,
     )
-    solver = dataclasses.replace(STRIP_SOLVER, method=args.method, max_steps=args.max_steps)
+    solver = dataclasses.replace(
+        STRIP_SOLVER,
+        method=args.method,
+        max_steps=args.max_steps,
+        loss=args.loss,
+        loss_scale=args.loss_scale,
+        remove_blunders=not args.keep_blunders,
+    )
     strip = StripConfig(ties=ties, level1=level1, level2=Level2Config(args.degree), solver=solver)
     return strip, RefitConfig(grid=tuple(args.rpc_grid))
 
@@ -196,9 +238,11 @@ def _run(args: argparse.Namespace) -> int:
     import sys
     import warnings
 
+    from ..bundle.errors import NotConvergedWarning, PoorFitWarning
     from ..io import read_dem
     from ..strip import (
         GCPDistributionWarning,
+        LineOffsetWarning,
         UniversalCorrectionWarning,
         adjust_strip,
         export,
@@ -226,7 +270,8 @@ def _run(args: argparse.Namespace) -> int:
             result = adjust_strip(strip, config)
         finally:  # the GCP distribution warning matters most when the adjustment fails
             for w in caught:
-                warns = (GCPDistributionWarning, UniversalCorrectionWarning)
+                warns = (GCPDistributionWarning, UniversalCorrectionWarning, LineOffsetWarning,
+                         NotConvergedWarning, PoorFitWarning)  # fmt: skip
                 kind = "warning" if issubclass(w.category, warns) else "note"
                 print(f"jaxgeo strip: {kind}: {w.message}", file=sys.stderr)
     converged = bool(result.report.strip["converged"])

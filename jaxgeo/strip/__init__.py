@@ -15,6 +15,8 @@ vmapped call. Modules, in the order the data passes them:
 - ``level2``: level-2 data (GCP, check and tie rows);
 - ``universal``: the universal correction of eq. 12-13;
 - ``solve``: both levels as one pure function of arrays (jit, vmap);
+- ``snooping``: gross errors at both levels (robust loss, w-test, removal) and wrong line
+  offsets (the seams of the vendor RPCs);
 - ``report``: per sub-scene and per pair figures;
 - ``result``: ``StripResult`` and the refitted RPCs;
 - ``adjustment``: ``adjust_strip`` (tables in, result out), ``adjust_individually``;
@@ -40,10 +42,12 @@ from .delivery import read_strip as read_strip
 from .distribution import GCPDistributionWarning as GCPDistributionWarning
 from .distribution import check_gcp_distribution as check_gcp_distribution
 from .errors import ConfigError as ConfigError
+from .errors import LineOffsetWarning as LineOffsetWarning
 from .errors import Setting as Setting
 from .errors import StripFormatError as StripFormatError
 from .errors import UniversalCorrectionWarning as UniversalCorrectionWarning
 from .level2 import Level2Data as Level2Data
+from .report import GrossErrors as GrossErrors
 from .report import StripReport as StripReport
 from .result import StripResult as StripResult
 from .solve import TwoLevelSolution as TwoLevelSolution

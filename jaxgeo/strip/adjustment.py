@@ -7,9 +7,12 @@
 3. level 2: the universal correction (eq. 12-13) fitted to the GCPs' level-1 positions and
    applied to every sub-scene; updated RPCs on request (:meth:`StripResult.updated_rpcs`).
 
-Both levels run as one compiled function (:func:`.solve.two_level`); the same function,
-vmapped, adjusts a batch (:func:`.batch.monte_carlo`). :func:`adjust_individually` is the
-practice the paper compares with: every sub-scene adjusted to its own GCPs.
+Gross errors (:mod:`.snooping`): both levels use the solver's robust loss (Cauchy by default,
+IRLS) and data snooping (w-test, the flagged observations removed and re-solved); a sub-scene
+whose line offset is wrong is named from the seams before solving
+(:class:`~.errors.LineOffsetWarning`). :func:`.solve.two_level` is both levels as one compiled
+function; vmapped, it adjusts a batch (:func:`.batch.monte_carlo`). :func:`adjust_individually`
+is the practice the paper compares with: every sub-scene adjusted to its own GCPs.
 """
 
 from __future__ import annotations
@@ -30,17 +33,20 @@ from ..bundle.build import build
 from ..bundle.config import SolverConfig
 from ..bundle.errors import AdjustmentError
 from ..bundle.result import AdjustResult, finish
+from ..bundle.snooping import snoop
 from ..io import GroundPoints, Observations
 from ..models.bias import BIAS_KINDS
+from ..models.rpc_fit import localize_points
 from .config import StripConfig
 from .delivery import Strip
 from .distribution import check_gcp_distribution
-from .errors import UniversalCorrectionWarning
+from .errors import LineOffsetWarning, UniversalCorrectionWarning
 from .level1 import level1_input
 from .level2 import Level2Data, level2_input
-from .report import strip_report
+from .report import GrossErrors, line_offset_message, strip_report
 from .result import StripResult
-from .solve import degree_index, en_error_m, evaluate_jit, localize_in, tie_gap, two_level_jit
+from .snooping import seam_offsets, snoop_level2, suspect_offsets
+from .solve import en_error_m, evaluate_jit, localize_in, tie_gap
 from .universal import N_TERMS, UniversallyCorrected, check_design
 
 N_BIAS_GCPS = {name: kind().n_params // 2 for name, kind in BIAS_KINDS.items()}
@@ -65,6 +71,11 @@ def adjust_strip(strip: Strip, config: StripConfig | None = None) -> StripResult
             leave-one-GCP-scene-out error exceeds the best one's by half warns
             (:class:`UniversalCorrectionWarning`): with few GCP scenes a quadratic fits their
             noise and degrades the scenes between them.
+
+    Gross errors: level 1 is snooped as :func:`jaxgeo.adjust` does
+    (:func:`jaxgeo.bundle.snooping.snoop`), level 2 with the same settings on the GCP
+    measurements left (:func:`.snooping.snoop_level2`); ``result.gross_errors`` and the report
+    list them. A broken seam warns (:class:`~.errors.LineOffsetWarning`) naming the sub-scene.
 
     Raises a :class:`~.errors.ConfigError` naming the setting (ties only without bias priors,
     too few or aligned GCPs for the correction), after the GCP distribution warning, and the
@@ -98,20 +109,34 @@ def adjust_strip(strip: Strip, config: StripConfig | None = None) -> StripResult
             f"{len(setup.problem.groups)} kinds"
         )
     block_of = np.array([setup.image_index[n][1] for n in names])
-    data, rows = level2_input(strip, inp, block_of)
+    data, rows = level2_input(strip, inp, block_of, _gsd_m(strip))
     where = f"{strip.files.ground}: " if strip.files is not None else ""
     check_design(
         np.asarray(data.gcp_lonlath), "shift" if degree in ("auto", "none") else degree, where
     )
+    suspects = suspect_offsets(strip, seam_offsets(strip, inp))
+    if suspects:
+        warnings.warn(line_offset_message(suspects), LineOffsetWarning, stacklevel=2)
     t1 = time.perf_counter()
-    sol = two_level_jit(setup.problem, data, degree_index(degree), config.solver)
-    sol = jax.block_until_ready(sol)
-    t2 = time.perf_counter()
-    ev = evaluate_jit(setup.problem, data, sol)
+    sol1, rem_i, rem_g, rounds = snoop(setup, config.solver)
     try:
-        level1 = finish(setup, sol.level1, inp.observations, inp.ground, config.solver)
+        level1 = finish(
+            setup, sol1, inp.observations, inp.ground, config.solver, (rem_i, rem_g), rounds
+        )
     except AdjustmentError as err:
         raise _in_level1(err, strip) from err
+    l2 = snoop_level2(
+        setup.problem,
+        data,
+        sol1,
+        degree,
+        config.solver,
+        _removed_at_level1(level1, inp, rows, strip),
+    )
+    sol = jax.block_until_ready(l2.solution)
+    data = eqx.tree_at(lambda t: t.gcp_weight, data, jnp.asarray(l2.weight))
+    t2 = time.perf_counter()
+    ev = evaluate_jit(setup.problem, data, sol)
     corr = jax.tree.map(np.asarray, sol.correction)
     final = {n: UniversallyCorrected(level1.models[n], corr) for n in names}
     used = list(N_TERMS)[int(sol.degree_index)]
@@ -125,7 +150,8 @@ def adjust_strip(strip: Strip, config: StripConfig | None = None) -> StripResult
             UniversalCorrectionWarning,
             stacklevel=2,
         )
-    report = strip_report(strip, sol, ev, rows, inp, setup.problem.n_unknowns, used)
+    gross = GrossErrors.collect(level1, l2, rows, strip, suspects, config.solver, inp.tie_ids)
+    report = strip_report(strip, sol, ev, rows, inp, setup.problem.n_unknowns, used, gross)
     return StripResult(
         strip=strip,
         models=final,
@@ -139,7 +165,40 @@ def adjust_strip(strip: Strip, config: StripConfig | None = None) -> StripResult
         inputs=inp,
         data=data,
         timings_s={"setup": t1 - t0, "first_call": t2 - t1},
+        gross_errors=gross,
     )
+
+
+def _gsd_m(strip: Strip) -> np.ndarray:
+    """Ground sample distance (m) of every sub-scene at its centre, from its vendor RPC."""
+    out = []
+    for s in strip.scenes:
+        rpc = strip.rpcs[s.name]
+        c = np.array([[0.5 * (s.n_cols - 1), 0.5 * (s.n_rows - 1)]])
+        xy = np.concatenate([c, c + [1.0, 0.0], c + [0.0, 1.0]])
+        g = localize_points(rpc, xy, np.full(3, float(rpc.ground_offset[2])))
+        d = np.asarray(en_error_m(jnp.asarray(g[1:]), jnp.asarray(g[[0, 0]])))
+        out.append(float(np.sqrt(np.mean(np.sum(d**2, axis=1)))))
+    return np.array(out)
+
+
+def _removed_at_level1(level1: AdjustResult, inp, rows: dict, strip: Strip) -> np.ndarray:
+    """The level-2 GCP measurements (g,) whose level-1 image observation or GCP coordinates
+    were removed as gross errors."""
+    o = inp.observations
+    n_tie = len(inp.ties.point)
+    removed = level1.removed if level1.removed is not None else np.zeros(len(o.point_ids), bool)
+    gone = {
+        key
+        for i, key in enumerate(zip(o.point_ids, o.images, strict=True))
+        if i >= n_tie and removed[i]
+    }
+    so = strip.observations
+    return np.array(
+        [(so.point_ids[i], so.images[i]) in gone or so.point_ids[i] in level1.gcp_removed
+         for i in rows["gcp"]],
+        dtype=bool,
+    )  # fmt: skip
 
 
 def evaluate_models(result: StripResult, models: Mapping[str, Any]) -> dict[str, np.ndarray]:

@@ -1,7 +1,10 @@
 """One strip's compiled two-level call run many times: timing and Monte-Carlo batches.
 
 :func:`monte_carlo` draws fresh measurement noise for the GCP and check measurements and
-adjusts every draw in one vmapped, jitted call (:func:`~.solve.two_level_batch`).
+adjusts every draw in one vmapped, jitted call (:func:`~.solve.two_level_batch`). A batch is
+the compiled call alone: the solver's robust loss acts, but nothing is removed (data snooping
+is a host-side loop around one strip, :func:`~.adjustment.adjust_strip`); the level-2 GCP
+weights are the result's (GCP measurements removed there stay out).
 """
 
 from __future__ import annotations

@@ -216,14 +216,18 @@ class RefitConfig(eqx.Module):
                               Setting("refit.h_range"))  # fmt: skip
 
 
-STRIP_SOLVER = SolverConfig(method="lm", loss="l2", max_steps=50, tol=1e-6)
-"""The level-1 solver of the strip: least squares (formed ties carry no blunders; GCP blunders
-show in the report's residuals)."""
+STRIP_SOLVER = SolverConfig(method="lm", loss="cauchy", max_steps=50, tol=1e-6)
+"""The solver of the strip, :func:`jaxgeo.adjust`'s defaults: Cauchy loss at 3 a priori sigmas
+(IRLS) on the image measurements and GCP coordinates, then data snooping (Baarda's w-test,
+iterated) removing the flagged observations and re-solving (``remove_blunders=False``: flag
+only), at level 1 and, with the same settings, at level 2 (:mod:`.snooping`). ``loss="l2"`` and
+``remove_blunders=False`` give the plain least squares of the paper."""
 
 
 class StripConfig(eqx.Module):
     """Everything :func:`~.adjustment.adjust_strip` needs besides the strip: the ties, the two
-    levels, the level-1 solver (``jaxgeo.bundle.config.SolverConfig``), and whether a
+    levels, the solver (``jaxgeo.bundle.config.SolverConfig``: level 1's solve, and the robust
+    loss and gross-error settings of both levels; default :data:`STRIP_SOLVER`), and whether a
     :class:`~.distribution.GCPDistributionWarning` is emitted when the GCP scenes break the
     rule of 003_ section 9."""
 
@@ -240,5 +244,6 @@ class StripConfig(eqx.Module):
             ties_per_pair=t.per_pair, tie_layout=t.layout, tie_margin_px=t.margin_px,
             tie_sigma_px=t.sigma_px, tie_height_sigma_m=t.height_sigma_m,
             bias=self.level1.bias, level1_gcps=self.level1.use_gcps, degree=self.level2.degree,
-            method=s.method, loss=s.loss, max_steps=s.max_steps, tol=s.tol,
+            method=s.method, loss=s.loss, loss_scale=s.loss_scale, max_steps=s.max_steps,
+            tol=s.tol, blunder_k=s.blunder_k, remove_blunders=s.remove_blunders,
         )  # fmt: skip

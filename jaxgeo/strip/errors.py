@@ -65,3 +65,10 @@ class ConfigError(ValueError):
 
 class UniversalCorrectionWarning(JaxgeoWarning):
     """The chosen universal correction predicts GCP scenes left out worse than a simpler one."""
+
+
+class LineOffsetWarning(JaxgeoWarning):
+    """The vendor RPCs of adjacent sub-scenes disagree at their formed ties by far more than at
+    the strip's other seams: a sub-scene's line offset (``first_line``) is probably wrong. Its
+    ties are all shifted alike, so the sub-scene's bias absorbs them (nothing for the data
+    snooping to find unless it has GCPs): fix the offset in the strip description."""

@@ -25,6 +25,10 @@ class Level2Data(eqx.Module):
     ``check_scene`` (c,), ``check_xy`` (c, 2) px, ``check_lonlath`` (c, 3) surveyed.
     Tie points, for the continuity figures: ``tie_scene`` (t, 2) the two sub-scenes,
     ``tie_xy`` (t, 2, 2) px in each, ``tie_h`` (t,) m.
+    Gross errors: ``gcp_weight`` (g,) the weight of each GCP measurement in the level-2 fit (0:
+    removed as a gross error, at level 1 or 2; below 1: a robust loss' IRLS weight),
+    ``gcp_sigma_m`` (g,) its a priori sigma per ground axis (m: the surveyed coordinates' and the
+    measurement's, one pixel taken as the sub-scene's ground sample distance).
     """
 
     gcp_scene: Int[Array, " g"]
@@ -37,14 +41,17 @@ class Level2Data(eqx.Module):
     tie_scene: Int[Array, "t 2"]
     tie_xy: Float[Array, "t 2 2"]
     tie_h: Float[Array, " t"]
+    gcp_weight: Float[Array, " g"]
+    gcp_sigma_m: Float[Array, " g"]
 
 
 def level2_input(
-    strip: Strip, inp: Level1Input, block_of: np.ndarray
+    strip: Strip, inp: Level1Input, block_of: np.ndarray, gsd_m: np.ndarray | None = None
 ) -> tuple[Level2Data, dict[str, list[int]]]:
     """The :class:`Level2Data` of ``strip`` (``block_of`` (S,): the level-1 block of each
-    sub-scene) and the strip's observation rows of the GCP and check measurements
-    (``{"gcp": [...], "check": [...]}``)."""
+    sub-scene; ``gsd_m`` (S,): each sub-scene's ground sample distance, m, default 1) and the
+    strip's observation rows of the GCP and check measurements
+    (``{"gcp": [...], "check": [...]}``). Every GCP measurement has weight 1."""
     o, g = strip.observations, strip.ground
     index = {p: i for i, p in enumerate(g.ids)}
     scene = {n: k for k, n in enumerate(strip.names)}
@@ -62,6 +69,11 @@ def level2_input(
         return jnp.asarray(block_of[[scene[o.images[i]] for i in r]].astype(np.int64))
 
     gcp_scene = np.array([scene[o.images[i]] for i in rows["gcp"]], dtype=int)
+    gsd = np.ones(len(strip.names)) if gsd_m is None else np.asarray(gsd_m, dtype=float)
+    r_g = rows["gcp"]
+    surveyed = g.sigma_m[[index[o.point_ids[i]] for i in r_g]].reshape(-1, 3)[:, :2]
+    finite = np.where(np.isfinite(surveyed), surveyed, 0.0)
+    sigma = np.hypot(np.sqrt(np.mean(finite**2, axis=1)), o.sigma_px[r_g] * gsd[gcp_scene])
     groups = np.unique(gcp_scene)
     group = (gcp_scene[None, :] == groups[:, None]).astype(float).reshape(len(groups), -1)
 
@@ -76,4 +88,6 @@ def level2_input(
         tie_scene=jnp.asarray(block_of[t.scene[pair]].astype(np.int64)),
         tie_xy=jnp.asarray(t.xy[pair]),
         tie_h=jnp.asarray(inp.tie_lonlath[:, 2]),
+        gcp_weight=jnp.ones(len(r_g)),
+        gcp_sigma_m=jnp.asarray(sigma.reshape(-1)),
     ), rows

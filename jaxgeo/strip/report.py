@@ -23,6 +23,130 @@ from .universal import N_TERMS
 STAGES = ("direct", "level1", "level2")
 
 
+@dataclasses.dataclass(frozen=True)
+class GrossErrors:
+    """The gross errors found in a strip (:mod:`.snooping`).
+
+    ``flagged``: one entry per flagged observation, ``{level, image, id, what, w, removed}``
+    (``level`` 1 or 2; ``image`` the sub-scene; ``id`` the point (``tie_*`` a formed tie);
+    ``what`` ``"image"`` for a measurement, ``"ground"`` for a GCP's coordinates, ``"tie
+    height"`` for a tie's height prior (removed with its rays); ``w`` the
+    largest |standardised residual|; ``removed``: left out and re-solved). ``rounds``: re-solves
+    at each level; ``line_offsets``: the broken seams (:func:`.snooping.suspect_offsets`);
+    ``checks_excluded``: check points left out of the statistics because an observation of
+    theirs was flagged (check measurements are mono-plotted, not adjusted: only a check point
+    that is also measured in the adjustment can be).
+    """
+
+    flagged: list[dict]
+    rounds: dict
+    line_offsets: list[dict]
+    checks_excluded: tuple[str, ...] = ()
+    loss: str = "l2"
+
+    @property
+    def n_removed(self) -> int:
+        return sum(1 for f in self.flagged if f["removed"])
+
+    @classmethod
+    def collect(
+        cls, level1, l2, rows: dict, strip, line_offsets: list[dict], solver, tie_ids=()
+    ) -> GrossErrors:
+        """From the level-1 :class:`~jaxgeo.bundle.result.AdjustResult`, the level-2
+        :class:`~.snooping.Level2Snooping`, the ``solver`` (its loss and ``blunder_k``) and the
+        formed ties' ids."""
+        flagged = []
+        removed = level1.removed if level1.removed is not None else np.zeros(0, bool)
+        for i in np.flatnonzero(level1.blunders):
+            w = np.abs(np.nan_to_num(level1.standardized[i]))
+            flagged.append({"level": 1, "image": level1.observation_images[i],
+                            "id": level1.observation_ids[i], "what": "image",
+                            "w": float(w.max()), "removed": bool(removed[i])})  # fmt: skip
+        ties = set(tie_ids)
+        for p, w in zip(level1.gcp_flagged, level1.gcp_w, strict=True):
+            what = "tie height" if p in ties else "ground"  # a tie removed with its height prior
+            flagged.append({"level": 1, "image": None, "id": p, "what": what, "w": float(w),
+                            "removed": p in level1.gcp_removed})  # fmt: skip
+        o = strip.observations
+        new = l2.removed & ~l2.removed_level1
+        for j in np.flatnonzero(new | ((l2.w > solver.blunder_k) & ~l2.removed_level1)):
+            i = rows["gcp"][j]
+            flagged.append({"level": 2, "image": o.images[i], "id": o.point_ids[i],
+                            "what": "image", "w": float(l2.w[j]),
+                            "removed": bool(new[j])})  # fmt: skip
+        bad = {f["id"] for f in flagged}
+        role = dict(zip(strip.ground.ids, strip.ground.role, strict=True))
+        checks = tuple(sorted(p for p in bad if role.get(p) == "check"))
+        return cls(flagged, {"level1": int(level1.snooping_rounds), "level2": int(l2.rounds)},
+                   list(line_offsets), checks, solver.loss)  # fmt: skip
+
+    def to_dict(self) -> dict:
+        return {
+            "loss": self.loss,
+            "n_flagged": len(self.flagged),
+            "n_removed": self.n_removed,
+            "flagged": self.flagged,
+            "snooping_rounds": self.rounds,
+            "line_offsets": self.line_offsets,
+            "checks_excluded": list(self.checks_excluded),
+        }
+
+    def format(self) -> str:
+        """Plain-text lines: the flagged observations (worst first), the broken seams."""
+        lines = []
+        if self.flagged:
+            gone = self.n_removed
+            lines.append(
+                f"gross errors: {len(self.flagged)} observations flagged (|w| > k), {gone} removed "
+                f"and re-solved (rounds: level 1 {self.rounds['level1']}, level 2 "
+                f"{self.rounds['level2']}):"
+            )
+            for f in sorted(self.flagged, key=lambda f: -f["w"]):
+                where = f"@{f['image']}" if f["image"] else f" ({f['what']})"
+                how = "removed" if f["removed"] else "flagged only"
+                lines.append(f"  level {f['level']}: {f['id']}{where}  w = {f['w']:.1f}  {how}")
+        else:
+            lines.append("gross errors: none flagged")
+        if self.checks_excluded:
+            lines.append(f"check points excluded from the statistics (an observation flagged): "
+                         f"{len(self.checks_excluded)}")  # fmt: skip
+        if self.line_offsets:
+            lines.append(line_offset_message(self.line_offsets))
+        return "\n".join(lines)
+
+
+def line_offset_message(suspects: list[dict]) -> str:
+    """The broken seams (:func:`.snooping.suspect_offsets`) in words, one sentence per
+    sub-scene named (or per seam where every sub-scene after it is shifted)."""
+    parts, done = [], set()
+    for s in suspects:
+        seam = (f"{s['a']} | {s['b']}: {s['col_px']:+.1f} px (columns), {s['row_px']:+.1f} px "
+                "(rows)")  # fmt: skip
+        if s["scene"] is None:
+            parts.append(
+                f"the vendor RPCs disagree at the formed ties of {seam} beyond the strip's other "
+                "seams: the line offsets (first_line) of every sub-scene from there on look "
+                "shifted alike"
+            )
+            continue
+        if s["scene"] in done:
+            continue
+        done.add(s["scene"])
+        own = [x for x in suspects if x["scene"] == s["scene"]]
+        lines = np.mean([x["row_px"] if x["b"] == s["scene"] else -x["row_px"] for x in own])
+        seams = "; ".join(
+            f"{x['a']} | {x['b']}: {x['col_px']:+.1f} px (columns), {x['row_px']:+.1f} px (rows)"
+            for x in own
+        )
+        parts.append(
+            f"the line offset (first_line) of {s['scene']} is probably wrong by {lines:+.0f} "
+            f"lines (too {'large' if lines > 0 else 'small'}): the vendor RPCs disagree at its "
+            f"formed ties ({seams}) beyond the strip's other seams; its bias absorbs the shift, "
+            "which no residual shows (its check points are off); correct its first_line"
+        )
+    return ". ".join(parts)
+
+
 def _rms(x: np.ndarray) -> float:
     x = np.asarray(x, dtype=float)
     return float(np.sqrt(np.mean(x**2))) if x.size else float("nan")
@@ -43,6 +167,7 @@ class StripReport:
     pairs: list[dict]
     strip: dict
     rows: dict = dataclasses.field(repr=False, default_factory=dict)
+    gross: GrossErrors | None = dataclasses.field(repr=False, default=None)
 
     def to_dict(self) -> dict:
         return {"strip": self.strip, "scenes": self.scenes, "pairs": self.pairs}
@@ -67,11 +192,13 @@ class StripReport:
             lines.append(f"{p['a'] + ' | ' + p['b']:<31} {p['n_ties']:5d} {cells}")
         s = self.strip
         lines.append("")
+        n_out = s.get("n_check_excluded", 0)
+        excl = f", {n_out} excluded: an observation flagged" if n_out else ""
         for st in STAGES:
             c, g = s["check_rms_m"][st], s["tie_gap_m"][st]
             lines.append(
                 f"whole strip, {st:<7}: check RMS E {c['e']:.2f} N {c['n']:.2f} plan "
-                f"{c['plan']:.2f} m ({s['n_check']} checks); tie gap RMS {g['rms']:.3f} max "
+                f"{c['plan']:.2f} m ({s['n_check']} checks{excl}); tie gap RMS {g['rms']:.3f} max "
                 f"{g['max']:.3f} m ({s['n_ties']} ties)"
             )
         lines.append(
@@ -85,6 +212,8 @@ class StripReport:
             "level 2, GCP scenes left out in turn, RMS (m): "
             + ", ".join(f"{d} {v:.2f}" for d, v in cv.items())
         )
+        if self.gross is not None:
+            lines.append(self.gross.format())
         return "\n".join(lines)
 
 
@@ -135,15 +264,22 @@ def whole(errors: Mapping[str, np.ndarray], gaps: Mapping[str, np.ndarray]) -> d
     }
 
 
-def strip_report(strip, sol, ev, rows: dict, inp, unknowns: int, degree: str) -> StripReport:
+def strip_report(
+    strip, sol, ev, rows: dict, inp, unknowns: int, degree: str, gross: GrossErrors | None = None
+) -> StripReport:
     """The :class:`StripReport` of a :func:`~.solve.two_level` solution ``sol``; ``rows``:
-    the strip's observation rows of the GCP and check measurements (``{"gcp": [...], ...}``)."""
+    the strip's observation rows of the GCP and check measurements (``{"gcp": [...], ...}``);
+    ``gross``: the gross errors found (check points in ``gross.checks_excluded`` are left out of
+    the check statistics; ``n_check_excluded`` says how many measurements)."""
     o = strip.observations
-    check_scene = np.array([strip.scene_index(o.images[i]) for i in rows["check"]], dtype=int)
+    out = set(gross.checks_excluded) if gross is not None else set()
+    use = np.array([o.point_ids[i] not in out for i in rows["check"]], dtype=bool)
+    check_rows = [i for i, u in zip(rows["check"], use, strict=True) if u]
+    check_scene = np.array([strip.scene_index(o.images[i]) for i in check_rows], dtype=int)
     errors = {
-        "direct": np.asarray(ev.check_error_before_m),
-        "level1": np.asarray(ev.check_error_level1_m),
-        "level2": np.asarray(ev.check_error_level2_m),
+        "direct": np.asarray(ev.check_error_before_m)[use],
+        "level1": np.asarray(ev.check_error_level1_m)[use],
+        "level2": np.asarray(ev.check_error_level2_m)[use],
     }
     gaps = {
         "direct": np.asarray(ev.tie_gap_before_m),
@@ -160,6 +296,7 @@ def strip_report(strip, sol, ev, rows: dict, inp, unknowns: int, degree: str) ->
         "n_check": int(len(errors["level1"])),
         "n_ties": int(inp.ties.n_ties),
         "n_gcp": int(len(g2)),
+        "n_check_excluded": int(np.sum(~use)),
         "gcp_scenes": [strip.names[k] for k in gcp_scenes],
         "s0": float(s.s0),
         "steps": int(s.num_steps),
@@ -169,10 +306,12 @@ def strip_report(strip, sol, ev, rows: dict, inp, unknowns: int, degree: str) ->
             zip(N_TERMS, map(float, np.asarray(sol.cv_rms_m)), strict=True)
         ),
         **whole(errors, gaps),
+        "gross_errors": gross.to_dict() if gross is not None else None,
     }
     return StripReport(
         scene_rows(strip.names, gcp_scenes, check_scene, errors),
         pair_rows(strip.names, inp.ties.pair, gaps),
         info,
         rows,
+        gross,
     )

@@ -14,7 +14,7 @@ from .delivery import Strip
 from .distribution import DistributionCheck
 from .level1 import Level1Input
 from .level2 import Level2Data
-from .report import StripReport
+from .report import GrossErrors, StripReport
 from .solve import Evaluation, TwoLevelSolution
 from .universal import UniversalCorrection, UniversallyCorrected
 
@@ -28,7 +28,9 @@ class StripResult:
     sigmas, s0, tie residuals); ``correction``: the universal correction; ``report``: per
     sub-scene absolute accuracy and continuity (:class:`~.report.StripReport`); ``solution``:
     the raw arrays of :func:`~.solve.two_level`; ``config``: the configuration it ran with;
-    ``timings_s``: setup, and the first (compiling) call of both levels.
+    ``timings_s``: setup, and the first (compiling) call of both levels; ``gross_errors``: the
+    observations flagged (and removed) at both levels and the broken seams
+    (:class:`~.report.GrossErrors`).
     """
 
     strip: Strip
@@ -43,6 +45,7 @@ class StripResult:
     inputs: Level1Input = dataclasses.field(repr=False)
     data: Level2Data = dataclasses.field(repr=False)
     timings_s: dict = dataclasses.field(default_factory=dict)
+    gross_errors: GrossErrors | None = None
 
     @property
     def setup(self) -> Setup:

@@ -6,7 +6,9 @@ with its level-1 model at the GCP's surveyed height, fits the universal correcti
 eq. 12-13 to the differences, and applies it; check points are localised the same way (mono-
 plotting at their surveyed height, as an ortho does) before and after the correction.
 Everything happens inside :func:`two_level`, so a batch of strips (or Monte-Carlo draws of one
-strip's measurements) is one ``vmap`` of one compiled function.
+strip's measurements) is one ``vmap`` of one compiled function. Gross errors are found around
+it, host side (:mod:`.snooping`): the level-1 observations removed enter as masks, the level-2
+GCP measurements removed as zero weights (``Level2Data.gcp_weight``).
 """
 
 from __future__ import annotations
@@ -14,7 +16,7 @@ from __future__ import annotations
 import equinox as eqx
 import jax
 import jax.numpy as jnp
-from jaxtyping import Array, Float, Int
+from jaxtyping import Array, Bool, Float, Int
 
 from ..bundle import solve as bundle_solve
 from ..bundle.config import SolverConfig
@@ -92,27 +94,30 @@ def degree_index(degree: str | Int[Array, ""]) -> Int[Array, ""]:
     return jnp.asarray(degree)
 
 
-def two_level(
+def level_two(
     problem: Problem,
     data: Level2Data,
+    level1: bundle_solve.Solution,
     degree: str | Int[Array, ""] = "quadratic",
-    solver: SolverConfig = STRIP_SOLVER,
 ) -> TwoLevelSolution:
-    """Level 1 (bundle adjustment of ``problem`` with ``solver``, one model group of
-    single-image blocks, one block per sub-scene in strip order) then level 2 (universal
-    correction from the GCPs; ``degree`` one of ``universal.N_TERMS`` or ``"auto"``: the one
-    with the lowest leave-one-GCP-scene-out error; or its :func:`degree_index`)."""
+    """Level 2 on a level-1 solution: every GCP measurement localised with its level-1 model at
+    the GCP's surveyed height, the universal correction fitted to them with the weights
+    ``data.gcp_weight`` (``degree`` one of ``universal.N_TERMS`` or ``"auto"``: the one with the
+    lowest leave-one-GCP-scene-out error; or its :func:`degree_index`)."""
     (group,) = problem.groups
-    sol = bundle_solve.solve(problem, solver)
-    adjusted = group.blocks(sol.theta[0])
+    adjusted = group.blocks(level1.theta[0])
+    w = data.gcp_weight
     gcp1 = localize_in(adjusted, data.gcp_scene, data.gcp_xy, data.gcp_lonlath[:, 2])
-    cv = cross_validate(gcp1, data.gcp_lonlath, data.gcp_group, metres_per_unit(gcp1))
+    # the degrees are compared on the GCPs kept, unweighted: a robust loss' weights belong to
+    # one degree's fit, and would make the comparison depend on the degree that chose them
+    keep = (w > 0).astype(gcp1.dtype)
+    cv = cross_validate(gcp1, data.gcp_lonlath, data.gcp_group, metres_per_unit(gcp1), keep)
     wanted = degree_index(degree)  # -1: auto, the degree that best predicts GCP scenes left out
     index = jnp.where(wanted < 0, jnp.argmin(jnp.where(jnp.isfinite(cv), cv, jnp.inf)), wanted)
-    fits = [fit_correction(gcp1, data.gcp_lonlath, d) for d in N_TERMS]
+    fits = [fit_correction(gcp1, data.gcp_lonlath, d, weight=w) for d in N_TERMS]
     corr = jax.tree.map(lambda *c: jnp.stack(c)[index], *fits)
     return TwoLevelSolution(
-        level1=sol,
+        level1=level1,
         correction=corr,
         cv_rms_m=cv,
         degree_index=index,
@@ -120,6 +125,26 @@ def two_level(
         gcp_error_level1_m=en_error_m(gcp1, data.gcp_lonlath),
         gcp_error_level2_m=en_error_m(corr.apply(gcp1), data.gcp_lonlath),
     )
+
+
+def two_level(
+    problem: Problem,
+    data: Level2Data,
+    degree: str | Int[Array, ""] = "quadratic",
+    solver: SolverConfig = STRIP_SOLVER,
+    *,
+    removed_image: Bool[Array, " M"] | None = None,
+    removed_ground: Bool[Array, " c"] | None = None,
+) -> TwoLevelSolution:
+    """Level 1 (bundle adjustment of ``problem`` with ``solver``, robust loss included, one
+    model group of single-image blocks, one block per sub-scene in strip order; the
+    ``removed_*`` observations out, as :func:`jaxgeo.bundle.solve.solve` takes them) then
+    :func:`level_two`. One pure function (jit, vmap); the data snooping that finds what to
+    remove runs around it (:func:`~.adjustment.adjust_strip`)."""
+    sol = bundle_solve.solve(
+        problem, solver, removed_image=removed_image, removed_ground=removed_ground
+    )
+    return level_two(problem, data, sol, degree)
 
 
 def evaluate(problem: Problem, data: Level2Data, sol: TwoLevelSolution) -> Evaluation:
@@ -142,6 +167,7 @@ def evaluate(problem: Problem, data: Level2Data, sol: TwoLevelSolution) -> Evalu
 
 
 two_level_jit = eqx.filter_jit(two_level)
+level_two_jit = eqx.filter_jit(level_two)
 evaluate_jit = eqx.filter_jit(evaluate)
 
 

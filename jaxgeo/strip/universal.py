@@ -152,18 +152,21 @@ def fit_correction(
 ) -> UniversalCorrection:
     """The least-squares fit of eq. 12-13 as a pure jax function (jit, vmap), no checks.
 
-    ``weight`` (n,) 0/1 masks GCPs out (e.g. padding in a batch); see
-    :func:`fit_universal_correction` for the checked numpy entry point.
+    ``weight`` (n,) >= 0 the GCPs' weights in the normal equations (0 masks a GCP out, e.g. a
+    gross error or padding in a batch); see :func:`fit_universal_correction` for the checked
+    numpy entry point.
     """
     k = N_TERMS[degree]
     w = jnp.ones(level1.shape[0]) if weight is None else weight
     if k == 0:
         return UniversalCorrection(jnp.zeros((2, 6)), jnp.zeros(2), jnp.ones(2))
     latlon = level1[:, jnp.array([1, 0])]
-    offset = jnp.sum(w[:, None] * latlon, axis=0) / jnp.sum(w)
-    scale = jnp.maximum(jnp.max(w[:, None] * jnp.abs(latlon - offset), axis=0), 1e-9)
-    t = _terms(*((latlon - offset) / scale).T)[:, :k] * w[:, None]
-    d = (truth - level1)[:, jnp.array([1, 0])] * w[:, None]  # (dlat, dlon)
+    on = (w > 0).astype(latlon.dtype)  # the normalisation: the extent of the GCPs used
+    offset = jnp.sum(on[:, None] * latlon, axis=0) / jnp.maximum(jnp.sum(on), 1.0)
+    scale = jnp.maximum(jnp.max(on[:, None] * jnp.abs(latlon - offset), axis=0), 1e-9)
+    root = jnp.sqrt(w)[:, None]  # rows scaled by sqrt(w): weight w in the normal equations
+    t = _terms(*((latlon - offset) / scale).T)[:, :k] * root
+    d = (truth - level1)[:, jnp.array([1, 0])] * root  # (dlat, dlon)
     sol = _normal_solve(t, d)
     coeffs = jnp.zeros((2, 6)).at[:, :k].set(sol.T)
     return UniversalCorrection(coeffs, offset, scale)
@@ -202,18 +205,22 @@ def cross_validate(
     truth: Float[Array, "n 3"],
     groups: Float[Array, "G n"],
     metres_per_unit: Float[Array, "n 3"],
+    weight: Float[Array, " n"] | None = None,
 ) -> Float[Array, " d"]:
     """Leave-one-group-out RMS (m, planimetric) of every degree of :data:`N_TERMS`, in order.
 
     ``groups`` (G, n) 0/1: the GCPs of each sub-scene with GCPs; each group is predicted by the
     correction fitted to all the others -- how well the correction carries to scenes without
-    GCPs, which is what level 2 is for. Pure jax.
+    GCPs, which is what level 2 is for. ``weight`` (n,): the GCPs' weights (0: a gross error,
+    neither fitted nor predicted). Pure jax.
     """
+    w = jnp.ones(level1.shape[0]) if weight is None else weight
+    groups = groups * (w > 0)
     n_left = jnp.maximum(jnp.sum(groups), 1.0)
 
     def one(degree):
         def left_out(g):
-            corr = fit_correction(level1, truth, degree, weight=1.0 - g)
+            corr = fit_correction(level1, truth, degree, weight=w * (1.0 - g))
             err = (corr.apply(level1) - truth)[:, :2] * metres_per_unit[:, :2]
             return jnp.sum(g * jnp.sum(err**2, axis=-1))
 

@@ -36,7 +36,8 @@ def case():
     strip = Strip.from_simulation(carto2s_strip(4, seed=1))
     with warnings.catch_warnings():  # level 2 (not compared here) on 2 GCP scenes
         warnings.filterwarnings("ignore", message=".*universal correction")
-        res = adjust_strip(strip, StripConfig(ties=TieConfig(per_pair=10)))
+        config = StripConfig(ties=TieConfig(per_pair=10), solver=sb.least_squares_solver())
+        res = adjust_strip(strip, config)
     return res, sb.problem_dict(res)
 
 

@@ -12,7 +12,7 @@ import rasterio
 from affine import Affine as GeoTransform
 
 from jaxgeo.cli import main
-from jaxgeo.io import read_ground, read_observations, read_rpc
+from jaxgeo.io import read_ground, read_observations, read_rpc, write_observations
 from jaxgeo.models import Affine, Biased
 from jaxgeo.simulate import carto2s_strip
 from jaxgeo.strip import UniversalCorrection, UniversallyCorrected
@@ -213,3 +213,37 @@ def test_dem_tie_heights(strip_dir, adjusted, tmp_path, capsys):
     assert main(["strip", str(strip_dir), "--dem", str(short)]) == 2
     err = capsys.readouterr().err
     assert f"{short}: " in err and "points lie outside the DEM" in err
+
+
+def test_gross_error_named_and_removed(strip_dir, adjusted, tmp_path, capsys):
+    """A GCP measurement 60 px off: listed (point, sub-scene, w) and removed by default, flagged
+    only with --keep-blunders; the clean run flags nothing. The options mirror jaxgeo adjust."""
+    assert "gross errors: none flagged" in adjusted[1]
+    from jaxgeo.cli import build_parser
+    from jaxgeo.cli.strip import strip_config
+
+    args = build_parser("strip").parse_args(
+        ["strip", str(strip_dir), "--loss", "huber", "--loss-scale", "2", "--keep-blunders"]
+    )
+    solver = strip_config(args)[0].solver
+    assert (solver.loss, solver.loss_scale, solver.remove_blunders) == ("huber", 2.0, False)
+    d = tmp_path / "s"
+    shutil.copytree(strip_dir, d)
+    obs = read_observations(d / "observations.csv")
+    ground = read_ground(d / "ground.csv")
+    role = dict(zip(ground.ids, ground.role, strict=True))
+    i = next(k for k, p in enumerate(obs.point_ids) if role[p] == "gcp")
+    xy = obs.xy.copy()
+    xy[i] += [36.0, -48.0]
+    bad = type(obs)(obs.point_ids, obs.images, xy, obs.sigma_px)
+    write_observations(bad, d / "observations.csv", overwrite=True)
+    for extra, removed in (([], True), (["--keep-blunders"], False)):
+        assert main(["strip", str(d), "--json", *extra]) == 0
+        gross = json.loads(capsys.readouterr().out)["report"]["strip"]["gross_errors"]
+        worst = max((f for f in gross["flagged"] if f["what"] == "image"), key=lambda f: f["w"])
+        assert (worst["id"], worst["image"], worst["level"]) == (obs.point_ids[i], obs.images[i], 1)
+        assert worst["w"] > 10 and worst["removed"] is removed
+        assert gross["n_removed"] == (1 if removed else 0)
+    assert main(["strip", str(d)]) == 0
+    text = capsys.readouterr().out
+    assert f"level 1: {obs.point_ids[i]}@{obs.images[i]}" in text and "removed" in text
