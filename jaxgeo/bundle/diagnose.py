@@ -91,10 +91,13 @@ def directions(
     loss: str = "l2",
     loss_scale: float = 3.0,
     rtol: float = SINGULAR_RTOL,
+    weakest: bool = False,
 ) -> list[Direction]:
     """The undetermined directions of the camera parameters at ``y`` (arguments as
     :func:`undetermined`), each with the point motion that absorbs it; empty when ``S`` is
-    regular (or a point block is singular: :func:`undetermined` names those)."""
+    regular (or a point block is singular: :func:`undetermined` names those), unless
+    ``weakest``: then the least determined direction (a nearly singular ``S``, e.g. a shift
+    that only the terrain relief of the tie points determines)."""
     y = y if y is not None else initial_unknowns(problem)
     v, big_s, w = (np.asarray(x) for x in _normal_matrices(problem, y, loss, float(loss_scale)))
     st = problem.structure
@@ -105,8 +108,11 @@ def directions(
     d = np.diag(s).copy()
     d = np.where(d > 0, d, 1.0)
     ev, vec = np.linalg.eigh(s / np.sqrt(np.outer(d, d)))
+    null = ev < rtol * ev[-1]
+    if weakest and not null.any():
+        null[0] = True
     out = []
-    for k in np.flatnonzero(ev < rtol * ev[-1]):
+    for k in np.flatnonzero(null):
         c = vec[:, k] / np.sqrt(d)
         c = c / c[np.argmax(np.abs(c))]
         c[np.abs(c) < 1e-9] = 0.0

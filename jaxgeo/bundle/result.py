@@ -170,6 +170,7 @@ def finish(
                 loss=solver.loss,
                 loss_scale=solver.loss_scale,
                 rtol=1.0 / INFLATION_MAX,
+                weakest=True,
             )
             how = tuple(explain(d, setup.param_names) for d in found)
         raise_singular(setup, bad_params, bad_points, how=how)
