@@ -203,7 +203,7 @@ def make_structure(
         pair_b=jnp.asarray(pair_b),
         pair_point=jnp.asarray(obs_point[pair_a]),
         obs_block=jnp.asarray(obs_block),
-        all_block_params=jnp.asarray(all_params.reshape(-1, width)),
+        all_block_params=jnp.asarray(all_params),
         pair_blocks=jnp.asarray(pair_blocks.reshape(-1, 2).astype(np.int64)),
         pair_seg=jnp.asarray(pair_seg.reshape(-1).astype(np.int64)),
         n_params=n_params,
