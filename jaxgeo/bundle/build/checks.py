@@ -69,7 +69,7 @@ def check_observations(
     names = np.asarray(obs.images, dtype=object)
     known = np.isin(names, np.asarray(list(images), dtype=object)) if len(names) else names
     ok = np.all(np.isfinite(xy), axis=1) & np.isfinite(sigma_px) & (sigma_px > 0) & known
-    for i in np.flatnonzero(~ok):  # the messages, for the (few) observations at fault
+    for i in np.flatnonzero(~ok).tolist():  # the messages, for the (few) observations at fault
         pid, img = obs.point_ids[i], obs.images[i]
         if img not in images:
             raise AdjustmentError(
@@ -267,7 +267,7 @@ def check_domains(
             norm = np.abs(lonlath[gk[sel][has_g]] - goff) / gscale
             bad[np.flatnonzero(has_g)] |= np.any(norm > DOMAIN_TOLERANCE, axis=1)
         suspect[sel[bad]] = True
-    for i in np.flatnonzero(suspect):
+    for i in np.flatnonzero(suspect).tolist():
         pid, img = obs.point_ids[i], obs.images[i]
         rpc = frames.get(img)
         if rpc is None:
