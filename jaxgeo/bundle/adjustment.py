@@ -98,6 +98,8 @@ def adjust(
     solver: SolverConfig = DEFAULT_SOLVER,
     check: bool = False,
     sources: Sources | None = None,
+    tie_height: Any = None,
+    tie_height_sigma_m: float = 10.0,
 ) -> AdjustResult:
     """Bundle block adjustment.
 
@@ -125,6 +127,11 @@ def adjust(
 
         sources: the files and lines the tables were read from, named in messages
             (:class:`~.build.checks.Sources`; :func:`adjust_files` fills it).
+        tie_height: heights ``f(lonlat (n, 2)) -> (n,)`` m, e.g. a DEM
+            (:func:`jaxgeo.io.read_dem`): every tie point gets its height at its initial
+            position as an observation of sigma ``tie_height_sigma_m`` (m); this fixes what the
+            ties leave open against the tie heights (e.g. an image's shift along the
+            epipolar direction, the along-track parallax of a pair).
 
     Pre-flight checks (:mod:`~.build.checks`) refuse, naming the observation or point (and
     file and line with ``sources``): a point measured twice in one image, a ground id given
@@ -145,6 +152,8 @@ def adjust(
         initial=initial,
         check_control=check,
         sources=sources,
+        tie_height=tie_height,
+        tie_height_sigma_m=tie_height_sigma_m,
     )
     sol, rem_i, rem_g, rounds = snoop(setup, solver)
     return finish(setup, sol, observations, ground, solver, (rem_i, rem_g), rounds)
@@ -271,10 +280,13 @@ def adjust_files(
     bias_prior_shift_px: float | None = None,
     bias_prior_matrix: float | None = None,
     direct_roles: Sequence[str] = ("gcp", "check"),
+    dem: Any = None,
+    tie_height_sigma_m: float = 10.0,
 ) -> FileAdjustment:
     """Read the RPC files (image name -> path), OBS.csv and GROUND.csv, adjust with an image
     bias per image (a name of :data:`BIAS_CHOICES`; optional priors on it,
-    :func:`bias_prior_sigma`), and intersect the ``direct_roles`` points
+    :func:`bias_prior_sigma`; tie heights from ``dem``, a :class:`~jaxgeo.io.dem.DEM`, with
+    sigma ``tie_height_sigma_m``), and intersect the ``direct_roles`` points
     with the given RPCs for comparison (tables 3 and 4 of 000_)."""
     if bias not in BIAS_CHOICES:
         raise ValueError(f"unknown bias {bias!r}; expected one of {', '.join(BIAS_CHOICES)}")
@@ -290,9 +302,13 @@ def adjust_files(
     if bias != "none":
         models = with_bias(models, bias)
     prior = bias_prior_sigma(models, bias_prior_shift_px, bias_prior_matrix)
-    result = adjust(models, obs, points, prior_sigma=prior, solver=solver, sources=sources)
+    result = adjust(
+        models, obs, points, prior_sigma=prior, solver=solver, sources=sources, tie_height=dem,
+        tie_height_sigma_m=tie_height_sigma_m,
+    )  # fmt: skip
     direct = None
     if points is not None and len(models) >= 2:
         direct = direct_georeferencing(models, obs, points, roles=tuple(direct_roles))
     inputs = [*images.values(), observations] + ([ground] if ground is not None else [])
+    inputs += [dem.path] if dem is not None and hasattr(dem, "path") else []
     return FileAdjustment(result, direct, bias, tuple(pathlib.Path(p) for p in inputs))

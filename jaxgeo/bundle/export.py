@@ -103,15 +103,65 @@ FIXED_OUTPUTS = (
 )  # fmt: skip
 
 
+def rpc_plans(
+    images: Mapping[str, str | os.PathLike],
+    out: pathlib.Path,
+    rpc_format: str = "txt",
+    copy_images: bool = False,
+    write_into: bool = False,
+) -> dict[str, Any]:
+    """Image name -> where its adjusted RPC goes (:func:`~jaxgeo.io.rpc_place.plan_rpc_outputs`;
+    two images of the same stem are written under their image names)."""
+    stems = {name: image_stem(path) for name, path in images.items()}
+    clash = {s for s in stems.values() if list(stems.values()).count(s) > 1}
+    return {
+        name: plan_rpc_outputs(
+            name,
+            images[name],
+            out,
+            rpc_format,
+            stem=name if stems[name] in clash else None,
+            copy_image=copy_images,
+            write_into=write_into,
+        )  # fmt: skip
+        for name in images
+    }
+
+
+def output_paths(
+    out_dir: str | os.PathLike,
+    images: Mapping[str, str | os.PathLike] | Iterable[str],
+    rpc_format: str = "txt",
+    copy_images: bool = False,
+    write_into: bool = False,
+) -> list[pathlib.Path]:
+    """Every file :func:`write_outputs` may write: the fixed outputs and, per image, its RPC
+    (and image copy) as planned from ``images`` (name -> file), or ``NAME_adjusted_RPC.TXT``
+    when only names are given."""
+    out = pathlib.Path(out_dir)
+    paths = [out / n for n in FIXED_OUTPUTS]
+    if isinstance(images, Mapping):
+        plans = rpc_plans(images, out, rpc_format, copy_images, write_into)
+        paths += [p for plan in plans.values() for p in plan.targets]
+    else:
+        paths += [out / f"{n}_adjusted_RPC.TXT" for n in images]
+    return paths
+
+
 def check_out_dir(
     out_dir: str | os.PathLike,
-    image_names: Iterable[str],
+    images: Mapping[str, str | os.PathLike] | Iterable[str],
     inputs: Iterable[str | os.PathLike] = (),
     overwrite: bool = False,
+    rpc_format: str = "txt",
+    copy_images: bool = False,
+    write_into: bool = False,
 ) -> None:
     """Before any computation: ``out_dir`` is (or can be created as) a writable folder, and no
-    file :func:`write_outputs` may write is an input or (unless ``overwrite``) exists. Raises
-    ``FileExistsError`` / ``PermissionError`` / ``NotADirectoryError`` naming the path."""
+    file :func:`write_outputs` will write (:func:`output_paths`, with the same ``images`` and
+    options) is an input or (unless ``overwrite``) exists. Raises ``FileExistsError`` /
+    ``PermissionError`` / ``NotADirectoryError`` naming the path, ``ValueError`` when an image
+    to copy is not found."""
     out = pathlib.Path(out_dir)
     if out.exists() and not out.is_dir():
         raise NotADirectoryError(f"{out}: --out exists and is not a folder")
@@ -122,10 +172,9 @@ def check_out_dir(
             break
     if not os.access(base, os.W_OK | os.X_OK):
         raise PermissionError(f"{out}: cannot write there ({base} is not writable)")
-    names = [*FIXED_OUTPUTS, *(f"{n}_adjusted_RPC.TXT" for n in image_names)]
     given = {pathlib.Path(p).resolve() for p in inputs}
-    for name in names:
-        path = (out / name).resolve()
+    for target in output_paths(out, images, rpc_format, copy_images, write_into):
+        path = target.resolve()
         if path in given:
             raise FileExistsError(f"{path}: refusing to write an adjusted file over an input")
         if path.exists() and not overwrite:
@@ -222,8 +271,8 @@ def write_outputs(
 def _place_rpcs(result, images, out, rpc_format, copy_images, write_into, report):
     """Plan every image's adjusted RPC (exact or refitted) before anything is written."""
     delivered = delivered_rpcs(result)
-    stems = {name: image_stem(images[name]) for name in result.models}
-    clash = {s for s in stems.values() if list(stems.values()).count(s) > 1}
+    plans = rpc_plans({n: images[n] for n in result.models}, out, rpc_format, copy_images,
+                      write_into)  # fmt: skip
     placed, notes, info = [], [], {}
     for name, model in result.models.items():
         try:
@@ -232,11 +281,7 @@ def _place_rpcs(result, images, out, rpc_format, copy_images, write_into, report
             notes.append(f"{name}: no RPC written ({e})")
             info[name] = {"how": "none", "reason": str(e)}
             continue
-        plan = plan_rpc_outputs(
-            name, images[name], out, rpc_format,
-            stem=name if stems[name] in clash else None,  # same stem twice: the image names
-            copy_image=copy_images, write_into=write_into,
-        )  # fmt: skip
+        plan = plans[name]
         placed.append((rpc, plan))
         where = ", ".join(p.name for p in plan.targets)
         notes.append(f"{name} -> {where}: {how}" + (
@@ -251,5 +296,7 @@ __all__ = [
     "delivered_rpcs",
     "format_reports",
     "models_json",
+    "output_paths",
+    "rpc_plans",
     "write_outputs",
 ]

@@ -15,7 +15,10 @@ class ImageObs(eqx.Module):
     """Image measurements of image ``slot`` of the blocks of group ``group``.
 
     ``block`` (m,) block index in the group, ``point`` (m,) ground point index, ``xy`` (m, 2) px,
-    ``weight`` (m,) = 1 / sigma_px.
+    ``weight`` (m,) = 1 / sigma_px. ``block_start``: when the observations are sorted by block,
+    the (static) first observation of each block and the end, ``(n_blocks + 1,)``: the
+    residuals are then evaluated block by block on slices (no per-observation copy of the
+    model); empty otherwise.
     """
 
     block: Int[Array, " m"]
@@ -24,6 +27,7 @@ class ImageObs(eqx.Module):
     weight: Float[Array, " m"]
     group: int = eqx.field(static=True)
     slot: int = eqx.field(static=True)
+    block_start: tuple[int, ...] = eqx.field(static=True, default=())
 
 
 class GroundObs(eqx.Module):

@@ -99,6 +99,13 @@ class Structure(eqx.Module):
     with ``n_params`` (a dummy slot); ``obs_point`` (M,); ``block_params``: per group
     ``(n_blocks, P)``; ``pair_a, pair_b`` (K,): every ordered pair of observations of one point,
     ``pair_point`` (K,) that point; ``ground_point`` (c,) the point of each ground observation.
+
+    For assembling the normal equations without scalar scatter-adds (slow on CPU: one atomic
+    add per element of ``(M, P, P)``), the blocks are also numbered globally: ``obs_block``
+    (M,) the global block of each observation, ``all_block_params`` (B, P) the parameter
+    indices of every block (groups in order), ``pair_blocks`` (Q, 2) the distinct (block of
+    ``a``, block of ``b``) of the pairs and ``pair_seg`` (K,) the index of a pair's among them:
+    products are summed per block (pair) first (``segment_sum``), then added to the matrix.
     """
 
     obs_params: Int[Array, "M P"]
@@ -108,6 +115,10 @@ class Structure(eqx.Module):
     pair_a: Int[Array, " K"]
     pair_b: Int[Array, " K"]
     pair_point: Int[Array, " K"]
+    obs_block: Int[Array, " M"]
+    all_block_params: Int[Array, "B P"]
+    pair_blocks: Int[Array, "Q 2"]
+    pair_seg: Int[Array, " K"]
     n_params: int = eqx.field(static=True)
     width: int = eqx.field(static=True)
     n_points: int = eqx.field(static=True)
@@ -176,6 +187,13 @@ def make_structure(
         jnp.asarray(param_index(g, np.arange(grp.n_blocks))) for g, grp in enumerate(groups)
     )
     pair_a, pair_b = observation_pairs(obs_point, n_points)
+    block_offsets = np.concatenate([[0], np.cumsum([g.n_blocks for g in groups])]).astype(int)
+    obs_block = [block_offsets[ob.group] + np.asarray(ob.block) for ob in images]
+    obs_block = np.concatenate(obs_block).astype(np.int64) if obs_block else np.zeros(0, int)
+    all_params = [param_index(g, np.arange(grp.n_blocks)) for g, grp in enumerate(groups)]
+    all_params = np.concatenate(all_params) if all_params else np.zeros((0, width), np.int64)
+    pairs = np.stack([obs_block[pair_a], obs_block[pair_b]], axis=1).reshape(-1, 2)
+    pair_blocks, pair_seg = np.unique(pairs, axis=0, return_inverse=True)
     return Structure(
         obs_params=jnp.asarray(obs_params),
         obs_point=jnp.asarray(obs_point),
@@ -184,6 +202,10 @@ def make_structure(
         pair_a=jnp.asarray(pair_a),
         pair_b=jnp.asarray(pair_b),
         pair_point=jnp.asarray(obs_point[pair_a]),
+        obs_block=jnp.asarray(obs_block),
+        all_block_params=jnp.asarray(all_params),
+        pair_blocks=jnp.asarray(pair_blocks.reshape(-1, 2).astype(np.int64)),
+        pair_seg=jnp.asarray(pair_seg.reshape(-1).astype(np.int64)),
         n_params=n_params,
         width=width,
         n_points=n_points,

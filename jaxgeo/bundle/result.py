@@ -17,8 +17,8 @@ import numpy as np
 from ..io.tables import GroundPoints, Observations
 from .build import Setup
 from .config import DEFAULT_SOLVER, SolverConfig
-from .covariance import undetermined_unknowns
-from .diagnose import undetermined
+from .covariance import INFLATION_MAX, undetermined_unknowns
+from .diagnose import directions, explain, undetermined
 from .errors import (
     RESULTS,
     S0_WARN,
@@ -108,17 +108,26 @@ class AdjustResult:
         return self.ground[j], self.ground_sigma_m[j]
 
 
-def raise_singular(setup: Setup, params: list[int], points: list[int], when: str = ""):
-    """Raise :class:`~.errors.SingularNormalEquations` naming parameters and points."""
+def raise_singular(
+    setup: Setup, params: list[int], points: list[int], when: str = "", how: tuple[str, ...] = ()
+):
+    """Raise :class:`~.errors.SingularNormalEquations` naming parameters and points (and
+    ``how``: the undetermined directions in words, :func:`~.diagnose.explain`)."""
     pnames = [setup.param_names[i] for i in params]
     qnames = [setup.point_ids[j] for j in points]
     # undetermined parameters leave the points they carry undetermined too: name the cause
     what = [f"parameter(s) {', '.join(pnames[:12])}" + (" ..." if len(pnames) > 12 else "")]
     if qnames and not pnames:
         what = [f"ground point(s) {', '.join(map(repr, qnames[:10]))}"]
+    directions = "".join(f"; direction {k + 1}: {h}" for k, h in enumerate(how[:4]))
+    fix = (
+        "fix it with a GCP measured in that image, bias priors (--bias-prior-shift-px S "
+        "--bias-prior-matrix M), or tie heights from a DEM (--dem)"
+        if pnames
+        else "add GCPs or tie points, or choose fewer adjustable parameters"
+    )
     raise SingularNormalEquations(
-        f"singular normal equations{when}: not determined: {'; '.join(what)} "
-        "(add GCPs or tie points, or choose fewer adjustable parameters)",
+        f"singular normal equations{when}: not determined: {'; '.join(what)}{directions} ({fix})",
         parameters=pnames,
         points=qnames,
     )
@@ -153,7 +162,18 @@ def finish(
                 problem, _final_y(problem, sol), loss=solver.loss, loss_scale=solver.loss_scale
             )
             bad_params, bad_points = more_params, (more if more else bad_points)
-        raise_singular(setup, bad_params, bad_points)
+        how = ()
+        if bad_params and not bad_points:
+            found = directions(
+                problem,
+                _final_y(problem, sol),
+                loss=solver.loss,
+                loss_scale=solver.loss_scale,
+                rtol=1.0 / INFLATION_MAX,
+                weakest=True,
+            )
+            how = tuple(explain(d, setup.param_names) for d in found)
+        raise_singular(setup, bad_params, bad_points, how=how)
     if not converged:
         warnings.warn(
             f"bundle adjustment did not converge ({message}) after {int(sol.num_steps)} steps; "
@@ -258,9 +278,9 @@ def _result(setup, sol, theta, s0, converged, message, solver, observations, gro
     with np.errstate(invalid="ignore", divide="ignore"):
         g_res = np.where(gw > 0, np.asarray(sol.residuals_ground) / gw, np.nan)[is_gcp]
     g_w = np.max(np.abs(np.nan_to_num(w_gnd)), axis=1) if w_gnd.size else np.zeros(0)
-    g_flag = (g_w > solver.blunder_k) | rem_g
+    g_flag = ((g_w > solver.blunder_k) | rem_g) & is_gcp  # not the DEM heights of ties
     gcp_flagged = tuple(p for p, f in zip(setup.ground_ids, g_flag, strict=True) if f)
-    gcp_removed = tuple(p for p, f in zip(setup.ground_ids, rem_g, strict=True) if f)
+    gcp_removed = tuple(p for p, f in zip(setup.ground_ids, rem_g & is_gcp, strict=True) if f)
     gcp_w = tuple(float(w) for w, f in zip(g_w, g_flag, strict=True) if f)
     flat = np.concatenate([t.reshape(-1) for t in theta] + [np.zeros(0)])
     qpp = np.asarray(sol.q_points)

@@ -113,16 +113,57 @@ def jacobians(linear: Callable, residual: PyTree, y: PyTree, width: int) -> Jaco
     )
 
 
-def normal_blocks(jac: Jacobians, s: Structure) -> NormalBlocks:
-    """Assemble :class:`NormalBlocks` from the Jacobian blocks (scatter-adds, no dense ``J``)."""
-    n1 = s.n_params + 1
-    idx = s.obs_params
-    u = (
-        jnp.zeros((n1, n1))
-        .at[idx[:, :, None], idx[:, None, :]]
-        .add(jnp.einsum("mkp,mkq->mpq", jac.jc, jac.jc))
+def add_per_block(target: Array, s: Structure, values: Array) -> Array:
+    """``target`` (N+1,) or (N+1, N+1) plus per-observation ``values`` (M, P) or (M, P, P) at
+    their parameters: summed per block first (``segment_sum``), then one small scatter (a
+    scatter-add of every element is slow on CPU: ~10x at 40 000 x 6 x 6)."""
+    bp = s.all_block_params
+    summed = jax.ops.segment_sum(values, s.obs_block, bp.shape[0])
+    if values.ndim == 2:
+        return target.at[bp].add(summed)
+    return target.at[bp[:, :, None], bp[:, None, :]].add(summed)
+
+
+def add_per_pair(target: Array, s: Structure, values: Array) -> Array:
+    """``target`` (N+1, N+1) plus per-pair ``values`` (K, P, P) at (parameters of the pair's
+    first observation, of its second), summed per block pair first."""
+    summed = jax.ops.segment_sum(values, s.pair_seg, s.pair_blocks.shape[0])
+    pa = s.all_block_params[s.pair_blocks[:, 0]]
+    pb = s.all_block_params[s.pair_blocks[:, 1]]
+    return target.at[pa[:, :, None], pb[:, None, :]].add(summed)
+
+
+def split_jacobians(fn: Callable, args: Any, y: PyTree, width: int) -> Jacobians:
+    """:func:`jacobians` from two linearisations of ``fn(y, args)``, in the camera parameters
+    (``width`` tangents) and in the points (3): the sensor models' derivatives in the ground
+    coordinates are evaluated for the 3 point tangents only, not for every parameter colour as
+    well (2.5x faster for 200 000 RPC observations)."""
+    z, u = y
+    r, lin_z = jax.linearize(lambda zz: fn((zz, u), args), z)
+    _, lin_u = jax.linearize(lambda uu: fn((z, uu), args), u)
+    eye = jnp.eye(width, dtype=u.dtype)
+    zs = tuple(jnp.broadcast_to(eye[:, None, : zg.shape[1]], (width, *zg.shape)) for zg in z)
+    us = jnp.broadcast_to(jnp.eye(3, dtype=u.dtype)[:, None, :], (3, *u.shape))
+    img_z, _, pr_z = jax.vmap(lin_z)(zs)
+    img_u, gnd_u, _ = jax.vmap(lin_u)(us)
+    img, gnd, pr = r
+    last = lambda o: jnp.moveaxis(o, 0, -1)  # noqa: E731
+    return Jacobians(
+        jc=jnp.concatenate([last(o) for o in img_z]) if img_z else jnp.zeros((0, 2, width)),
+        jp=jnp.concatenate([last(o) for o in img_u]) if img_u else jnp.zeros((0, 2, 3)),
+        r=jnp.concatenate(img) if img else jnp.zeros((0, 2)),
+        jg=last(gnd_u),
+        rg=gnd,
+        jpr=tuple(last(o) for o in pr_z),
+        rpr=tuple(pr),
     )
-    gc = jnp.zeros(n1).at[idx].add(jnp.einsum("mkp,mk->mp", jac.jc, jac.r))
+
+
+def normal_blocks(jac: Jacobians, s: Structure) -> NormalBlocks:
+    """Assemble :class:`NormalBlocks` from the Jacobian blocks (no dense ``J``)."""
+    n1 = s.n_params + 1
+    u = add_per_block(jnp.zeros((n1, n1)), s, jnp.einsum("mkp,mkq->mpq", jac.jc, jac.jc))
+    gc = add_per_block(jnp.zeros(n1), s, jnp.einsum("mkp,mk->mp", jac.jc, jac.r))
     for bidx, jpr, rpr in zip(s.block_params, jac.jpr, jac.rpr, strict=True):
         u = u.at[bidx[:, :, None], bidx[:, None, :]].add(jnp.einsum("bqp,bqr->bpr", jpr, jpr))
         gc = gc.at[bidx].add(jnp.einsum("bqp,bq->bp", jpr, rpr))
@@ -160,9 +201,8 @@ def reduced_system(
     u, v = damped(blocks, s, lam)
     vinv = inv3(v)
     y = jnp.einsum("mpj,mjk->mpk", blocks.w, vinv[s.obs_point])
-    pa, pb = s.obs_params[s.pair_a], s.obs_params[s.pair_b]
     sub = jnp.einsum("kpj,kqj->kpq", y[s.pair_a], blocks.w[s.pair_b])
-    big_s = u.at[pa[:, :, None], pb[:, None, :]].add(-sub)
+    big_s = add_per_pair(u, s, -sub)
     # the dummy (padding) parameter stays an identity row
     big_s = big_s.at[n, :].set(0.0).at[:, n].set(0.0).at[n, n].set(1.0)
     return big_s, vinv, y
@@ -184,13 +224,13 @@ def schur_solve(
     idx, pt = s.obs_params, s.obs_point
 
     def solve(gc, gp):
-        rhs = gc.at[idx].add(-jnp.einsum("mpj,mj->mp", y, gp[pt])).at[n].set(0.0)
+        rhs = add_per_block(gc, s, -jnp.einsum("mpj,mj->mp", y, gp[pt])).at[n].set(0.0)
         dc = cho_solve(chol, rhs)
         back = jax.ops.segment_sum(jnp.einsum("mpj,mp->mj", blocks.w, dc[idx]), pt, s.n_points)
         return dc, jnp.einsum("nij,nj->ni", vinv, gp - back)
 
     def apply(dc, dp):
-        hc = (u @ dc).at[idx].add(jnp.einsum("mpj,mj->mp", blocks.w, dp[pt]))
+        hc = add_per_block(u @ dc, s, jnp.einsum("mpj,mj->mp", blocks.w, dp[pt]))
         cross = jnp.einsum("mpj,mp->mj", blocks.w, dc[idx])
         hp = jnp.einsum("nij,nj->ni", v, dp) + jax.ops.segment_sum(cross, pt, s.n_points)
         return hc.at[n].set(0.0), hp
@@ -259,6 +299,10 @@ class SchurDescent(optx.AbstractDescent):
     structure: Structure
     damping: float = 1e-4
     damped: bool = eqx.field(static=True, default=True)
+    fn: Callable | None = eqx.field(static=True, default=None)
+    args: Any = None
+    """The residual function and its arguments: given, the Jacobian blocks come from
+    :func:`split_jacobians` (faster) instead of the solver's linearisation."""
 
     def init(self, y, f_info_struct) -> SchurState:
         img, gnd, pr = f_info_struct.residual
@@ -267,7 +311,10 @@ class SchurDescent(optx.AbstractDescent):
 
     def query(self, y, f_info, state) -> SchurState:
         s = self.structure
-        jac = jacobians(f_info.jac.mv, f_info.residual, y, s.width)
+        if self.fn is not None:
+            jac = split_jacobians(self.fn, self.args, y, s.width)
+        else:
+            jac = jacobians(f_info.jac.mv, f_info.residual, y, s.width)
         blocks = normal_blocks(jac, s)
         dc, dp = schur_solve(blocks, s, 0.0)
         dec = jnp.dot(blocks.gc[: s.n_params], dc) + jnp.sum(blocks.gp * dp)
@@ -308,7 +355,7 @@ class NoiseTolerantTrustRegion(optx.AbstractSearch):
 
     high_cutoff: float = 0.99
     low_cutoff: float = 0.01
-    high_constant: float = 3.5
+    high_constant: float = 10.0
     low_constant: float = 0.25
     noise: float = NOISE_FLOOR
 
@@ -372,13 +419,17 @@ class StructuredGaussNewton(optx.AbstractGaussNewton):
         damping: float = 1e-4,
         max_rejections: int = 8,
         verbose: bool = False,
+        fn: Callable | None = None,
+        args: Any = None,
     ):
         if method not in ("lm", "gn"):
             raise ValueError(f"method must be 'lm' or 'gn', got {method!r}")
         self.rtol = 0.0
         self.atol = 0.0
         self.norm = optx.max_norm
-        self.descent = SchurDescent(structure, damping=damping, damped=method == "lm")
+        self.descent = SchurDescent(
+            structure, damping=damping, damped=method == "lm", fn=fn, args=args
+        )
         self.search = NoiseTolerantTrustRegion() if method == "lm" else optx.LearningRate(1.0)
         self.verbose = _print_verbose if verbose else _silent
         self.tol = tol

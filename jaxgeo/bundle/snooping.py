@@ -5,8 +5,9 @@ After each (robust) solve every observation gets its standardised residual
 normal equations); those above ``blunder_k`` are flagged. Unless told otherwise
 (``SolverConfig.remove_blunders``) the worst flagged observations are removed and the block
 re-solved, until none is flagged: with least squares one observation per round (a gross error
-spreads into its neighbours' residuals), with a robust loss every flagged observation within a
-factor 2 of the worst (the robust solution already isolates them; rounds repeat for the
+spreads into its neighbours' residuals; but see :data:`BATCH_RATIO` for blocks with many
+observations per parameter), with a robust loss every flagged observation within a factor 2 of
+the worst (the robust solution already isolates them; rounds repeat for the
 smaller ones). An image observation of a point without ground coordinates (tie or check) whose
 removal leaves the point in fewer than two images takes the point's other observations with it
 (a two-ray point's gross error cannot be told from its partner: the point group is removed,
@@ -41,6 +42,12 @@ MAX_REMOVED_FRACTION = 0.2
 """Snooping stops rather than remove more than this fraction of the image observations: so many
 "gross errors" are a model that does not fit (e.g. two RPC files swapped), which the s0 warning
 then reports, not something to cut away."""
+BATCH_RATIO = 200
+"""Least squares removes one observation per round (a gross error spreads into the others'
+residuals through the shared parameters), unless there are this many image observations per
+camera parameter or more (e.g. a pair with thousands of ties): the spread through the
+parameters is then negligible, and the rule of the robust losses applies, with at most one
+observation per point and round."""
 ROBUST_FRACTION = 0.5
 """With a robust loss, a round removes the flagged observations with ``|w|`` at least this
 fraction of the largest."""
@@ -58,6 +65,19 @@ def standardized(sol: Solution) -> tuple[np.ndarray, np.ndarray]:
         with np.errstate(invalid="ignore", divide="ignore"):
             out.append(np.where(red > 1e-10, r / np.sqrt(np.maximum(red, 1e-300)), np.nan))
     return out[0], out[1]
+
+
+def _worst_per_point(w: np.ndarray, point: np.ndarray, cut: float) -> np.ndarray:
+    """The observations with ``w >= cut`` that have the largest ``w`` of their point (one per
+    point: within a point a gross error spreads into the other rays)."""
+    best = np.full(point.max(initial=-1) + 1, -np.inf)
+    np.maximum.at(best, point, w)
+    pick = (w >= cut) & (w >= best[point])
+    first = np.zeros_like(pick)  # ties within a point: the first one
+    idx = np.flatnonzero(pick)
+    _, keep = np.unique(point[idx], return_index=True)
+    first[idx[keep]] = True
+    return first
 
 
 def _largest(w: np.ndarray) -> np.ndarray:
@@ -111,8 +131,11 @@ def snoop(
         worst = max(w_i.max(initial=0.0), w_g.max(initial=0.0))
         if not worst > solver.blunder_k:
             break
-        if solver.loss == "l2":
+        if solver.loss == "l2" and m < BATCH_RATIO * max(problem.structure.n_params, 1):
             pick_i, pick_g = w_i >= worst, w_g >= worst
+        elif solver.loss == "l2":  # many rays per parameter: points are all but independent
+            cut = max(solver.blunder_k, ROBUST_FRACTION * worst)
+            pick_i, pick_g = _worst_per_point(w_i, point, cut), w_g >= cut
         else:
             cut = max(solver.blunder_k, ROBUST_FRACTION * worst)
             pick_i, pick_g = w_i >= cut, w_g >= cut

@@ -26,8 +26,8 @@ from .schur import (
     Jacobians,
     NormalBlocks,
     StructuredGaussNewton,
-    jacobians,
     normal_blocks,
+    split_jacobians,
     split_params,
     sum_squares,
 )
@@ -62,6 +62,20 @@ def _block_priors(block) -> Float[Array, " q"]:
     return jnp.asarray(block.prior_residuals(), dtype=float).reshape(-1)
 
 
+def _per_block(grp, stacked, ob, ground: Float[Array, "n 3"]) -> Float[Array, "m 2"]:
+    """Weighted image residuals of ``ob`` (sorted by block, ``ob.block_start``), each block's
+    slice projected by its own model."""
+    parts = []
+    for k in range(grp.n_blocks):
+        a, b = ob.block_start[k], ob.block_start[k + 1]
+        if b == a:
+            continue
+        model = grp.image_model(_take(stacked, k), ob.slot)
+        g = ground[ob.point[a:b]]
+        parts.append((model.project(g) - ob.xy[a:b]) * ob.weight[a:b, None])
+    return jnp.concatenate(parts) if parts else jnp.zeros_like(ob.xy)
+
+
 def thetas(problem: Problem, z, scales) -> tuple[Float[Array, "b p"], ...]:
     """Solver variables ``z`` -> raveled parameters per group."""
     return tuple(g.theta0 + sc * zg for g, sc, zg in zip(problem.groups, scales, z, strict=True))
@@ -85,10 +99,13 @@ def residuals(y, args):
         def one(block, g, xy, w, grp=grp, slot=ob.slot):
             return (grp.image_model(block, slot).project(g) - xy) * w
 
-        per_obs = _take(stacked[ob.group], ob.block)
-        r = eqx.filter_vmap(one, in_axes=(eqx.if_array(0), 0, 0, 0))(
-            per_obs, ground[ob.point], ob.xy, ob.weight
-        )
+        if ob.block_start:
+            r = _per_block(grp, stacked[ob.group], ob, ground)
+        else:
+            per_obs = _take(stacked[ob.group], ob.block)
+            r = eqx.filter_vmap(one, in_axes=(eqx.if_array(0), 0, 0, 0))(
+                per_obs, ground[ob.point], ob.xy, ob.weight
+            )
         img.append(robust(r, loss, loss_scale))
     gobs = problem.ground
     gnd = jax.vmap(lambda g, o, w: geodesy.geodetic_to_enu(g, o) * w)(
@@ -168,8 +185,8 @@ def blocks_at(
     problem: Problem, scales, y, loss: str = "l2", loss_scale: float = 3.0
 ) -> tuple[Jacobians, NormalBlocks]:
     """The Jacobian and normal-equation blocks at ``y``."""
-    r, lin = jax.linearize(lambda yy: residuals(yy, (problem, scales, loss, loss_scale)), y)
-    jac = jacobians(lin, r, y, problem.structure.width)
+    args = (problem, scales, loss, loss_scale)
+    jac = split_jacobians(residuals, args, y, problem.structure.width)
     return jac, normal_blocks(jac, problem.structure)
 
 
@@ -264,14 +281,22 @@ def solve(
         )
     else:
         scales = unit_scales(problem)
-        optimiser = StructuredGaussNewton(s, tol=solver.tol, method=solver.method, verbose=verbose)
+        optimiser = None
+
+    def with_args(args):  # the Schur descent evaluates the Jacobian blocks itself (faster)
+        if optimiser is not None:
+            return optimiser
+        return StructuredGaussNewton(
+            s, tol=solver.tol, method=solver.method, verbose=verbose, fn=residuals, args=args
+        )
 
     def inner(y, w_i, w_g, problem=problem):
+        args = (_weighted(problem, base_i * w_i, base_g * w_g), scales, "l2", c)
         sol = optx.least_squares(
             residuals,
-            optimiser,
+            with_args(args),
             y,
-            args=(_weighted(problem, base_i * w_i, base_g * w_g), scales, "l2", c),
+            args=args,
             max_steps=solver.max_steps,
             throw=False,
         )
@@ -323,11 +348,12 @@ def solve(
         # the final solve minimises sum rho(|r|^2) over the image residuals itself (IRLS' fixed
         # point, so one or two steps from there), with the ground weights held: its implicit
         # derivative is that of the M-estimate, not of a weighted least-squares problem
+        args = (_weighted(problem, base_i, base_g * w_g), scales, loss, c)
         last = optx.least_squares(
             residuals,
-            optimiser,
+            with_args(args),
             y,
-            args=(_weighted(problem, base_i, base_g * w_g), scales, loss, c),
+            args=args,
             max_steps=solver.max_steps,
             throw=False,
         )

@@ -2,6 +2,7 @@
 
     jaxgeo adjust --image NAME=RPCFILE [--image ...] --ground GROUND.csv
                   --observations OBS.csv --bias {none,shift,shift-drift,affine}
+                  [--bias-prior-shift-px S --bias-prior-matrix M] [--dem FILE]
                   [--json] [--out DIR] [--overwrite]
 
 GROUND.csv: ``id,lon,lat,h,role[,sigma_e_m,sigma_n_m,sigma_h_m]`` (role gcp or check);
@@ -99,6 +100,26 @@ def register(sub) -> None:
         metavar="M",
         help="prior sigma (px/px) of the affine matrix (or shift-drift drift) terms",
     )
+    parser.add_argument(
+        "--dem",
+        metavar="FILE",
+        help="tie heights from a single-band DEM raster (ellipsoidal m, any CRS), as height "
+        "observations of the tie points (fixes what the ties leave open against their heights)",
+    )
+    parser.add_argument(
+        "--dem-offset-m",
+        type=float,
+        default=0.0,
+        metavar="N",
+        help="added to the DEM heights (e.g. the geoid undulation for orthometric DEMs)",
+    )
+    parser.add_argument(
+        "--tie-height-sigma-m",
+        type=float,
+        default=10.0,
+        metavar="M",
+        help="sigma of the DEM tie heights (m, default 10)",
+    )
     parser.add_argument("--max-steps", type=int, default=50, help="solver steps (default 50)")
     parser.add_argument("--json", action="store_true", help="print one JSON object")
     parser.add_argument("--out", metavar="DIR", help="write adjusted models and the report here")
@@ -152,8 +173,13 @@ def run(args: argparse.Namespace) -> int:
     from ..bundle.adjustment import adjust_files
     from ..bundle.errors import PoorFitWarning
     from ..bundle.export import check_out_dir
+    from . import CommandError
 
     images = _images(args.image)
+    if args.dem_offset_m and not args.dem:
+        raise CommandError("--dem-offset-m applies to --dem heights only")
+    if not (args.tie_height_sigma_m > 0 and args.tie_height_sigma_m < float("inf")):
+        raise CommandError(f"--tie-height-sigma-m must be positive, got {args.tie_height_sigma_m}")
     solver = SolverConfig(
         method=args.method,
         loss=args.loss,
@@ -163,13 +189,30 @@ def run(args: argparse.Namespace) -> int:
     )
     if args.out:  # before any computation
         inputs = [*images.values(), args.observations] + ([args.ground] if args.ground else [])
+        inputs += [args.dem] if args.dem else []
         try:
-            check_out_dir(args.out, images, inputs, overwrite=args.overwrite)
-        except OSError as err:
+            check_out_dir(
+                args.out, images, inputs, overwrite=args.overwrite, rpc_format=args.rpc_format,
+                copy_images=args.copy_images, write_into=args.write_into,
+            )  # fmt: skip
+        except (OSError, ValueError) as err:
             raise CommandErrorOut(str(err)) from None
+    dem = None
+    if args.dem:
+        from ..io import read_dem
+
+        dem = read_dem(args.dem, offset_m=args.dem_offset_m)
+        if dem.vertical_crs and not args.dem_offset_m:
+            print(f"jaxgeo adjust: note: {args.dem} declares vertical CRS {dem.vertical_crs!r}; "
+                  "heights are used as ellipsoidal", file=sys.stderr)  # fmt: skip
     with warnings.catch_warnings(record=True) as caught:
         warnings.simplefilter("always")
-        run = adjust_files(images, args.observations, args.ground, bias=args.bias, solver=solver)
+        run = adjust_files(
+            images, args.observations, args.ground, bias=args.bias, solver=solver,
+            bias_prior_shift_px=args.bias_prior_shift_px,
+            bias_prior_matrix=args.bias_prior_matrix, dem=dem,
+            tie_height_sigma_m=args.tie_height_sigma_m,
+        )  # fmt: skip
     poor = False
     for w in caught:
         poor |= issubclass(w.category, PoorFitWarning)

@@ -37,6 +37,23 @@ def test_what_ties_leave_open_is_named(block):
         adjust(block.models, obs, block.ground, bias="shift")
     named = err.value.parameters
     assert named and all(p.startswith("right.bias.shift_px") for p in named)
+    # and the direction: the right image's shift trades against the tie heights (parallax)
+    msg = str(err.value)
+    assert "direction 1:" in msg and "right.bias.shift_px" in msg
+    assert "tie point heights" in msg and "parallax" in msg and "--dem" in msg
+
+
+def test_tie_heights_from_a_dem_fix_it(block):
+    obs = _without_right_gcps(block)
+    gcp_h = block.ground.lonlath[:, 2]
+    r = adjust(  # the check points are tie points here
+        block.models, obs, block.ground.select("gcp"), bias="shift",
+        tie_height=lambda lonlat: np.full(len(lonlat), float(np.mean(gcp_h))),
+        tie_height_sigma_m=300.0,
+    )  # fmt: skip
+    assert r.converged and np.all(np.isfinite(r.param_sigma))
+    assert not r.gcp_flagged or all(p in block.ground.select("gcp").ids for p in r.gcp_flagged)
+    assert "tie" in r.point_role and r.gcp_ids == block.ground.select("gcp").ids
 
 
 def test_bias_priors_fix_it(block):

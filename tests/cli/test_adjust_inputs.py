@@ -55,6 +55,29 @@ def test_out_over_an_input_refused_before_computing(scene, capsys):
     assert "over an input" in capsys.readouterr().err
 
 
+@pytest.mark.parametrize(
+    ("extra", "existing"),
+    [((), "fore_RPC.TXT"), (("--rpc-format", "rpb"), "aft.RPB"), ((), "report.json")],
+)
+def test_existing_output_refused_before_computing(scene, tmp_path, capsys, monkeypatch, extra,
+                                                  existing):  # fmt: skip
+    # the pre-check checks exactly the files the writer writes (not old names)
+    import jaxgeo.bundle.adjustment as adjustment
+
+    def never(*args, **kwargs):
+        raise AssertionError("computed before --out was checked")
+
+    monkeypatch.setattr(adjustment, "adjust_files", never)
+    out = tmp_path / "o"
+    out.mkdir()
+    (out / existing).write_text("keep me")
+    assert main(_args(scene, "--bias", "shift", "--out", str(out), *extra)) == 2
+    err = capsys.readouterr().err
+    assert f"{out / existing}: exists" in err and "--overwrite" in err
+    assert (out / existing).read_text() == "keep me"
+    assert sorted(p.name for p in out.iterdir()) == [existing]
+
+
 def test_failed_write_keeps_the_report(scene, tmp_path, capsys, monkeypatch):
     import jaxgeo.bundle.adjustment as adjustment
 

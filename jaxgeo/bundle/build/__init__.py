@@ -9,7 +9,7 @@ ground points get initial values (:mod:`.points`) and the blocks their priors (:
 from __future__ import annotations
 
 import dataclasses
-from collections.abc import Mapping
+from collections.abc import Callable, Mapping
 from typing import Any
 
 import jax.numpy as jnp
@@ -30,6 +30,7 @@ from .checks import (
     check_points,
     image_names,
     label,
+    listing,
 )
 from .checks import (
     check_control as check_control_points,
@@ -39,6 +40,11 @@ from .points import initial_points
 from .priors import prior_arrays
 
 ROLES = ("gcp", "check", "tie")
+SLICED_BLOCKS = 16
+"""Groups of at most this many blocks get their observations sorted by block
+(``ImageObs.block_start``): each block's model then projects its own slice of observations,
+instead of a copy of the model per observation (an RPC's 80 coefficients: 0.27 s against
+0.015 s for 200 000 observations of two RPCs). More blocks would mean a larger program."""
 
 
 @dataclasses.dataclass(frozen=True)
@@ -88,10 +94,14 @@ def build(
     initial: Mapping[str, Any] | None = None,
     check_control: bool = True,
     sources: Sources | None = None,
+    tie_height: Callable[[np.ndarray], np.ndarray] | None = None,
+    tie_height_sigma_m: float = 10.0,
 ) -> Setup:
     """Check the input and build the array problem (arguments as :func:`jaxgeo.adjust`;
     ``check_control``: check every image's GCP count against its adjustable parameters;
-    ``sources``: the files and lines of the tables, named in messages)."""
+    ``sources``: the files and lines of the tables, named in messages; ``tie_height``: heights
+    ``f(lonlat (n, 2)) -> (n,)`` (m), e.g. a :class:`~jaxgeo.io.dem.DEM`, given to every tie
+    point as a height observation of sigma ``tie_height_sigma_m``)."""
     src = sources if sources is not None else Sources()
     image_of = check_models(models)
     ground = (
@@ -161,6 +171,11 @@ def build(
             sel = np.flatnonzero((obs_img[:, 0] == g) & (obs_img[:, 2] == slot))
             if sel.size == 0:
                 continue
+            start: tuple[int, ...] = ()
+            if groups[g].n_blocks <= SLICED_BLOCKS:  # sorted by block: sliced residuals
+                sel = sel[np.argsort(obs_img[sel, 1], kind="stable")]
+                counts = np.bincount(obs_img[sel, 1], minlength=groups[g].n_blocks)
+                start = tuple(int(x) for x in np.concatenate([[0], np.cumsum(counts)]))
             order.append(sel)
             images.append(
                 ImageObs(
@@ -170,6 +185,7 @@ def build(
                     weight=jnp.asarray(1.0 / sig_px[sel]),
                     group=g,
                     slot=slot,
+                    block_start=start,
                 )
             )
     # every point with ground coordinates gets a ground observation, with weight 0 for check
@@ -178,9 +194,20 @@ def build(
     gsig = np.asarray([ground.sigma_m[gindex[p]] for p in known], dtype=float).reshape(-1, 3)
     is_gcp = np.array([ground.role[gindex[p]] == "gcp" for p in known], dtype=bool)
     gweight = np.where(np.isfinite(gsig) & is_gcp.reshape(-1, 1), 1.0 / gsig, 0.0)
+    g_point = np.array([pindex[p] for p in known], dtype=np.int64)
+    g_lonlath = lonlath[[gindex[p] for p in known]].reshape(-1, 3)
+    gweight = gweight.reshape(-1, 3)
+    if tie_height is not None:  # tie heights as observations: up only, at the initial lon/lat
+        ties = [j for j, r in enumerate(role) if r == "tie"]
+        h = dem_heights(tie_height, origin[ties, :2], [point_ids[j] for j in ties])
+        known = known + [point_ids[j] for j in ties]
+        g_point = np.concatenate([g_point, np.asarray(ties, dtype=np.int64)])
+        g_lonlath = np.concatenate([g_lonlath, np.column_stack([origin[ties, :2], h])])
+        up = np.tile([0.0, 0.0, 1.0 / _positive_sigma(tie_height_sigma_m)], (len(ties), 1))
+        gweight = np.concatenate([gweight, up])
     gobs = GroundObs(
-        point=jnp.asarray(np.array([pindex[p] for p in known], dtype=np.int64)),
-        lonlath=jnp.asarray(lonlath[[gindex[p] for p in known]].reshape(-1, 3)),
+        point=jnp.asarray(g_point),
+        lonlath=jnp.asarray(g_lonlath.reshape(-1, 3)),
         weight=jnp.asarray(gweight.reshape(-1, 3)),
     )
     prior_mean, prior_weight, n_prior_rows = prior_arrays(
@@ -215,3 +242,28 @@ def build(
         ground_ids=tuple(known),
         param_names=param_names,
     )
+
+
+def _positive_sigma(sigma: float) -> float:
+    if not (np.isfinite(sigma) and sigma > 0):
+        raise AdjustmentError(f"the tie height sigma must be a positive number, got {sigma!r}")
+    return float(sigma)
+
+
+def dem_heights(
+    tie_height: Callable[[np.ndarray], np.ndarray], lonlat: np.ndarray, ids: list[str]
+) -> np.ndarray:
+    """``tie_height(lonlat)`` (m), refused naming the points where it is not finite (or the
+    DEM's own message, e.g. a point outside it)."""
+    try:
+        h = np.asarray(tie_height(np.asarray(lonlat, dtype=float)), dtype=float).reshape(-1)
+    except ValueError as err:
+        raise AdjustmentError(f"tie heights from the DEM: {err}") from None
+    if h.shape != (len(ids),):
+        raise AdjustmentError(f"the tie height function returned {h.shape} values for "
+                              f"{len(ids)} tie points")  # fmt: skip
+    bad = [p for p, v in zip(ids, h, strict=True) if not np.isfinite(v)]
+    if bad:
+        raise AdjustmentError(f"no DEM height for tie point(s) {listing(bad)} (outside the DEM "
+                              "or on nodata)")  # fmt: skip
+    return h

@@ -66,7 +66,11 @@ def check_observations(
     obs: Observations, images: Mapping[str, Any], xy: np.ndarray, sigma_px: np.ndarray
 ) -> None:
     """Every observation names a known image and has finite coordinates and a positive sigma."""
-    for i, (pid, img) in enumerate(zip(obs.point_ids, obs.images, strict=True)):
+    names = np.asarray(obs.images, dtype=object)
+    known = np.isin(names, np.asarray(list(images), dtype=object)) if len(names) else names
+    ok = np.all(np.isfinite(xy), axis=1) & np.isfinite(sigma_px) & (sigma_px > 0) & known
+    for i in np.flatnonzero(~ok).tolist():  # the messages, for the (few) observations at fault
+        pid, img = obs.point_ids[i], obs.images[i]
         if img not in images:
             raise AdjustmentError(
                 f"observation {i} of point {pid!r} names unknown image {img!r} "
@@ -244,7 +248,27 @@ def check_domains(
     gindex = {pid: i for i, pid in enumerate(ground.ids)}
     frames = {name: rpc_frame(m) for name, m in image_models.items()}
     axes = (("longitude", "deg"), ("latitude", "deg"), ("height", "m"))
-    for i, (pid, img) in enumerate(zip(obs.point_ids, obs.images, strict=True)):
+    # vectorised per image; the messages below for the (few) observations at fault
+    xy = np.asarray(obs.xy, dtype=float).reshape(-1, 2)
+    names = np.asarray(obs.images, dtype=object)
+    gk = np.array([gindex.get(p, -1) for p in obs.point_ids], dtype=np.int64)
+    suspect = np.zeros(len(names), dtype=bool)
+    for name, rpc in frames.items():
+        sel = np.flatnonzero(names == name) if rpc is not None else np.zeros(0, int)
+        if sel.size == 0:
+            continue
+        ioff, iscale = np.asarray(rpc.image_offset, float), np.asarray(rpc.image_scale, float)
+        beyond = np.abs(xy[sel] - ioff) - iscale * (1.0 + IMAGE_MARGIN) - 1.0
+        bad = np.any(beyond > 0, axis=1)
+        has_g = gk[sel] >= 0
+        if np.any(has_g):
+            goff = np.asarray(rpc.ground_offset, float)
+            gscale = np.asarray(rpc.ground_scale, float)
+            norm = np.abs(lonlath[gk[sel][has_g]] - goff) / gscale
+            bad[np.flatnonzero(has_g)] |= np.any(norm > DOMAIN_TOLERANCE, axis=1)
+        suspect[sel[bad]] = True
+    for i in np.flatnonzero(suspect).tolist():
+        pid, img = obs.point_ids[i], obs.images[i]
         rpc = frames.get(img)
         if rpc is None:
             continue
