@@ -198,6 +198,11 @@ def cartosat1_stereo(
     skip = ("preset", "vendor_errors", "lon", "lat", "h_range")
     params = {k: v for k, v in locals().items() if k not in skip}
     params["vendor_errors"] = vendor_errors.to_dict()
+    # recorded only when set (the packaged demo's truth.json predates these options)
+    if tuple(terrain_wavelengths_m) == (4000.0, 40000.0):
+        params.pop("terrain_wavelengths_m")
+    if not centre_columns:
+        params.pop("centre_columns")
     rng = np.random.default_rng(seed)
 
     # --- the pass: orbit over the site, then the scan times of the two images

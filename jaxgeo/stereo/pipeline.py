@@ -301,7 +301,8 @@ class _Dense:
         if c1 <= c0 or r1 <= r0:
             return np.full((rb - ra, x1 - x0), np.nan, np.float32)
         return resample(
-            image[r0:r1, c0:c1], self.grids, side, origin_xy=self.origin[side] + (c0, r0),
+            image[r0:r1, c0:c1], self.grids, side,
+            origin_xy=tuple(float(v) for v in self.origin[side] + (c0, r0)),
             y_shift_px=self.shift[side], x_range=self.x_range, y_range=(ra, rb),
         )  # fmt: skip
 

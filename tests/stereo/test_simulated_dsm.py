@@ -49,7 +49,8 @@ def test_bands_of_epipolar_rows_match_one_pass(pair):
     both = np.isfinite(d1) & np.isfinite(d2)
     assert both.sum() > 0.97 * np.isfinite(d1).sum()
     assert np.mean(np.abs(d1 - d2)[both] < 0.05) > 0.95  # SGM paths reach past 32 rows
-    np.testing.assert_array_equal(one.intermediates["left"], banded.intermediates["left"])
+    # the same epipolar image (each band samples from its own window: float32 map rounding)
+    np.testing.assert_allclose(one.intermediates["left"], banded.intermediates["left"], atol=0.01)
     a = rasterize(one.points, 5.0)
     b = rasterize(banded.points, 5.0, epsg=a.epsg, origin=(a.x0, a.y0), shape=a.height.shape)
     dh = np.abs(a.height - b.height)[np.isfinite(a.height) & np.isfinite(b.height)]
