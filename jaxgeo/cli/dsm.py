@@ -2,12 +2,14 @@
 
     jaxgeo dsm IMG1 IMG2 [IMG3 ...] [--model IMG=RPCFILE ...] [--roi X Y W H] [--res M]
                [--crs EPSG:n] [--triangulation {intersect,los_midpoint}] [--no-register]
-               [--keep DIR] -o dsm.tif [--overwrite]
+               [--band-rows N] [--keep DIR] [--quiet] -o dsm.tif [--overwrite]
 
 IMG1 is the reference: each pair (IMG1, IMGi) is rectified, matched densely (SGM) and
 triangulated; the points are pooled into one height per cell (median; bands: height above the
 WGS84 ellipsoid, count, spread). ``--roi`` in pixels of IMG1; ``--res`` metres (default 0.5);
 CRS default the local UTM zone. ``--keep DIR`` writes each pair's intermediate products.
+Dense matching runs over bands of ``--band-rows`` epipolar rows (default 512), so its memory
+follows the band, not the image; a progress bar per pair shows the bands (``--quiet``: none).
 """
 
 from __future__ import annotations
@@ -33,6 +35,10 @@ def register(sub) -> None:
     parser.add_argument(
         "--no-register", action="store_true", help="do not remove the pairs' height offsets"
     )
+    parser.add_argument(
+        "--band-rows", type=int, default=512, metavar="N",
+        help="epipolar rows per band of dense matching (default 512)",
+    )  # fmt: skip
     parser.add_argument("--keep", metavar="DIR", help="keep intermediate products here")
     parser.add_argument("--quiet", action="store_true", help="no progress display")
     parser.add_argument("-o", "--output", required=True, metavar="DSM.tif")
@@ -62,6 +68,8 @@ def run(args: argparse.Namespace) -> int:
 
     if len(args.images) < 2:
         raise CommandError("give at least two images")
+    if args.band_rows < 1:
+        raise CommandError(f"--band-rows {args.band_rows}: expected a positive number of rows")
     refuse_existing(args.output, args.overwrite)
     models = models_of(args.images, args.model)
     dsm, stats = dsm_from_images(
@@ -74,6 +82,7 @@ def run(args: argparse.Namespace) -> int:
         keep_dir=args.keep,
         progress=not args.quiet,
         register=not args.no_register,
+        band_rows=args.band_rows,
     )
     write_dsm(dsm, args.output, overwrite=args.overwrite)
     filled = float(np.isfinite(dsm.height).mean())

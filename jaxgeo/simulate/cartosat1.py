@@ -17,6 +17,7 @@ import math
 import os
 import pathlib
 
+import equinox as eqx
 import numpy as np
 
 from .. import geodesy
@@ -167,6 +168,8 @@ def cartosat1_stereo(
     attitude_order: int = 5,
     attitude_wobble_rad: float = 5e-6,
     rpc_grid: tuple[int, int, int] = (21, 21, 7),
+    terrain_wavelengths_m: tuple[float, float] = (4000.0, 40000.0),
+    centre_columns: bool = False,
 ) -> StereoScene:
     """Simulate a Cartosat-1 stereo pair (see the module docstring).
 
@@ -175,7 +178,11 @@ def cartosat1_stereo(
     defaults of ``centre_*``, ``h_range_m``, ``n_points`` and ``layout`` (``"quarter"`` or
     ``"grid"``). ``n_gcps`` points spread over the field get role ``gcp``, the rest ``check``.
     ``attitude_wobble_rad`` is the size of the true attitude's smooth departure from ideal yaw
-    steering. Returns a :class:`StereoScene`.
+    steering. ``terrain_wavelengths_m``: the range of the terrain's wavelengths (shorter ones
+    for small images, whose footprint is a few kilometres). ``centre_columns``: shift each
+    camera's principal column so that the site centre is seen in the middle column (a window of
+    a longer CCD; without it the Earth's rotation between the fore and aft passes moves the aft
+    footprint ~270 px across, which matters only in small images). Returns a :class:`StereoScene`.
     """
     if site not in SITES:
         raise ValueError(f"unknown site {site!r}; expected one of {sorted(SITES)}")
@@ -191,6 +198,11 @@ def cartosat1_stereo(
     skip = ("preset", "vendor_errors", "lon", "lat", "h_range")
     params = {k: v for k, v in locals().items() if k not in skip}
     params["vendor_errors"] = vendor_errors.to_dict()
+    # recorded only when set (the packaged demo's truth.json predates these options)
+    if tuple(terrain_wavelengths_m) == (4000.0, 40000.0):
+        params.pop("terrain_wavelengths_m")
+    if not centre_columns:
+        params.pop("centre_columns")
     rng = np.random.default_rng(seed)
 
     # --- the pass: orbit over the site, then the scan times of the two images
@@ -224,16 +236,23 @@ def cartosat1_stereo(
             orbit, span, first_line_time_s=t - duration / 2, view_angles_deg=(angle, 0.0, 0.0),
             attitude_offsets_rad=wobble, **common,
         )  # fmt: skip
+        if centre_columns:
+            col = float(np.asarray(sc.project(model, target))[0])
+            shift = 0.5 * (n_cols - 1) - col  # columns are linear in the principal column
+            model = eqx.tree_at(lambda m: m.principal_col_px, model, model.principal_col_px + shift)
         truth[name] = sc.quantize_model(model)
 
     # --- terrain over both footprints, and the GPS point field
     corners = np.array([[0, 0], [n_cols - 1, 0], [0, n_rows - 1], [n_cols - 1, n_rows - 1]], float)
     foot = [np.asarray(sc.localize(m, corners, h_mid)) for m in truth.values()]
-    terrain = Terrain.random(rng, np.concatenate(foot)[:, :2], h_range)
+    terrain = Terrain.random(
+        rng, np.concatenate(foot)[:, :2], h_range, wavelength_range_m=terrain_wavelengths_m
+    )
     fore, aft = truth["fore"], truth["aft"]
     aft_in_fore = np.asarray(sc.project(fore, foot[1]))
-    lo = np.maximum(aft_in_fore.min(0), 0.0) + 200.0
-    hi = np.minimum(aft_in_fore.max(0), [n_cols - 1, n_rows - 1]) - 200.0
+    margin = min(200.0, min(n_rows, n_cols) / 8.0)  # 200 px, less in small images
+    lo = np.maximum(aft_in_fore.min(0), 0.0) + margin
+    hi = np.minimum(aft_in_fore.max(0), [n_cols - 1, n_rows - 1]) - margin
     if layout == "quarter":
         hi = 0.5 * (lo + hi)
         cand = lo + (hi - lo) * rng.uniform(0.0, 1.0, (4 * n_points, 2))
@@ -246,8 +265,9 @@ def cartosat1_stereo(
     img_fore = np.asarray(sc.project(fore, ground_all))
     img_aft = np.asarray(sc.project(aft, ground_all))
     size = np.array([n_cols - 1, n_rows - 1])
+    m = margin / 4.0
     inside = np.all(
-        (img_fore > 50) & (img_fore < size - 50) & (img_aft > 50) & (img_aft < size - 50), -1
+        (img_fore > m) & (img_fore < size - m) & (img_aft > m) & (img_aft < size - m), -1
     )
     keep = np.flatnonzero(inside)[:n_points]
     if len(keep) < n_points:

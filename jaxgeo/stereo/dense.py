@@ -27,8 +27,10 @@ def resample(
     y_shift_px: float = 0.0,
     interpolation: str = "cubic",
     x_range: tuple[int, int] | None = None,
+    y_range: tuple[int, int] | None = None,
 ) -> np.ndarray:
-    """The epipolar image of ``side`` (``grids.epipolar_shape``, float32, NaN outside).
+    """The epipolar image of ``side`` (``grids.epipolar_shape``, float32, NaN outside), or its
+    columns ``x_range`` and rows ``y_range`` (``[start, stop)`` epipolar pixels).
 
     ``image`` holds pixels of the sensor image starting at sensor ``origin_xy`` (a window);
     ``y_shift_px`` moves the sampling across the epipolar lines (the measured vertical
@@ -37,8 +39,9 @@ def resample(
 
     rows, cols = grids.epipolar_shape
     x0, x1 = (0, cols) if x_range is None else x_range
+    y0, y1 = (0, rows) if y_range is None else y_range
     xs = np.arange(x0, x1, dtype=float)
-    xe, ye = np.meshgrid(xs, np.arange(rows, dtype=float) + y_shift_px)
+    xe, ye = np.meshgrid(xs, np.arange(y0, y1, dtype=float) + y_shift_px)
     sensor = grids.to_sensor(side, np.stack([xe, ye], axis=-1)) - np.asarray(origin_xy)
     # maps relative to the window are small numbers: float32 keeps 1e-4 px
     map_x = sensor[..., 0].astype(np.float32)

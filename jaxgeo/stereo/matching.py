@@ -13,6 +13,7 @@ more than one tile's scale space. Image coordinates: jaxgeo (integer = pixel cen
 
 from __future__ import annotations
 
+from collections.abc import Sequence
 from dataclasses import dataclass
 
 import numpy as np
@@ -82,7 +83,7 @@ def sift_features(image8: np.ndarray, tile_px: int = 2048) -> tuple[np.ndarray, 
 
 
 def sift_features_raster(
-    path, window: tuple[int, int, int, int] | None = None, tile_px: int = 2048
+    path, window: Sequence[int] | None = None, tile_px: int = 2048
 ) -> tuple[np.ndarray, np.ndarray]:
     """:func:`sift_features` of band 1 of a raster file over ``window = (col, row, w, h)``
     (whole image by default), reading one tile at a time (bounded memory for large images);
@@ -135,7 +136,7 @@ def guided_matches(
     desc1: np.ndarray,
     xy2: np.ndarray,
     desc2: np.ndarray,
-    height_range_m: tuple[float, float],
+    height_range_m: Sequence[float],
     epipolar_tol_px: float = 10.0,
     ratio: float = 0.8,
 ) -> Matches:
@@ -194,7 +195,7 @@ def epipolar_offsets(
     model2: AbstractSensorModel,
     xy1: np.ndarray,
     xy2: np.ndarray,
-    height_range_m: tuple[float, float],
+    height_range_m: Sequence[float],
 ) -> np.ndarray:
     """Signed distance (px) of each ``xy2`` from the epipolar curve of ``xy1`` in image 2 (the
     segment between heights ``height_range_m``): the models' relative bias across the epipolar

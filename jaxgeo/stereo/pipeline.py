@@ -35,23 +35,37 @@ from .triangulation import los_heights, triangulate
 
 DISPARITY_MARGIN_PX = 8.0
 MIN_TIE_POINTS = 10
+BAND_ROWS = 512
+"""Epipolar rows per band of dense matching (memory grows with the band, not the image)."""
+BAND_OVERLAP_ROWS = 32
+BAND_MARGIN_PX = 8
+TRIANGULATION_CHUNK = 65536
 
 
 def read_window(path: str | os.PathLike, window: tuple[int, int, int, int]) -> np.ndarray:
     """Band 1 of ``path`` over ``(col_off, row_off, width, height)`` as float32 (only that
     window is read)."""
-    import rasterio
     from rasterio.windows import Window
 
-    with rasterio.open(path) as src:
+    with _open(path) as src:
         return src.read(1, window=Window(*window)).astype(np.float32)
+
+
+def _open(path):
+    """rasterio dataset of a sensor image: no geotransform is expected (no warning for it)."""
+    import warnings
+
+    import rasterio
+    from rasterio.errors import NotGeoreferencedWarning
+
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore", NotGeoreferencedWarning)
+        return rasterio.open(path)
 
 
 def image_size(path: str | os.PathLike) -> tuple[int, int]:
     """``(width, height)`` of a raster."""
-    import rasterio
-
-    with rasterio.open(path) as src:
+    with _open(path) as src:
         return src.width, src.height
 
 
@@ -117,10 +131,19 @@ def stereo_pair(
     method: str = "intersect",
     keep: bool = False,
     log: Callable[[str], None] | None = None,
+    band_rows: int | None = BAND_ROWS,
+    on_band: Callable[[int, int], None] | None = None,
+    epipolar_tol_px: float = 10.0,
 ) -> PairProducts:
     """3D points of a pair over ``roi = (col, row, width, height)`` of the reference image
     (whole image by default); ``method`` the triangulation (``intersect`` or
-    ``los_midpoint``)."""
+    ``los_midpoint``).
+
+    Dense matching and triangulation run over bands of ``band_rows`` epipolar rows (``None``:
+    one band), each resampled from the sensor pixels it needs; ``on_band(done, total)`` is
+    called after each band (progress). ``epipolar_tol_px``: how far from the models' epipolar
+    curves tie points may lie (the models' relative bias across the epipolar lines; the
+    rectified pair's vertical disparity is then measured and removed, whatever its size)."""
     log = log or (lambda _: None)
     clock = [time.perf_counter()]
 
@@ -146,7 +169,7 @@ def stereo_pair(
     x1, d1 = sift_features(to_uint8(img1))
     x2, d2 = sift_features(to_uint8(img2))
     ties = guided_matches(
-        ref, sec, x1 + roi[:2], d1, x2 + win2[:2], d2, h_valid, epipolar_tol_px=10.0
+        ref, sec, x1 + roi[:2], d1, x2 + win2[:2], d2, h_valid, epipolar_tol_px=epipolar_tol_px
     )
     if len(ties) < MIN_TIE_POINTS:
         raise ValueError(
@@ -165,7 +188,8 @@ def stereo_pair(
     lap("rectification")
     a, b = _epipolar_sift(to_uint8(left), to_uint8(right))
     dy = b[:, 1] - a[:, 1]
-    ok = (np.abs(dy) < 10.0) & np.isfinite(dy)
+    centre = np.nanmedian(dy) if len(dy) else 0.0  # the models' relative bias, if any
+    ok = (np.abs(dy - centre) < 10.0) & np.isfinite(dy)
     ok[ok] = _robust(dy[ok])
     if ok.sum() < MIN_TIE_POINTS:
         raise ValueError(f"stereo: only {ok.sum()} matches on the rectified pair")
@@ -191,38 +215,48 @@ def stereo_pair(
     stats["vertical_disparity_after_std_px"] = float(np.std(dy2[ok2])) if ok2.any() else np.nan
     lap("vertical_disparity")
     log(f"vertical disparity {dy_med:+.2f} px removed; SGM over [{dmin:.0f}, {dmax:.0f}] px")
-    # widen both epipolar images by the disparity range: the right matches of the left image's
+    # widen the epipolar images by the disparity range: the right matches of the left image's
     # edge columns lie outside its own epipolar extent
     rows_e, cols_e = grids.epipolar_shape
     x0, x1 = min(0, int(np.floor(dmin))), cols_e + max(0, int(np.ceil(dmax)))
-    left_w = resample(img1, grids, "left", origin_xy=roi[:2], x_range=(x0, x1))
-    right_w = resample(
-        img2, grids, "right", origin_xy=win2[:2], y_shift_px=dy_med, x_range=(x0, x1)
-    )
-    lims1 = stretch_limits(left_w)
-    lims2 = stretch_limits(right_w)
-    valid_l, valid_r = np.isfinite(left_w), np.isfinite(right_w)
-    disp = sgm_disparity(
-        to_uint8(left_w, lims1), to_uint8(right_w, lims2), dmin, dmax, sgm, valid=valid_l
-    )
-    ye, xe = np.mgrid[0:rows_e, x0:x1].astype(float)
-    xr = np.rint(xe + np.nan_to_num(disp)).astype(np.int64) - x0
-    in_r = (xr >= 0) & (xr < x1 - x0)
-    ok_r = np.zeros_like(valid_l)
-    ok_r[in_r] = valid_r[ye.astype(np.int64)[in_r], xr[in_r]]
-    disp = np.where(ok_r, disp, np.nan)
-    sel = np.isfinite(disp)
-    stats["disparity_fill"] = float(sel.sum() / max(valid_l.sum(), 1))
-    lap("sgm")
-    log(f"{sel.sum()} disparities; triangulation ({method})")
-    xl = grids.to_sensor("left", np.stack([xe[sel], ye[sel]], axis=-1))
-    xrr = grids.to_sensor("right", np.stack([xe[sel] + disp[sel], ye[sel] + dy_med], axis=-1))
-    points, result = triangulate([ref, sec], np.stack([xl, xrr], axis=1), method)
-    if result is not None:
-        stats["median_sigma_h_m"] = float(np.nanmedian(np.asarray(result.sigma_enu)[:, 2]))
-    lap("triangulation")
+    lims = (stretch_limits(left), stretch_limits(right))
+    del left, right
+    band = rows_e if band_rows is None else max(int(band_rows), 1)
+    starts = list(range(0, rows_e, band))
+    dense = _Dense(img1, img2, roi[:2], win2[:2], grids, dy_med, (x0, x1), lims, (dmin, dmax), sgm)
+    matches, kept, n_valid, n_disp = [], [], 0, 0
+    points, sigma_h = [], []
+    for k, r0 in enumerate(starts):
+        r1 = min(r0 + band, rows_e)
+        disp, valid_l, images = dense.band(r0, r1, keep)
+        n_valid += int(valid_l.sum())
+        ye, xe = np.mgrid[r0:r1, x0:x1].astype(float)
+        sel = np.isfinite(disp)
+        n_disp += int(sel.sum())
+        xl = grids.to_sensor("left", np.stack([xe[sel], ye[sel]], axis=-1))
+        xr = grids.to_sensor("right", np.stack([xe[sel] + disp[sel], ye[sel] + dy_med], axis=-1))
+        matches.append(np.stack([xl, xr], axis=1))
+        if keep:
+            kept.append((disp, *images))
+        pending = sum(len(m) for m in matches)
+        if pending >= TRIANGULATION_CHUNK or k == len(starts) - 1:
+            pts, sig = _triangulate(ref, sec, np.concatenate(matches), method)
+            points.append(pts)
+            sigma_h.append(sig)
+            matches = []
+        if on_band is not None:
+            on_band(k + 1, len(starts))
+    stats["disparity_fill"] = float(n_disp / max(n_valid, 1))
+    stats["n_bands"] = len(starts)
+    lap("sgm_triangulation")
+    points = np.concatenate(points)
+    sigma_h = np.concatenate(sigma_h)
+    if method == "intersect" and np.isfinite(sigma_h).any():
+        stats["median_sigma_h_m"] = float(np.nanmedian(sigma_h))
+    log(f"{len(points)} points ({method})")
     products = PairProducts(points=points, stats=stats)
     if keep:
+        disp, left_w, right_w = (np.concatenate(a) for a in zip(*kept, strict=True))
         products.grids = grids
         products.intermediates = dict(
             left=left_w,
@@ -233,6 +267,80 @@ def stereo_pair(
             ties_xy2=ties.xy2,
         )
     return products
+
+
+class _Dense:
+    """SGM over bands of epipolar rows: each band is resampled from the sensor pixels it needs,
+    with ``BAND_OVERLAP_ROWS`` of context above and below (SGM's vertical paths) dropped after
+    matching, so the result matches one pass over the whole image up to those paths' reach."""
+
+    def __init__(self, img1, img2, origin1, origin2, grids, dy, x_range, lims, drange, sgm):
+        self.img = {"left": img1, "right": img2}
+        self.origin = {"left": np.asarray(origin1, float), "right": np.asarray(origin2, float)}
+        self.shift = {"left": 0.0, "right": dy}
+        self.grids, self.x_range, self.lims, self.drange, self.sgm = (
+            grids, x_range, lims, drange, sgm
+        )  # fmt: skip
+
+    def _resample(self, side, ra, rb):
+        """Epipolar rows ``[ra, rb)`` of ``side`` from the part of the image they sample."""
+        x0, x1 = self.x_range
+        border = np.concatenate([
+            np.stack([np.arange(x0, x1 + 1, 8.0), np.full_like(np.arange(x0, x1 + 1, 8.0), y)], -1)
+            for y in (ra, rb)
+        ] + [np.stack([np.full_like(np.arange(ra, rb + 1, 8.0), x), np.arange(ra, rb + 1, 8.0)],
+                      -1) for x in (x0, x1)])  # fmt: skip
+        border[:, 1] += self.shift[side]
+        sensor = self.grids.to_sensor(side, border) - self.origin[side]
+        image = self.img[side]
+        h, w = image.shape
+        c0 = int(np.clip(np.floor(sensor[:, 0].min()) - BAND_MARGIN_PX, 0, w))
+        c1 = int(np.clip(np.ceil(sensor[:, 0].max()) + BAND_MARGIN_PX + 1, c0, w))
+        r0 = int(np.clip(np.floor(sensor[:, 1].min()) - BAND_MARGIN_PX, 0, h))
+        r1 = int(np.clip(np.ceil(sensor[:, 1].max()) + BAND_MARGIN_PX + 1, r0, h))
+        if c1 <= c0 or r1 <= r0:
+            return np.full((rb - ra, x1 - x0), np.nan, np.float32)
+        return resample(
+            image[r0:r1, c0:c1], self.grids, side,
+            origin_xy=tuple(float(v) for v in self.origin[side] + (c0, r0)),
+            y_shift_px=self.shift[side], x_range=self.x_range, y_range=(ra, rb),
+        )  # fmt: skip
+
+    def band(self, r0, r1, keep=False):
+        """Disparity ``(r1 - r0, width)`` of epipolar rows ``[r0, r1)`` (NaN = none), the left
+        image's valid mask there, and (``keep``) both epipolar images of the band."""
+        rows_e = self.grids.epipolar_shape[0]
+        ra, rb = max(r0 - BAND_OVERLAP_ROWS, 0), min(r1 + BAND_OVERLAP_ROWS, rows_e)
+        left, right = self._resample("left", ra, rb), self._resample("right", ra, rb)
+        valid_l, valid_r = np.isfinite(left), np.isfinite(right)
+        disp = sgm_disparity(
+            to_uint8(left, self.lims[0]), to_uint8(right, self.lims[1]), *self.drange, self.sgm,
+            valid=valid_l,
+        )  # fmt: skip
+        x0, x1 = self.x_range
+        ye, xe = np.mgrid[0 : rb - ra, x0:x1]
+        xr = np.rint(xe + np.nan_to_num(disp)).astype(np.int64) - x0
+        in_r = (xr >= 0) & (xr < x1 - x0)
+        ok_r = np.zeros_like(valid_l)
+        ok_r[in_r] = valid_r[ye[in_r], xr[in_r]]
+        disp = np.where(ok_r, disp, np.nan)
+        core = slice(r0 - ra, r1 - ra)
+        images = (left[core], right[core]) if keep else ()
+        return disp[core], valid_l[core], images
+
+
+def _triangulate(ref, sec, matches, method):
+    """Points ``(n, 3)`` and height sigmas ``(n,)`` (NaN for ``los_midpoint``) of ``(n, 2, 2)``
+    matches, in chunks of one size (one compilation whatever the band)."""
+    n = matches.shape[0]
+    pad = -n % TRIANGULATION_CHUNK
+    if pad:
+        matches = np.concatenate([matches, np.full((pad, 2, 2), np.nan)])
+    points, result = triangulate([ref, sec], matches, method, chunk=TRIANGULATION_CHUNK)
+    sigma_h = np.full(n, np.nan)
+    if result is not None:
+        sigma_h = np.asarray(result.sigma_enu)[:n, 2]
+    return points[:n], sigma_h
 
 
 def dsm_from_images(
@@ -247,6 +355,7 @@ def dsm_from_images(
     keep_dir: str | os.PathLike | None = None,
     progress: bool = False,
     register: bool = True,
+    band_rows: int | None = BAND_ROWS,
 ) -> tuple[DSMGrid, list[dict]]:
     """DSM of ``roi`` of the first image from the pairs (first, i): pooled points, median per
     cell. Returns the grid and each pair's stats.
@@ -258,21 +367,22 @@ def dsm_from_images(
     too. With GCPs, adjust the models first (``jaxgeo adjust``) and pass ``register=False``.
 
     ``keep_dir``: write each pair's intermediate
-    products there (``pair_i.npz``: epipolar images, disparity, tie points, points)."""
+    products there (``pair_i.npz``: epipolar images, disparity, tie points, points).
+    ``band_rows``: epipolar rows per band of dense matching (:func:`stereo_pair`); ``progress``:
+    a progress bar per pair (tqdm, on stderr)."""
     if len(models) != len(paths) or len(paths) < 2:
         raise ValueError("dsm: give at least two images, each with its model")
     all_points, all_stats = [], []
     n = len(paths) - 1
     for i in range(1, len(paths)):
-
-        def log(msg, i=i):
-            if progress:
-                print(f"\r[pair {i}/{n}] {msg}".ljust(100), end="", file=sys.stderr, flush=True)
-
-        pair = stereo_pair(
-            models[0], models[i], paths[0], paths[i], roi, method=method,
-            keep=keep_dir is not None, log=log,
-        )  # fmt: skip
+        bar = _Progress(f"pair {i}/{n}", progress)
+        try:
+            pair = stereo_pair(
+                models[0], models[i], paths[0], paths[i], roi, method=method,
+                keep=keep_dir is not None, log=bar.log, band_rows=band_rows, on_band=bar.band,
+            )  # fmt: skip
+        finally:
+            bar.close()
         all_points.append(pair.points)
         all_stats.append(pair.stats)
         if keep_dir is not None:
@@ -280,7 +390,7 @@ def dsm_from_images(
             out.mkdir(parents=True, exist_ok=True)
             np.savez_compressed(out / f"pair_{i}.npz", points=pair.points, **pair.intermediates)
     if progress:
-        print("\r[dsm] rasterising".ljust(100), file=sys.stderr, flush=True)
+        print("[dsm] rasterising", file=sys.stderr, flush=True)
     if register and len(all_points) > 1:
         offsets = _height_offsets(all_points, res_m, epsg)
         for pts, st, off in zip(all_points, all_stats, offsets, strict=True):
@@ -288,6 +398,32 @@ def dsm_from_images(
             st["height_offset_removed_m"] = float(off)
     dsm = rasterize(np.concatenate(all_points), res_m, epsg=epsg, origin=origin, shape=shape)
     return dsm, all_stats
+
+
+class _Progress:
+    """A tqdm bar over the dense-matching bands of one pair; the stage messages as its postfix.
+    Silent when not ``enabled``."""
+
+    def __init__(self, name: str, enabled: bool):
+        self.bar = None
+        if enabled:
+            from tqdm import tqdm
+
+            self.bar = tqdm(total=1, desc=name, unit="band", file=sys.stderr, leave=True)
+
+    def log(self, msg: str) -> None:
+        if self.bar is not None:
+            self.bar.set_postfix_str(msg[:60])
+
+    def band(self, done: int, total: int) -> None:
+        if self.bar is not None:
+            self.bar.total = total
+            self.bar.n = done
+            self.bar.refresh()
+
+    def close(self) -> None:
+        if self.bar is not None:
+            self.bar.close()
 
 
 def _height_offsets(all_points, res_m, epsg):
