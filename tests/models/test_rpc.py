@@ -166,4 +166,6 @@ def test_gradients_localize(pleiades):
     def f(p):
         return eqx.combine(p, static).localize(img, h)
 
-    check_grads(jax.jit(f), (params,), order=1, modes=("fwd", "rev"), eps=1e-8, atol=1e-9, rtol=1e-3)
+    check_grads(
+        jax.jit(f), (params,), order=1, modes=("fwd", "rev"), eps=1e-8, atol=1e-9, rtol=1e-3
+    )
