@@ -74,9 +74,16 @@ def en_error_m(estimate: Float[Array, "n 3"], reference: Float[Array, "n 3"]):
     return ((estimate - reference) * metres_per_unit(reference))[:, :2]
 
 
+def _tie_ground(blocks, data: Level2Data):
+    """Ground of every tie (t, 3) localised in its first and in its second sub-scene."""
+    return [
+        localize_in(blocks, data.tie_scene[:, i], data.tie_xy[:, i], data.tie_h) for i in (0, 1)
+    ]
+
+
 def tie_gap(blocks, data: Level2Data, correction=None):
     """Tie ground gaps (t, 2) east/north m: second sub-scene minus first, at the tie height."""
-    g = [localize_in(blocks, data.tie_scene[:, i], data.tie_xy[:, i], data.tie_h) for i in (0, 1)]
+    g = _tie_ground(blocks, data)
     if correction is not None:
         g = [correction.apply(x) for x in g]
     return en_error_m(g[1], g[0])
@@ -105,7 +112,14 @@ def level_two(
     ``data.gcp_weight`` (``degree`` one of ``universal.N_TERMS`` or ``"auto"``: the one with the
     lowest leave-one-GCP-scene-out error; or its :func:`degree_index`)."""
     (group,) = problem.groups
-    adjusted = group.blocks(level1.theta[0])
+    return TwoLevelSolution(level1, *_level_two(group, data, level1.theta[0], degree))
+
+
+def _level_two(group, data: Level2Data, theta, degree):
+    """:func:`level_two`'s fields after ``level1``, from the model group and level-1 parameters
+    only (not the level-1 problem and solution, whose shapes depend on the level-1
+    observations: :func:`level_two_jit` then compiles once per strip layout)."""
+    adjusted = group.blocks(theta)
     w = data.gcp_weight
     gcp1 = localize_in(adjusted, data.gcp_scene, data.gcp_xy, data.gcp_lonlath[:, 2])
     # the degrees are compared on the GCPs kept, unweighted: a robust loss' weights belong to
@@ -116,14 +130,13 @@ def level_two(
     index = jnp.where(wanted < 0, jnp.argmin(jnp.where(jnp.isfinite(cv), cv, jnp.inf)), wanted)
     fits = [fit_correction(gcp1, data.gcp_lonlath, d, weight=w) for d in N_TERMS]
     corr = jax.tree.map(lambda *c: jnp.stack(c)[index], *fits)
-    return TwoLevelSolution(
-        level1=level1,
-        correction=corr,
-        cv_rms_m=cv,
-        degree_index=index,
-        gcp_level1=gcp1,
-        gcp_error_level1_m=en_error_m(gcp1, data.gcp_lonlath),
-        gcp_error_level2_m=en_error_m(corr.apply(gcp1), data.gcp_lonlath),
+    return (
+        corr,
+        cv,
+        index,
+        gcp1,
+        en_error_m(gcp1, data.gcp_lonlath),
+        en_error_m(corr.apply(gcp1), data.gcp_lonlath),
     )
 
 
@@ -150,25 +163,50 @@ def two_level(
 def evaluate(problem: Problem, data: Level2Data, sol: TwoLevelSolution) -> Evaluation:
     """Check-point errors and tie gaps of the vendor, level-1 and level-2 models."""
     (group,) = problem.groups
+    return _evaluate(group, data, sol.level1.theta[0], sol.correction)
+
+
+def _evaluate(group, data: Level2Data, theta, corr: UniversalCorrection) -> Evaluation:
+    """:func:`evaluate` from the model group, the level-1 parameters and the correction only
+    (:func:`evaluate_jit` then compiles once per strip layout)."""
     vendor = group.blocks(group.theta0)
-    adjusted = group.blocks(sol.level1.theta[0])
-    corr = sol.correction
+    adjusted = group.blocks(theta)
     h = data.check_lonlath[:, 2]
     chk0 = localize_in(vendor, data.check_scene, data.check_xy, h)
     chk1 = localize_in(adjusted, data.check_scene, data.check_xy, h)
+    # the ties localised with the level-1 models once, for the level-1 and level-2 gaps
+    ties1 = _tie_ground(adjusted, data)
     return Evaluation(
         check_error_before_m=en_error_m(chk0, data.check_lonlath),
         check_error_level1_m=en_error_m(chk1, data.check_lonlath),
         check_error_level2_m=en_error_m(corr.apply(chk1), data.check_lonlath),
         tie_gap_before_m=tie_gap(vendor, data),
-        tie_gap_level1_m=tie_gap(adjusted, data),
-        tie_gap_level2_m=tie_gap(adjusted, data, corr),
+        tie_gap_level1_m=en_error_m(ties1[1], ties1[0]),
+        tie_gap_level2_m=en_error_m(corr.apply(ties1[1]), corr.apply(ties1[0])),
     )
 
 
 two_level_jit = eqx.filter_jit(two_level)
-level_two_jit = eqx.filter_jit(level_two)
-evaluate_jit = eqx.filter_jit(evaluate)
+_level_two_jit = eqx.filter_jit(_level_two)
+_evaluate_jit = eqx.filter_jit(_evaluate)
+
+
+def level_two_jit(
+    problem: Problem,
+    data: Level2Data,
+    level1: bundle_solve.Solution,
+    degree: str | Int[Array, ""] = "quadratic",
+) -> TwoLevelSolution:
+    """:func:`level_two` compiled once per strip layout (model group and level-2 data): level-1
+    problems of one strip with or without GCPs share it."""
+    (group,) = problem.groups
+    return TwoLevelSolution(level1, *_level_two_jit(group, data, level1.theta[0], degree))
+
+
+def evaluate_jit(problem: Problem, data: Level2Data, sol: TwoLevelSolution) -> Evaluation:
+    """:func:`evaluate` compiled once per strip layout (as :func:`level_two_jit`)."""
+    (group,) = problem.groups
+    return _evaluate_jit(group, data, sol.level1.theta[0], sol.correction)
 
 
 @eqx.filter_jit

@@ -3,8 +3,8 @@
 12 sub-scenes with GCPs surveyed in every one (``strip_full``); ``strip_quarter`` keeps the GCPs
 of a quarter of them (every fourth and the last, the rule of 003_ section 9), and
 ``strip_result`` is its two-level adjustment with the default settings (robust loss, data
-snooping) and 20 ties per pair: test_solve checks its accuracy, test_gross compares corrupted
-copies of the strip with it (same shapes: the compiled solve is reused).
+snooping) and 20 ties per pair: test_solve checks its accuracy and compares corrupted copies
+of the strip with it (same shapes: the compiled solve is reused within that module).
 """
 
 import warnings
