@@ -14,6 +14,7 @@ import equinox as eqx
 import jax
 import jax.numpy as jnp
 import lineax as lx
+import numpy as np
 import optimistix as optx
 from jaxtyping import Array, Bool, Float, Int
 
@@ -62,18 +63,32 @@ def _block_priors(block) -> Float[Array, " q"]:
     return jnp.asarray(block.prior_residuals(), dtype=float).reshape(-1)
 
 
+def _padded_layout(block_start: tuple[int, ...]) -> tuple[np.ndarray, np.ndarray]:
+    """Static layout of block-sorted observations padded to ``(n_blocks, most)``: the index of
+    each padded entry into the observations (a block's last one repeated; 0 for an empty
+    block), and the padded position of each observation."""
+    start = np.asarray(block_start)
+    counts = np.diff(start)
+    most = max(int(counts.max()), 1)
+    rank = np.arange(most)
+    index = start[:-1, None] + np.minimum(rank[None, :], np.maximum(counts[:, None] - 1, 0))
+    index = np.where(counts[:, None] > 0, index, 0)
+    block = np.repeat(np.arange(counts.size), counts)
+    position = block * most + (np.arange(start[-1]) - start[:-1][block])
+    return index, position
+
+
 def _per_block(grp, stacked, ob, ground: Float[Array, "n 3"]) -> Float[Array, "m 2"]:
-    """Weighted image residuals of ``ob`` (sorted by block, ``ob.block_start``), each block's
-    slice projected by its own model."""
-    parts = []
-    for k in range(grp.n_blocks):
-        a, b = ob.block_start[k], ob.block_start[k + 1]
-        if b == a:
-            continue
-        model = grp.image_model(_take(stacked, k), ob.slot)
-        g = ground[ob.point[a:b]]
-        parts.append((model.project(g) - ob.xy[a:b]) * ob.weight[a:b, None])
-    return jnp.concatenate(parts) if parts else jnp.zeros_like(ob.xy)
+    """Weighted image residuals of ``ob`` (sorted by block, ``ob.block_start``): each block's
+    model projects its own observations, padded to the largest block's count and vmapped over
+    the blocks (one program whatever the number of blocks; no per-observation model copy)."""
+    index, position = _padded_layout(ob.block_start)
+
+    def project(block, g, slot=ob.slot):
+        return grp.image_model(block, slot).project(g)
+
+    xy = eqx.filter_vmap(project, in_axes=(eqx.if_array(0), 0))(stacked, ground[ob.point[index]])
+    return (xy.reshape(-1, 2)[position] - ob.xy) * ob.weight[:, None]
 
 
 def thetas(problem: Problem, z, scales) -> tuple[Float[Array, "b p"], ...]:
@@ -319,26 +334,28 @@ def solve(
         # problem cut from the autodiff graph; one final solve of the robust objective from its
         # answer carries the derivatives (implicit function theorem through optimistix)
         outer = jax.tree.map(lambda x: jax.lax.stop_gradient(x) if eqx.is_array(x) else x, problem)
-        y, result, steps = inner(y0, ones_i, ones_g, outer)
 
+        # solve k (k = 0: least squares) uses the weights of solve k-1's answer; at least two
+        # solves, then on while the weights move. One traced copy of the least-squares solve
+        # (the first solve inside the loop, not before it: a third less to compile)
         def cond(carry):
-            _, _, _, res, _, k, change = carry
-            go = (k < solver.irls_iterations) & (change > solver.irls_tol)
+            k, change, res = carry[-3], carry[-2], carry[-1]
+            go = (k <= solver.irls_iterations) & ((k < 2) | (change > solver.irls_tol))
             return go & (res == RESULTS.successful)
 
         def body(carry):
-            y, _, _, _, steps, k, _ = carry
-            wi, wg = reweight(y, outer)
+            y, _, _, wi, wg, steps, k, _, _ = carry
             y, res, st = inner(y, wi, wg, outer)
-            # the weights' change across this solve decides whether another one is needed
             wi2, wg2 = reweight(y, outer)
             change = jnp.maximum(
                 jnp.max(jnp.abs(wi2 - wi), initial=0.0), jnp.max(jnp.abs(wg2 - wg), initial=0.0)
             )
-            return y, wi, wg, res, steps + st, k + 1, change
+            return y, wi, wg, wi2, wg2, steps + st, k + 1, change, res
 
-        carry = (y, ones_i, ones_g, result, steps, jnp.array(0), jnp.array(jnp.inf))
-        y, w_i, w_g, result, steps, k, change = jax.lax.while_loop(cond, body, carry)
+        start = jax.lax.stop_gradient(y0)
+        carry = (start, ones_i, ones_g, ones_i, ones_g, jnp.array(0), jnp.array(0))
+        carry = (*carry, jnp.array(jnp.inf), RESULTS.successful)
+        y, w_i, w_g, _, _, steps, k, change, result = jax.lax.while_loop(cond, body, carry)
         result = RESULTS.where(
             (change > solver.irls_tol) & (result == RESULTS.successful),
             RESULTS.not_converged,

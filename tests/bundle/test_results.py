@@ -23,17 +23,23 @@ def problems(ventoux_pair):
     return good, bad
 
 
+_solve = eqx.filter_jit(lambda p: solve(p, SolverConfig()))
+"""One jitted solve for the module: compiled once, for every problem of one structure."""
+
+
 def test_singular_problem_is_a_result_or_raises_with_throw(problems):
-    good, bad = problems
-    ok = eqx.filter_jit(lambda p: solve(p, SolverConfig()))(good)
+    good, bad = problems  # one structure: each jitted solve compiles once for both
+    plain = _solve
+    throwing = eqx.filter_jit(lambda p: solve(p, SolverConfig(), throw=True))
+    ok = plain(good)
     assert bool(ok.result == RESULTS.successful)
-    sol = eqx.filter_jit(lambda p: solve(p, SolverConfig()))(bad)
+    sol = plain(bad)
     assert bool(sol.result == RESULTS.undetermined)
     assert describe(sol.result) == (False, "singular normal equations")
     with pytest.raises(eqx.EquinoxRuntimeError, match="parameters or ground points are not"):
-        jax.block_until_ready(eqx.filter_jit(lambda p: solve(p, SolverConfig(), throw=True))(bad))
+        jax.block_until_ready(throwing(bad))
     # a successful solve does not raise with throw=True
-    thrown = eqx.filter_jit(lambda p: solve(p, SolverConfig(), throw=True))(good)
+    thrown = throwing(good)
     np.testing.assert_allclose(thrown.theta[0], ok.theta[0], rtol=1e-12, atol=1e-12)
 
 
@@ -44,7 +50,7 @@ def test_vmap_gives_each_problem_its_own_result(problems):
     flags = np.asarray(sols.result == RESULTS.successful)
     singular = np.asarray(sols.result == RESULTS.undetermined)
     assert flags.tolist() == [True, False] and singular.tolist() == [False, True]
-    single = eqx.filter_jit(lambda p: solve(p, SolverConfig()))(good)
+    single = _solve(good)
     np.testing.assert_allclose(sols.theta[0][0], single.theta[0], rtol=1e-8, atol=1e-9)
 
 
