@@ -1,8 +1,8 @@
 """Multi-image space intersection (triangulation) with any sensor models.
 
 A ground point seen in ``N >= 2`` images is the weighted least-squares solution of
-``project_i(ground) = image_i`` (001_5627e94f1608fac0.txt, sections 5.3 and 5.6), found by
-Newton's method on the gradient (:func:`~jaxgeo.models.newton.newton_root`) in local
+``project_i(ground) = image_i`` (001_5627e94f1608fac0.txt, sections 5.3 and 5.6), found as the
+root of the gradient (:func:`~jaxgeo.models.newton.newton_root`, Gauss-Newton steps) in local
 east/north/up metres, vmapped over points.
 
 Initial values follow method III of section 5.5: the first-order (linear) terms of every model,
@@ -99,6 +99,15 @@ def _gradient(u, args):
     return vjp(r)[0]
 
 
+def _gauss_newton(u, args):
+    """``J^T r`` and Gauss-Newton's ``J^T J``: the Newton iteration's linearisation from first
+    derivatives only (the exact Hessian of :func:`_gradient`, second derivatives of every
+    model, is left to the implicit derivative; the compiled intersection is ~2x smaller)."""
+    models, rest = args
+    jac, r = jax.jacfwd(lambda v: (_residual_fn(models)(v, rest),) * 2, has_aux=True)(u)
+    return jac.T @ r, jac.T @ jac
+
+
 def _weights(xy, sigma, mask):
     """Validity of each ray and its weight ``1 / sigma`` (0 where invalid); NaN-free ``xy``."""
     valid = jnp.all(jnp.isfinite(xy), axis=-1) & mask & jnp.isfinite(sigma) & (sigma > 0)
@@ -121,10 +130,15 @@ def _intersect_flat(models, xy, sigma, mask, max_steps, batch):
         g0 = jax.lax.stop_gradient(g0)
         mpu = metres_per_unit(g0)
         args = (g0, mpu, xy_i, w_i)
-        # Newton on the gradient J^T r (the shared guarded Newton, implicit derivatives): a
-        # small while-loop traces ~10x faster than optimistix' least squares
+        # the root of the gradient J^T r, stepped by Gauss-Newton (the shared guarded Newton,
+        # implicit derivatives): a small while-loop traces ~10x faster than optimistix'
         sol = newton_root(
-            _gradient, jnp.zeros(3), (models, args), max_steps=max_steps, tol=INTERSECT_ATOL_M
+            _gradient,
+            jnp.zeros(3),
+            (models, args),
+            max_steps=max_steps,
+            tol=INTERSECT_ATOL_M,
+            linearise=_gauss_newton,
         )
         u = sol.value
         ground = g0 + u / mpu

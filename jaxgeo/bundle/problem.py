@@ -128,8 +128,9 @@ class Structure(eqx.Module):
 class Problem(eqx.Module):
     """A bundle adjustment as arrays; a pure input of :func:`jaxgeo.bundle.solve.solve`.
 
-    ``n_rows``: number of scalar observations (image, ground with non-zero weight, priors);
-    the loss and the solver's settings are not part of the problem (see
+    ``n_rows``: number of scalar observations (image, ground with non-zero weight, priors), an
+    array (not static): problems that differ only in which points are GCPs share one compiled
+    solve and stack for ``vmap``. The loss and the solver's settings are not part of the problem (see
     :class:`~jaxgeo.bundle.config.SolverConfig`).
     """
 
@@ -141,14 +142,14 @@ class Problem(eqx.Module):
     prior_mean: tuple[Float[Array, "b p"], ...]
     prior_weight: tuple[Float[Array, "b p"], ...]
     structure: Structure
-    n_rows: int = eqx.field(static=True)
+    n_rows: Int[Array, ""]
 
     @property
     def n_unknowns(self) -> int:
         return self.structure.n_params + 3 * self.structure.n_points
 
     @property
-    def redundancy(self) -> int:
+    def redundancy(self) -> Int[Array, ""]:
         return self.n_rows - self.n_unknowns
 
     def ground_points(self, u: Float[Array, "n 3"]) -> Float[Array, "n 3"]:

@@ -59,15 +59,15 @@ def _value_and_jacobian(fun, x, args):
     return value, jac
 
 
-@functools.partial(jax.custom_jvp, nondiff_argnums=(0, 3, 4))
-def _root(fun, x0, args, max_steps: int, tol: float):
+@functools.partial(jax.custom_jvp, nondiff_argnums=(0, 3, 4, 5))
+def _root(fun, x0, args, max_steps: int, tol: float, linearise):
     def cond(carry):
         k, _, step = carry
         return (k < max_steps) & (step > tol)  # a NaN step stops that point at once
 
     def body(carry):
         k, x, _ = carry
-        f, jac = _value_and_jacobian(fun, x, args)
+        f, jac = linearise(x, args) if linearise is not None else _value_and_jacobian(fun, x, args)
         dx = _solve(jac, f)
         return k + 1, x - dx, jnp.max(jnp.abs(dx))
 
@@ -76,10 +76,10 @@ def _root(fun, x0, args, max_steps: int, tol: float):
 
 
 @_root.defjvp
-def _root_jvp(fun, max_steps, tol, primals, tangents):
+def _root_jvp(fun, max_steps, tol, linearise, primals, tangents):
     x0, args = primals
     _, d_args = tangents
-    x, step = _root(fun, x0, args, max_steps, tol)
+    x, step = _root(fun, x0, args, max_steps, tol, linearise)
     # double where: linearise at a finite stand-in where the root is not finite, and give
     # such points (and singular Jacobians) a zero tangent, so their NaN reaches no one else
     finite = jnp.all(jnp.isfinite(x))
@@ -102,6 +102,7 @@ def newton_root(
     max_steps: int,
     tol: float = 0.0,
     converged_tol: float | None = None,
+    linearise: Callable[[Array, Any], tuple[Array, Array]] | None = None,
 ) -> NewtonSolution:
     """Root of ``fun(x, args)`` (``x`` a scalar or a vector, ``fun`` of the same shape) by Newton.
 
@@ -110,8 +111,13 @@ def newton_root(
     ``converged`` is ``step <= converged_tol`` (default ``tol``). ``fun`` must be a function
     of ``(x, args)`` only; ``args`` (any pytree) carries the data it is differentiated by.
     One problem per call: ``jax.vmap`` over points.
+
+    ``linearise(x, args) -> (fun(x, args), M)``, if given, replaces the exact Jacobian in the
+    iteration by an approximation ``M`` with the same root (e.g. Gauss-Newton's ``J^T J`` for
+    the gradient ``J^T r`` of a least-squares problem: first derivatives only, so a smaller
+    program to compile). The derivatives of the root still use the exact Jacobian of ``fun``.
     """
     x0 = jax.lax.stop_gradient(jnp.asarray(x0, dtype=float))
-    x, step = _root(fun, x0, args, int(max_steps), float(tol))
+    x, step = _root(fun, x0, args, int(max_steps), float(tol), linearise)
     limit = tol if converged_tol is None else converged_tol
     return NewtonSolution(x, step <= limit, step)

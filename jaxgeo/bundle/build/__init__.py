@@ -225,7 +225,7 @@ def build(
         prior_mean=prior_mean,
         prior_weight=prior_weight,
         structure=make_structure(groups_t, images_t, gobs, len(point_ids)),
-        n_rows=n_rows,
+        n_rows=jnp.asarray(n_rows),
     )
     param_names = tuple(
         f"{label(key)}{name}"
