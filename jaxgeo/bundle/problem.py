@@ -130,8 +130,8 @@ class Problem(eqx.Module):
 
     ``n_rows``: number of scalar observations (image, ground with non-zero weight, priors), an
     array (not static): problems that differ only in which points are GCPs share one compiled
-    solve and stack for ``vmap``. The loss and the solver's settings are not part of the problem (see
-    :class:`~jaxgeo.bundle.config.SolverConfig`).
+    solve and stack for ``vmap``. The loss and the solver's settings are not part of the
+    problem (see :class:`~jaxgeo.bundle.config.SolverConfig`).
     """
 
     groups: tuple[ModelGroup, ...]
