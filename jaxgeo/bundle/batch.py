@@ -7,8 +7,9 @@ GCPs, or Monte-Carlo draws of one block). :func:`solve_batch` stacks them leaf-w
 ``chunk`` problems: a chunk runs until its slowest member converges (a vmapped while-loop), so
 chunks confine stragglers and bound memory. The small factorisations are LAPACK-free
 (:mod:`~jaxgeo.bundle.factor`), which removes the hang of >= 1000 vmapped problems in jaxlib's
-batched LAPACK. With several local devices (``jax.local_device_count() > 1``) the problems are
-sharded over them (``jax.sharding``, one mesh axis): the results are those of one device.
+batched LAPACK; problems whose reduced system is larger (LAPACK) run one at a time. With
+several local devices (``jax.local_device_count() > 1``) the problems are sharded over them
+(``jax.sharding``, one mesh axis): the results are those of one device.
 
 Example::
 
@@ -27,6 +28,7 @@ import jax.numpy as jnp
 import numpy as np
 
 from .config import DEFAULT_SOLVER, SolverConfig
+from .factor import UNROLL_MAX
 from .problem import Problem
 from .solve import Solution, solve
 
@@ -142,6 +144,10 @@ def solve_batch(
     mesh = _mesh(n) if shard else None
     devices = 1 if mesh is None else mesh.size
     chunk = max(1, min(int(chunk), n // devices))
+    if stacked.structure.n_params + 1 > UNROLL_MAX:
+        # the reduced system goes to LAPACK, whose batched (vmapped) kernels deadlock on this
+        # 2-core CPU (both XLA threads waiting in ParallelBatchMap): one problem at a time
+        chunk = 1
     # pad (repeating the last problem) to whole chunks per device: lax.map then compiles one
     # body, and every batch size of a multiple of chunk * devices reuses one program
     total = -(-n // (chunk * devices)) * chunk * devices

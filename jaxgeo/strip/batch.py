@@ -1,7 +1,7 @@
 """One strip's compiled two-level call run many times: timing and Monte-Carlo batches.
 
 :func:`monte_carlo` draws fresh measurement noise for the GCP and check measurements and
-adjusts every draw in one vmapped, jitted call (:func:`~.solve.two_level_batch`). A batch is
+adjusts every draw in one jitted call (:func:`~.solve.two_level_batch`). A batch is
 the compiled call alone: the solver's robust loss acts, but nothing is removed (data snooping
 is a host-side loop around one strip, :func:`~.adjustment.adjust_strip`); the level-2 GCP
 weights are the result's (GCP measurements removed there stay out).
@@ -62,7 +62,7 @@ def monte_carlo(
     result: StripResult, n_runs: int, noise_px: float | None = None, seed: int = 0
 ) -> tuple[TwoLevelSolution, Evaluation]:
     """``n_runs`` Monte-Carlo repetitions of ``result``'s two-level adjustment (noise as in
-    :func:`monte_carlo_inputs`) in one vmapped, jitted call. Returns the batched solution and
+    :func:`monte_carlo_inputs`) in one jitted call. Returns the batched solution and
     evaluation (leading axis ``n_runs``)."""
     xy, gcp_xy, check_xy = monte_carlo_inputs(result, n_runs, noise_px, seed)
     c = result.config

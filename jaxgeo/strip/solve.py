@@ -221,8 +221,11 @@ def two_level_batch(
 ) -> tuple[TwoLevelSolution, Evaluation]:
     """:func:`two_level` and :func:`evaluate` for a batch of measurement sets of one strip
     structure: ``xy`` the problem's concatenated image observations, ``gcp_xy``/``check_xy``
-    those of level 2, per batch item. One compiled, vmapped call (Monte-Carlo runs, or many
-    strips of one layout)."""
+    those of level 2, per batch item. One compiled call (Monte-Carlo runs, or many strips of
+    one layout), the items one after another (``lax.map``), not vmapped: a strip's reduced
+    system is factorised by LAPACK, and jaxlib's batched (vmapped) LAPACK kernels deadlock on
+    a 2-core CPU (seen in this call: both XLA threads waiting in ``ParallelBatchMap`` inside
+    ``dpotrf``, the test suite hung)."""
 
     def one(xy_b, gcp_b, check_b):
         d = eqx.tree_at(lambda t: (t.gcp_xy, t.check_xy), data, (gcp_b, check_b))
@@ -230,4 +233,4 @@ def two_level_batch(
         sol = two_level(p, d, degree, solver)
         return sol, evaluate(p, d, sol)
 
-    return jax.vmap(one)(xy, gcp_xy, check_xy)
+    return jax.lax.map(lambda args: one(*args), (xy, gcp_xy, check_xy))

@@ -163,11 +163,9 @@ def test_distribution_rule_warns_before_solving(full):
 
 
 def test_monte_carlo_batch_equals_single_runs(result):
-    """Monte-Carlo runs in one vmapped, jitted call == the same runs one by one.
-
-    Least squares: a vmapped IRLS loop runs every member as long as the slowest one, so a
-    robust batch agrees with single runs to the reweighting tolerance only (5e-7 px), and
-    compiles twice as long."""
+    """Monte-Carlo runs in one jitted call (``lax.map``: a vmapped batch deadlocked in
+    jaxlib's batched LAPACK Cholesky, see ``two_level_batch``) == the same runs one by one.
+    Least squares: it compiles in half the time of the robust default."""
     xy, gcp_xy, check_xy = monte_carlo_inputs(result, 3, seed=2)
     c = result.config
     args = (degree_index(c.level2.degree), dataclasses.replace(c.solver, loss="l2"))
