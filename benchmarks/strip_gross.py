@@ -42,6 +42,7 @@ def main() -> None:
     import jaxgeo.strip.adjustment as strip_adjustment
     from jaxgeo.io import Observations
     from jaxgeo.simulate import carto2s_strip
+    from jaxgeo.simulate.gross import flag_scores
     from jaxgeo.strip import Strip, StripConfig, TieConfig, adjust_strip
     from jaxgeo.strip.config import STRIP_SOLVER
     from jaxgeo.strip.level1 import level1_input
@@ -111,19 +112,8 @@ def main() -> None:
         return res, out
 
     def scores(res):
-        units = set()
-        for f in res.gross_errors.flagged:
-            if f["id"].startswith("tie_"):
-                units.add(("tie", f["id"]))
-            elif f["what"] == "image":
-                units.add((f["id"], f["image"]))
-            else:
-                units.add(("gcp", f["id"]))
-        truth = {("tie", t) for t in bad_ties} | bad_obs
-        pts = {p for p, _ in bad_obs}
-        right = [u for u in units if u in truth or (u[0] == "gcp" and u[1] in pts)]
-        return {"recall": len(truth & units) / len(truth),
-                "precision": len(right) / max(len(units), 1)}  # fmt: skip
+        sc = flag_scores(res.gross_errors.flagged, bad_obs, bad_ties)
+        return {"recall": sc.recall, "precision": sc.precision}
 
     out = {"args": vars(args)}
     for name, solver in solvers.items():

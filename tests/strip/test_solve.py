@@ -21,6 +21,7 @@ import jaxgeo.strip.adjustment as strip_adjustment
 from jaxgeo.bundle.errors import RESULTS
 from jaxgeo.io import Observations, read_observations
 from jaxgeo.models.rpc_fit import project_points
+from jaxgeo.simulate.gross import flag_scores
 from jaxgeo.strip import (
     GCPDistributionWarning,
     Level1Config,
@@ -285,21 +286,8 @@ def _corrupting_ties(rng, bad: set):
 
 
 def _scores(result, bad_obs: set, bad_ties: set) -> tuple[float, float, int]:
-    """Recall, precision and count of the flags (ties per tie point; a GCP's coordinates flag
-    is right when a measurement of that GCP is wrong: one cannot tell which)."""
-    units = set()
-    for f in result.gross_errors.flagged:
-        if f["id"].startswith("tie_"):
-            units.add(("tie", f["id"]))
-        elif f["what"] == "image":
-            units.add((f["id"], f["image"]))
-        else:
-            units.add(("gcp", f["id"]))
-    truth = {("tie", t) for t in bad_ties} | bad_obs
-    bad_points = {p for p, _ in bad_obs}
-    right = [u for u in units if u in truth or (u[0] == "gcp" and u[1] in bad_points)]
-    recall = len(truth & units) / len(truth)
-    return recall, len(right) / max(len(units), 1), len(units)
+    """Recall, precision and count of the flags (:func:`jaxgeo.simulate.gross.flag_scores`)."""
+    return tuple(flag_scores(result.gross_errors.flagged, bad_obs, bad_ties))
 
 
 def _plan(result, stage="level2"):
