@@ -62,7 +62,8 @@ def kernel_specs(tmp_path_factory):
 @pytest.fixture
 def run_notebook(kernel_specs, tmp_path):
     """``run_notebook(name)`` executes ``notebooks/{name}.ipynb`` in a fresh kernel (an error in
-    any cell fails the test) and writes the executed copy to ``tmp_path`` for a look."""
+    any cell fails the test), writes the executed copy to ``tmp_path`` for a look, checks that
+    every code cell ran through to the last one's run-time line, and returns the printed text."""
     nbformat = pytest.importorskip("nbformat")
     nbclient = pytest.importorskip("nbclient")
     from jupyter_client.manager import KernelManager
@@ -81,5 +82,12 @@ def run_notebook(kernel_specs, tmp_path):
                 km.shutdown_kernel(now=True)
         print(f"{name}: {time.perf_counter() - t:.0f} s")
         nbformat.write(nb, tmp_path / f"{name}.ipynb")  # executed copy
+        code = [c for c in nb.cells if c.cell_type == "code"]
+        assert code and all(c.execution_count for c in code), f"{name}: a cell did not run"
+        text = "".join(
+            o.get("text", "") for c in code for o in c.outputs if o.output_type == "stream"
+        )
+        assert "notebook run time" in text, f"{name}: the last cell printed no run time"
+        return text
 
     return run
