@@ -217,6 +217,10 @@ def parameter_scales(
     return jax.lax.stop_gradient(split_params(sc, problem.structure))
 
 
+IRLS_INNER_TOL = 1e-3
+"""Tolerance (``StructuredGaussNewton.tol``) of the weighted least-squares solves inside the
+reweighting loop: a step below 1e-3 of its standard deviation moves a residual by ~1e-3 sigma,
+under the weight tolerance's reach; the final robust solve goes to ``SolverConfig.tol``."""
 REMOVED_WEIGHT = 1e-8
 """Weight factor of an observation removed as a gross error: it keeps the arrays (and the
 compiled solve) of the same shape while its influence (``1e-16`` of the normal equations) is
@@ -255,6 +259,7 @@ def solve(
     *,
     removed_image: Bool[Array, " M"] | None = None,
     removed_ground: Bool[Array, " c"] | None = None,
+    irls_limit: Int[Array, ""] | None = None,
     throw: bool = False,
     verbose: bool = False,
 ) -> Solution:
@@ -274,7 +279,9 @@ def solve(
 
     ``removed_image`` (M,, blocks concatenated) / ``removed_ground`` (c,): observations taken
     out as gross errors (weight ``REMOVED_WEIGHT``, rows out of the redundancy); arrays, so that
-    removing observations does not recompile.
+    removing observations does not recompile. ``irls_limit``: reweighted solves at most, an
+    array at most ``solver.irls_iterations`` (default that): the data snooping asks for fewer
+    while it is still finding gross errors, without a second compilation.
 
     The outcome is ``Solution.result`` (see :class:`Solution`): singular normal equations are
     detected here, inside the compiled solve. ``throw=True`` raises (an ``equinox`` runtime
@@ -298,18 +305,22 @@ def solve(
         scales = unit_scales(problem)
         optimiser = None
 
-    def with_args(args):  # the Schur descent evaluates the Jacobian blocks itself (faster)
+    def with_args(args, tol=solver.tol):  # the Schur descent evaluates the Jacobian blocks
         if optimiser is not None:
             return optimiser
         return StructuredGaussNewton(
-            s, tol=solver.tol, method=solver.method, verbose=verbose, fn=residuals, args=args
+            s, tol=tol, method=solver.method, verbose=verbose, fn=residuals, args=args
         )
+
+    # the reweighting's solves need not be exact: their weights are refined by the next one
+    # and the final solve polishes the answer to ``solver.tol``
+    inner_tol = solver.tol if loss == "l2" else max(solver.tol, IRLS_INNER_TOL)
 
     def inner(y, w_i, w_g, problem=problem):
         args = (_weighted(problem, base_i * w_i, base_g * w_g), scales, "l2", c)
         sol = optx.least_squares(
             residuals,
-            with_args(args),
+            with_args(args, inner_tol),
             y,
             args=args,
             max_steps=solver.max_steps,
@@ -325,6 +336,11 @@ def solve(
             irls_weights(jnp.sum(gnd**2, axis=-1), loss, c),
         )
 
+    limit = (
+        solver.irls_iterations
+        if irls_limit is None
+        else jnp.minimum(irls_limit, solver.irls_iterations)
+    )
     ones_i, ones_g = jnp.ones(m), jnp.ones(n_g)
     w_i, w_g = ones_i, ones_g
     if loss == "l2":
@@ -340,7 +356,7 @@ def solve(
         # (the first solve inside the loop, not before it: a third less to compile)
         def cond(carry):
             k, change, res = carry[-3], carry[-2], carry[-1]
-            go = (k <= solver.irls_iterations) & ((k < 2) | (change > solver.irls_tol))
+            go = (k <= limit) & ((k < 2) | (change > solver.irls_tol))
             return go & (res == RESULTS.successful)
 
         def body(carry):

@@ -248,6 +248,7 @@ def _run(args: argparse.Namespace) -> int:
         export,
         read_strip,
     )
+    from ..strip.errors import MeasuredTieWarning
     from . import CommandError
 
     if args.dem_offset_m and not args.dem:
@@ -271,7 +272,7 @@ def _run(args: argparse.Namespace) -> int:
         finally:  # the GCP distribution warning matters most when the adjustment fails
             for w in caught:
                 warns = (GCPDistributionWarning, UniversalCorrectionWarning, LineOffsetWarning,
-                         NotConvergedWarning, PoorFitWarning)  # fmt: skip
+                         NotConvergedWarning, PoorFitWarning, MeasuredTieWarning)  # fmt: skip
                 kind = "warning" if issubclass(w.category, warns) else "note"
                 print(f"jaxgeo strip: {kind}: {w.message}", file=sys.stderr)
     converged = bool(result.report.strip["converged"])

@@ -43,6 +43,7 @@ from .distribution import GCPDistributionWarning as GCPDistributionWarning
 from .distribution import check_gcp_distribution as check_gcp_distribution
 from .errors import ConfigError as ConfigError
 from .errors import LineOffsetWarning as LineOffsetWarning
+from .errors import MeasuredTieWarning as MeasuredTieWarning
 from .errors import Setting as Setting
 from .errors import StripFormatError as StripFormatError
 from .errors import UniversalCorrectionWarning as UniversalCorrectionWarning

@@ -152,7 +152,10 @@ def adjust_strip(strip: Strip, config: StripConfig | None = None) -> StripResult
             UniversalCorrectionWarning,
             stacklevel=2,
         )
-    gross = GrossErrors.collect(level1, l2, rows, strip, suspects, config.solver, inp.tie_ids)
+    gross = GrossErrors.collect(
+        level1, l2, rows, strip, suspects, config.solver, inp.tie_ids + inp.measured_ids,
+        np.asarray(ev.check_error_level2_m),
+    )  # fmt: skip
     report = strip_report(strip, sol, ev, rows, inp, setup.problem.n_unknowns, used, gross)
     return StripResult(
         strip=strip,

@@ -38,20 +38,20 @@ def monte_carlo_inputs(
     """Noisy measurement sets for :func:`~.solve.two_level_batch`: ``(xy (b, m, 2),
     gcp_xy (b, g, 2), check_xy (b, c, 2))``. Fresh Gaussian noise (``noise_px``, default each
     measurement's a priori sigma) on the GCP and check measurements, the same draw wherever a
-    measurement enters (level 1 and level 2); formed ties stay exact."""
+    measurement enters (level 1 and level 2); formed and measured ties stay as they are."""
     rng = np.random.default_rng(seed)
     data, inp = result.data, result.inputs
     o = result.strip.observations
     rows = result.report.rows
     sigma = o.sigma_px if noise_px is None else np.full(len(o.sigma_px), float(noise_px))
-    n_ties = len(inp.ties.point)
+    n_ties, n_gcp = len(inp.ties.point), len(rows["gcp"])
     xy, gcp_xy, check_xy = [], [], []
     for _ in range(n_runs):
         e = rng.normal(0.0, 1.0, o.xy.shape) * sigma[:, None]
         e_gcp, e_chk = e[rows["gcp"]], e[rows["check"]]
         noisy = np.array(inp.observations.xy)
         if result.config.level1.use_gcps:
-            noisy[n_ties:] += e_gcp  # the level-1 GCP rows, in the order of rows["gcp"]
+            noisy[n_ties : n_ties + n_gcp] += e_gcp  # level-1 GCP rows, in rows["gcp"] order
         xy.append(noisy[result.setup.obs_order])
         gcp_xy.append(np.asarray(data.gcp_xy) + e_gcp)
         check_xy.append(np.asarray(data.check_xy) + e_chk)

@@ -72,3 +72,8 @@ class LineOffsetWarning(JaxgeoWarning):
     the strip's other seams: a sub-scene's line offset (``first_line``) is probably wrong. Its
     ties are all shifted alike, so the sub-scene's bias absorbs them (nothing for the data
     snooping to find unless it has GCPs): fix the offset in the strip description."""
+
+
+class MeasuredTieWarning(JaxgeoWarning):
+    """Points of the observations without ground coordinates (measured tie points) that cannot
+    be used, e.g. measured in one sub-scene only; the message names them and the file."""

@@ -7,6 +7,11 @@ other at the tie's height -- zero for a seamless mosaic.
 
 Stages: ``direct`` (vendor RPCs), ``level1`` (bundle-adjusted biases), ``level2`` (plus the
 universal correction).
+
+No height figures: a strip sees each point from one direction (adjacent sub-scenes share their
+overlap lines, so a point's two rays nearly coincide), so the check points are mono-plotted at
+their surveyed heights and only their plan error is measured (a height error needs a stereo pair:
+``jaxgeo adjust``).
 """
 
 from __future__ import annotations
@@ -18,6 +23,7 @@ from collections.abc import Mapping, Sequence
 import numpy as np
 
 from ..bundle.errors import RESULTS
+from .snooping import CHECK_K, gross_checks
 from .universal import N_TERMS
 
 STAGES = ("direct", "level1", "level2")
@@ -35,7 +41,9 @@ class GrossErrors:
     at each level; ``line_offsets``: the broken seams (:func:`.snooping.suspect_offsets`);
     ``checks_excluded``: check points left out of the statistics because an observation of
     theirs was flagged (check measurements are mono-plotted, not adjusted: only a check point
-    that is also measured in the adjustment can be).
+    that is also measured in the adjustment can be); ``checks_gross``: check measurements whose
+    own error is gross (:func:`.snooping.gross_checks`), ``{id, image, e_m, n_m}``, their points
+    left out of the statistics too.
     """
 
     flagged: list[dict]
@@ -43,6 +51,12 @@ class GrossErrors:
     line_offsets: list[dict]
     checks_excluded: tuple[str, ...] = ()
     loss: str = "l2"
+    checks_gross: tuple[dict, ...] = ()
+
+    @property
+    def checks_out(self) -> set[str]:
+        """Every check point left out of the statistics."""
+        return set(self.checks_excluded) | {c["id"] for c in self.checks_gross}
 
     @property
     def n_removed(self) -> int:
@@ -50,11 +64,20 @@ class GrossErrors:
 
     @classmethod
     def collect(
-        cls, level1, l2, rows: dict, strip, line_offsets: list[dict], solver, tie_ids=()
+        cls,
+        level1,
+        l2,
+        rows: dict,
+        strip,
+        line_offsets: list[dict],
+        solver,
+        tie_ids=(),
+        check_error_m: np.ndarray | None = None,
     ) -> GrossErrors:
         """From the level-1 :class:`~jaxgeo.bundle.result.AdjustResult`, the level-2
-        :class:`~.snooping.Level2Snooping`, the ``solver`` (its loss and ``blunder_k``) and the
-        formed ties' ids."""
+        :class:`~.snooping.Level2Snooping`, the ``solver`` (its loss and ``blunder_k``), the
+        ids of the ties (formed and measured: their height priors are "tie height") and the
+        check measurements' final errors ``(c, 2)`` m (rows ``rows["check"]``)."""
         flagged = []
         removed = level1.removed if level1.removed is not None else np.zeros(0, bool)
         for i in np.flatnonzero(level1.blunders):
@@ -77,8 +100,16 @@ class GrossErrors:
         bad = {f["id"] for f in flagged}
         role = dict(zip(strip.ground.ids, strip.ground.role, strict=True))
         checks = tuple(sorted(p for p in bad if role.get(p) == "check"))
+        gross_chk = []
+        if check_error_m is not None:
+            err = np.asarray(check_error_m)
+            scene = np.array([strip.scene_index(o.images[i]) for i in rows["check"]], dtype=int)
+            for j in np.flatnonzero(gross_checks(scene, err)):
+                i = rows["check"][j]
+                gross_chk.append({"id": o.point_ids[i], "image": o.images[i],
+                                  "e_m": float(err[j, 0]), "n_m": float(err[j, 1])})  # fmt: skip
         return cls(flagged, {"level1": int(level1.snooping_rounds), "level2": int(l2.rounds)},
-                   list(line_offsets), checks, solver.loss)  # fmt: skip
+                   list(line_offsets), checks, solver.loss, tuple(gross_chk))  # fmt: skip
 
     def to_dict(self) -> dict:
         return {
@@ -89,6 +120,7 @@ class GrossErrors:
             "snooping_rounds": self.rounds,
             "line_offsets": self.line_offsets,
             "checks_excluded": list(self.checks_excluded),
+            "checks_gross": list(self.checks_gross),
         }
 
     def format(self) -> str:
@@ -110,6 +142,17 @@ class GrossErrors:
         if self.checks_excluded:
             lines.append(f"check points excluded from the statistics (an observation flagged): "
                          f"{len(self.checks_excluded)}")  # fmt: skip
+        if self.checks_gross:
+            lines.append(
+                f"check measurements with a gross error of their own (error > {CHECK_K:g} robust "
+                f"sigmas from their sub-scene's other checks), their points excluded from the "
+                f"statistics: "
+                + ", ".join(
+                    f"{c['id']}@{c['image']} (E {c['e_m']:+.2f} N {c['n_m']:+.2f} m)"
+                    for c in self.checks_gross[:20]
+                )  # fmt: skip
+                + (" ..." if len(self.checks_gross) > 20 else "")
+            )
         if self.line_offsets:
             lines.append(line_offset_message(self.line_offsets))
         return "\n".join(lines)
@@ -193,7 +236,7 @@ class StripReport:
         s = self.strip
         lines.append("")
         n_out = s.get("n_check_excluded", 0)
-        excl = f", {n_out} excluded: an observation flagged" if n_out else ""
+        excl = f", {n_out} excluded as gross errors" if n_out else ""
         for st in STAGES:
             c, g = s["check_rms_m"][st], s["tie_gap_m"][st]
             lines.append(
@@ -201,6 +244,10 @@ class StripReport:
                 f"{c['plan']:.2f} m ({s['n_check']} checks{excl}); tie gap RMS {g['rms']:.3f} max "
                 f"{g['max']:.3f} m ({s['n_ties']} ties)"
             )
+        lines.append("heights: not evaluated (one view direction per point: checks are "
+                     "mono-plotted at their surveyed heights)")  # fmt: skip
+        if s.get("n_measured_ties"):
+            lines.append(f"level 1 also adjusted {s['n_measured_ties']} measured tie points")
         lines.append(
             f"level 1: {s['scenes']} sub-scenes, {s['unknowns']} unknowns, s0 {s['s0']:.3f}, "
             f"{s['steps']} steps, {'converged' if s['converged'] else 'NOT CONVERGED'}; "
@@ -269,10 +316,10 @@ def strip_report(
 ) -> StripReport:
     """The :class:`StripReport` of a :func:`~.solve.two_level` solution ``sol``; ``rows``:
     the strip's observation rows of the GCP and check measurements (``{"gcp": [...], ...}``);
-    ``gross``: the gross errors found (check points in ``gross.checks_excluded`` are left out of
+    ``gross``: the gross errors found (check points in ``gross.checks_out`` are left out of
     the check statistics; ``n_check_excluded`` says how many measurements)."""
     o = strip.observations
-    out = set(gross.checks_excluded) if gross is not None else set()
+    out = gross.checks_out if gross is not None else set()
     use = np.array([o.point_ids[i] not in out for i in rows["check"]], dtype=bool)
     check_rows = [i for i, u in zip(rows["check"], use, strict=True) if u]
     check_scene = np.array([strip.scene_index(o.images[i]) for i in check_rows], dtype=int)
@@ -295,6 +342,7 @@ def strip_report(
         "degree": degree,
         "n_check": int(len(errors["level1"])),
         "n_ties": int(inp.ties.n_ties),
+        "n_measured_ties": len(inp.measured_ids),
         "n_gcp": int(len(g2)),
         "n_check_excluded": int(np.sum(~use)),
         "gcp_scenes": [strip.names[k] for k in gcp_scenes],

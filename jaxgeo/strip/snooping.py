@@ -192,3 +192,43 @@ def suspect_offsets(strip: Strip, seams: np.ndarray, limit_px: float = SEAM_LIMI
         out.append({"a": names[k], "b": names[k + 1], "col_px": float(dev[k, 0]),
                     "row_px": float(dev[k, 1]), "scene": scene})  # fmt: skip
     return out
+
+
+CHECK_K = 5.0
+"""A check measurement whose level-2 error departs from the other checks of its sub-scene by
+more than this many robust sigmas is a gross error of the check itself (:func:`gross_checks`)."""
+CHECK_FLOOR_M = 0.05
+"""The robust sigma of :func:`gross_checks` is at least this (m): exact simulated checks must
+not make centimetre departures gross."""
+CHECK_MIN_PER_SCENE = 3
+"""Checks a sub-scene needs before one of them can be told apart from the others."""
+
+
+def gross_checks(
+    scene: np.ndarray, error_m: np.ndarray, k: float = CHECK_K, floor_m: float = CHECK_FLOOR_M
+) -> np.ndarray:
+    """The check measurements (c,) bool whose final error is a gross error of their own.
+
+    Check points never enter the adjustment (mono-plotted afterwards), so no w-test sees them;
+    a wrong check measurement or surveyed position would otherwise inflate the statistics that
+    judge the adjustment. ``error_m`` (c, 2) east/north error after level 2 (m), ``scene`` (c,)
+    their sub-scene. A check is compared with the median error of its own sub-scene's checks
+    (the correction's error varies along the strip, and a sub-scene whose model is wrong, e.g.
+    its line offset, moves all its checks alike: that is the model's error, never hidden), and
+    flagged when the departure exceeds ``k`` robust sigmas (1.4826 MAD of all departures, per
+    axis, at least ``floor_m``). Only sub-scenes with ``CHECK_MIN_PER_SCENE`` checks or more
+    can flag one.
+    """
+    scene, err = np.asarray(scene), np.asarray(error_m, dtype=float)
+    dev = np.zeros_like(err)
+    judged = np.zeros(len(err), dtype=bool)
+    for s in np.unique(scene):
+        own = scene == s
+        if own.sum() >= CHECK_MIN_PER_SCENE:
+            dev[own] = err[own] - np.median(err[own], axis=0)
+            judged |= own
+    if judged.sum() < 5:
+        return np.zeros(len(err), dtype=bool)
+    d = dev[judged]
+    sigma = 1.4826 * np.median(np.abs(d - np.median(d, axis=0)), axis=0)
+    return judged & np.any(np.abs(dev) > k * np.maximum(sigma, floor_m), axis=1)
