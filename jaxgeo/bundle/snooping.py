@@ -35,7 +35,7 @@ from .build import Setup
 from .config import BLUNDER_K, DEFAULT_SOLVER, SolverConfig
 from .errors import RESULTS
 from .report import enu_errors as enu
-from .solve import Solution, solve_jit
+from .solve import Solution, initial_unknowns, solve_jit
 
 DEFAULT_ROUNDS = SolverConfig().snooping_rounds
 MAX_REMOVED_FRACTION = 0.2
@@ -50,11 +50,12 @@ parameter or more (e.g. a pair with thousands of ties): the spread through the p
 then negligible, and every flagged point loses its worst observation in the same round (at most
 one per point: within a point a gross error spreads into the other rays)."""
 DETECT_IRLS = 5
-"""Reweighted solves at most while gross errors are being removed from a block with
-``BATCH_RATIO`` observations per parameter or more: the gross errors stand out after a few (the
+"""Reweighted solves at most in the first solve of a block with ``BATCH_RATIO`` observations per
+parameter or more, while the gross errors are all still in: they stand out after a few (the
 same ones are flagged after 5 as after 20 on a pair with 20 000 ties and 1 % gross errors),
-while on such data the weights settle only once they are gone. A last solve whose reweighting
-did not settle in so few is repeated with the configured ``irls_iterations``."""
+while on such data the weights settle only once they are gone; the re-solves after a removal
+get the configured ``irls_iterations``, and so does a first solve that flags nothing but did
+not settle (it is repeated)."""
 ROBUST_FRACTION = 0.5
 """With a robust loss, a round removes the flagged observations with ``|w|`` at least this
 fraction of the largest."""
@@ -130,7 +131,16 @@ def snoop(
     full = jnp.asarray(solver.irls_iterations)
     at_scale = m >= BATCH_RATIO * max(problem.structure.n_params, 1)
     irls = jnp.asarray(DETECT_IRLS) if limit and solver.loss != "l2" and at_scale else full
-    sol = solve_jit(problem, compiled, removed_image=rem_i, removed_ground=rem_g, irls_limit=irls)
+    cold = (initial_unknowns(problem), jnp.ones(m), jnp.ones(c))
+
+    def warm(last: Solution):
+        # at scale a removal barely moves the solution: the re-solve goes on from the last one
+        # (its weights too). A small block starts afresh: a gross error there biased the last
+        # solution, whose robust weights would keep good observations out (Cauchy is not convex)
+        return (last.unknowns, last.weight_image, last.weight_ground) if at_scale else cold
+    sol = solve_jit(
+        problem, compiled, removed_image=rem_i, removed_ground=rem_g, irls_limit=irls, start=cold
+    )
     rounds = 0
     # a robust solve whose weights still move (not_converged) is snooped on: removing the gross
     # errors is what lets the reweighting settle
@@ -190,7 +200,8 @@ def snoop(
             compiled,
             removed_image=rem_i | pick_i,
             removed_ground=rem_g | pick_g,
-            irls_limit=irls,
+            irls_limit=full,
+            start=warm(sol),
         )
         if bool(tried.result == RESULTS.undetermined):
             # these removals would leave unknowns undetermined (the control of an image): they
@@ -200,10 +211,15 @@ def snoop(
         rem_i, rem_g = rem_i | pick_i, rem_g | pick_g
         problem = moved
         rounds += 1
-    if bool(sol.result == RESULTS.not_converged) and irls is not full:
+    if bool(sol.result == RESULTS.not_converged) and not rounds and irls is not full:
         # the reweighting had the snooping's short budget: the answer gets the whole one
         sol = solve_jit(
-            problem, compiled, removed_image=rem_i, removed_ground=rem_g, irls_limit=full
+            problem,
+            compiled,
+            removed_image=rem_i,
+            removed_ground=rem_g,
+            irls_limit=full,
+            start=warm(sol),
         )
     if rounds:  # residuals against the measurements as given
         r_img = np.asarray(sol.residuals_image) + (xy - xy0) * w_xy[:, None]

@@ -10,6 +10,8 @@ through optimistix). Failures are data: ``Solution.result`` is a
 
 from __future__ import annotations
 
+from typing import Any
+
 import equinox as eqx
 import jax
 import jax.numpy as jnp
@@ -164,6 +166,8 @@ class Solution(eqx.Module):
             ``cost``, ``s0``, the covariance and redundancy numbers are those of the problem
             weighted with them.
         redundancy: rows minus unknowns, without the removed observations' rows.
+        unknowns: the solver's unknowns at the solution (scaled parameters, points): a warm
+            ``start`` for a re-solve.
     """
 
     theta: tuple[Float[Array, "b p"], ...]
@@ -183,6 +187,7 @@ class Solution(eqx.Module):
     weight_image: Float[Array, " M"]
     weight_ground: Float[Array, " c"]
     redundancy: Int[Array, ""]
+    unknowns: Any = None
 
 
 def initial_unknowns(problem: Problem):
@@ -260,6 +265,7 @@ def solve(
     removed_image: Bool[Array, " M"] | None = None,
     removed_ground: Bool[Array, " c"] | None = None,
     irls_limit: Int[Array, ""] | None = None,
+    start: tuple[Any, Float[Array, " M"], Float[Array, " c"]] | None = None,
     throw: bool = False,
     verbose: bool = False,
 ) -> Solution:
@@ -281,7 +287,11 @@ def solve(
     out as gross errors (weight ``REMOVED_WEIGHT``, rows out of the redundancy); arrays, so that
     removing observations does not recompile. ``irls_limit``: reweighted solves at most, an
     array at most ``solver.irls_iterations`` (default that): the data snooping asks for fewer
-    while it is still finding gross errors, without a second compilation.
+    while it is still finding gross errors, without a second compilation. ``start``: ``(unknowns,
+    image weights, ground weights)`` to start the reweighting from (a previous
+    :class:`Solution`'s ``unknowns``, ``weight_image``, ``weight_ground``: a re-solve after a
+    few observations were removed then takes a few steps); default the models' values and
+    weights 1, least squares first.
 
     The outcome is ``Solution.result`` (see :class:`Solution`): singular normal equations are
     detected here, inside the compiled solve. ``throw=True`` raises (an ``equinox`` runtime
@@ -344,7 +354,7 @@ def solve(
     ones_i, ones_g = jnp.ones(m), jnp.ones(n_g)
     w_i, w_g = ones_i, ones_g
     if loss == "l2":
-        y, result, steps = inner(y0, ones_i, ones_g)
+        y, result, steps = inner(y0 if start is None else start[0], ones_i, ones_g)
     else:
         # the reweighting loop (a while_loop: no reverse-mode derivative) runs on a copy of the
         # problem cut from the autodiff graph; one final solve of the robust objective from its
@@ -368,8 +378,9 @@ def solve(
             )
             return y, wi, wg, wi2, wg2, steps + st, k + 1, change, res
 
-        start = jax.lax.stop_gradient(y0)
-        carry = (start, ones_i, ones_g, ones_i, ones_g, jnp.array(0), jnp.array(0))
+        y_s, wi_s, wg_s = (y0, ones_i, ones_g) if start is None else start
+        y_s, wi_s, wg_s = jax.lax.stop_gradient((y_s, wi_s, wg_s))
+        carry = (y_s, wi_s, wg_s, wi_s, wg_s, jnp.array(0), jnp.array(0))
         carry = (*carry, jnp.array(jnp.inf), RESULTS.successful)
         y, w_i, w_g, _, _, steps, k, change, result = jax.lax.while_loop(cond, body, carry)
         result = RESULTS.where(
@@ -434,6 +445,7 @@ def solve(
         weight_image=w_i,
         weight_ground=w_g,
         redundancy=red,
+        unknowns=y,
     )
     if throw:
         out = result.error_if(out, result != RESULTS.successful)
