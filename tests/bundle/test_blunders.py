@@ -83,11 +83,13 @@ def test_gross_errors_found_and_check_points_keep_clean_accuracy(block, clean, r
         ids = [p for p in block.ground.ids if role[p] == "check" and p not in dirty]
         h, v = _check_rms(block, r, ids)
         h0, v0 = _check_rms(block, clean, ids)
+        print(f"check RMS h {h:.3f} v {v:.3f} m (clean {h0:.3f} / {v0:.3f})")
         assert h <= 1.5 * h0 + 0.3 and v <= 1.5 * v0 + 0.5, (h, v, h0, v0)
         # and the report leaves out (and counts) the check points with a flagged observation
         flagged = {p for p in pids[r.blunders] if role[p] == "check"}
         assert set(r.checks_excluded) == flagged
         assert r.report.n == sum(x == "check" for x in block.ground.role) - len(flagged)
+    print(f"flagged {found}/{total} gross errors, {true_groups}/{groups} flags true")
     assert found / total >= 0.95, (found, total)
     assert true_groups / groups >= 0.8, (true_groups, groups)
 
