@@ -138,6 +138,7 @@ def snoop(
         # (its weights too). A small block starts afresh: a gross error there biased the last
         # solution, whose robust weights would keep good observations out (Cauchy is not convex)
         return (last.unknowns, last.weight_image, last.weight_ground) if at_scale else cold
+
     sol = solve_jit(
         problem, compiled, removed_image=rem_i, removed_ground=rem_g, irls_limit=irls, start=cold
     )
