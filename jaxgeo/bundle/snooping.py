@@ -130,7 +130,8 @@ def snoop(
     limit = solver.snooping_rounds if solver.remove_blunders else 0
     full = jnp.asarray(solver.irls_iterations)
     at_scale = m >= BATCH_RATIO * max(problem.structure.n_params, 1)
-    irls = jnp.asarray(DETECT_IRLS) if limit and solver.loss != "l2" and at_scale else full
+    brief = bool(limit) and solver.loss != "l2" and at_scale  # a short first reweighting
+    irls = jnp.asarray(DETECT_IRLS) if brief else full
     cold = (initial_unknowns(problem), jnp.ones(m), jnp.ones(c))
 
     def warm(last: Solution):
@@ -212,7 +213,7 @@ def snoop(
         rem_i, rem_g = rem_i | pick_i, rem_g | pick_g
         problem = moved
         rounds += 1
-    if bool(sol.result == RESULTS.not_converged) and not rounds and irls is not full:
+    if brief and not rounds and bool(sol.result == RESULTS.not_converged):
         # the reweighting had the snooping's short budget: the answer gets the whole one
         sol = solve_jit(
             problem,

@@ -102,8 +102,7 @@ def measured_ties(strip: Strip) -> tuple[tuple[str, ...], StripTies, list[int]]:
     scenes = np.array([scene[o.images[i]] for i in sel], dtype=int)
     first = np.full(len(ids), np.iinfo(int).max)
     np.minimum.at(first, point, scenes)
-    xy = o.xy[sel].reshape(-1, 2)
-    return ids, StripTies(point, scenes, xy, first if len(ids) else np.zeros(0, int)), sel
+    return ids, StripTies(point, scenes, o.xy[sel], first), sel
 
 
 def level1_input(
@@ -121,7 +120,11 @@ def level1_input(
     m_ids, m_ties, m_rows = measured_ties(strip)
     taken = set(tie_ids) & (set(strip.ground.ids) | set(m_ids))
     if taken:
-        raise ValueError(f"point ids {sorted(taken)[:5]} clash with the formed tie ids")
+        where = f"{strip.files.observations}: " if strip.files is not None else ""
+        raise ValueError(
+            f"{where}point ids {sorted(taken)[:5]} clash with the ids of the formed ties "
+            "('tie_<n>'): rename them"
+        )
     lonlath = _tie_positions(strip, ties, tie_height)
     m_lonlath = _tie_positions(strip, m_ties, tie_height)
 

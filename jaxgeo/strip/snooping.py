@@ -202,6 +202,8 @@ CHECK_FLOOR_M = 0.05
 not make centimetre departures gross."""
 CHECK_MIN_PER_SCENE = 3
 """Checks a sub-scene needs before one of them can be told apart from the others."""
+CHECK_MIN_JUDGED = 5
+"""Checks (in sub-scenes that have enough) the robust sigma of :func:`gross_checks` needs."""
 
 
 def gross_checks(
@@ -217,7 +219,8 @@ def gross_checks(
     its line offset, moves all its checks alike: that is the model's error, never hidden), and
     flagged when the departure exceeds ``k`` robust sigmas (1.4826 MAD of all departures, per
     axis, at least ``floor_m``). Only sub-scenes with ``CHECK_MIN_PER_SCENE`` checks or more
-    can flag one.
+    can flag one, and only when such sub-scenes hold ``CHECK_MIN_JUDGED`` checks in all (the
+    robust sigma needs them).
     """
     scene, err = np.asarray(scene), np.asarray(error_m, dtype=float)
     dev = np.zeros_like(err)
@@ -227,7 +230,7 @@ def gross_checks(
         if own.sum() >= CHECK_MIN_PER_SCENE:
             dev[own] = err[own] - np.median(err[own], axis=0)
             judged |= own
-    if judged.sum() < 5:
+    if judged.sum() < CHECK_MIN_JUDGED:
         return np.zeros(len(err), dtype=bool)
     d = dev[judged]
     sigma = 1.4826 * np.median(np.abs(d - np.median(d, axis=0)), axis=0)

@@ -51,6 +51,15 @@ def test_measured_ties_enter_level1_and_one_view_points_are_named(strip_quarter)
     with pytest.warns(MeasuredTieWarning, match="one sub-scene only.*'LONE'"):
         inp = level1_input(dataclasses.replace(strip, observations=one))
     assert "LONE" not in inp.measured_ids and "LONE" not in inp.observations.point_ids
+    # a measured point named like a formed tie: refused, named
+    tid = inp.tie_ids[1]
+    clash = Observations(
+        o.point_ids + (tid, tid), o.images + strip.names[:2],
+        np.concatenate([o.xy, [[100.0, 100.0], [100.0, 200.0]]]),
+        np.concatenate([o.sigma_px, [0.3, 0.3]]),
+    )  # fmt: skip
+    with pytest.raises(ValueError, match=f"'{tid}'.*clash with the ids of the formed ties"):
+        level1_input(dataclasses.replace(strip, observations=clash))
 
 
 @pytest.mark.filterwarnings("ignore::jaxgeo.strip.errors.UniversalCorrectionWarning")
