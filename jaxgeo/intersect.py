@@ -25,6 +25,7 @@ import jax.numpy as jnp
 import numpy as np
 from jaxtyping import Array, ArrayLike, Bool, Float, Int
 
+from . import _exported
 from .geodesy import metres_per_unit
 from .models.base import AbstractSensorModel
 from .models.newton import newton_root
@@ -115,7 +116,6 @@ def _weights(xy, sigma, mask):
     return jnp.where(valid[..., None], xy, 0.0), weight, valid
 
 
-@eqx.filter_jit
 def _intersect_flat(models, xy, sigma, mask, max_steps, batch):
     fn = _residual_fn(models)
     lin = _linear_terms(models)
@@ -171,7 +171,6 @@ def _intersect_flat(models, xy, sigma, mask, max_steps, batch):
     )
 
 
-@eqx.filter_jit
 def _linear_flat(models, xy, sigma, mask, batch):
     lin = _linear_terms(models)
     xy, weight, valid = _weights(xy, sigma, mask)
@@ -217,7 +216,7 @@ def intersect_linear(
     two rays come back as NaN.
     """
     models, batch, xy, sigma, mask = _prepare(models, image_points, sigma_px, mask)
-    return _linear_flat(models, xy, sigma, mask, tuple(batch))
+    return _exported.call(_linear_flat, models, xy, sigma, mask, tuple(batch))
 
 
 def intersect(
@@ -236,4 +235,5 @@ def intersect(
     image points and the models (implicit function theorem).
     """
     models, batch, xy, sigma, mask = _prepare(models, image_points, sigma_px, mask)
-    return _intersect_flat(models, xy, sigma, mask, int(max_steps), tuple(batch))
+    # compiled, and traced once per structure across runs when the inputs are concrete
+    return _exported.call(_intersect_flat, models, xy, sigma, mask, int(max_steps), tuple(batch))

@@ -31,11 +31,12 @@ import equinox as eqx
 import jax.numpy as jnp
 import numpy as np
 
+from .. import _exported
 from .build import Setup
 from .config import BLUNDER_K, DEFAULT_SOLVER, SolverConfig
 from .errors import RESULTS
 from .report import enu_errors as enu
-from .solve import Solution, initial_unknowns, solve_jit
+from .solve import Solution, initial_unknowns, solve
 
 DEFAULT_ROUNDS = SolverConfig().snooping_rounds
 MAX_REMOVED_FRACTION = 0.2
@@ -100,6 +101,12 @@ def solve_settings(solver: SolverConfig) -> SolverConfig:
     )
 
 
+def _solve(*args, **kwargs) -> Solution:
+    """:func:`~.solve.solve` compiled and traced once per structure, across runs too
+    (:mod:`jaxgeo._exported`)."""
+    return _exported.call(solve, *args, **kwargs)
+
+
 def snoop(
     setup: Setup, solver: SolverConfig = DEFAULT_SOLVER
 ) -> tuple[Solution, np.ndarray, np.ndarray, int]:
@@ -140,7 +147,7 @@ def snoop(
         # solution, whose robust weights would keep good observations out (Cauchy is not convex)
         return (last.unknowns, last.weight_image, last.weight_ground) if at_scale else cold
 
-    sol = solve_jit(
+    sol = _solve(
         problem, compiled, removed_image=rem_i, removed_ground=rem_g, irls_limit=irls, start=cold
     )
     rounds = 0
@@ -197,7 +204,7 @@ def snoop(
         moved = eqx.tree_at(
             lambda p: p.ground.lonlath, problem.with_xy(jnp.asarray(xy_try)), jnp.asarray(g_try)
         )
-        tried = solve_jit(
+        tried = _solve(
             moved,
             compiled,
             removed_image=rem_i | pick_i,
@@ -215,7 +222,7 @@ def snoop(
         rounds += 1
     if brief and not rounds and bool(sol.result == RESULTS.not_converged):
         # the reweighting had the snooping's short budget: the answer gets the whole one
-        sol = solve_jit(
+        sol = _solve(
             problem,
             compiled,
             removed_image=rem_i,

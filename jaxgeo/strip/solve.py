@@ -18,6 +18,7 @@ import jax
 import jax.numpy as jnp
 from jaxtyping import Array, Bool, Float, Int
 
+from .. import _exported
 from ..bundle import solve as bundle_solve
 from ..bundle.config import SolverConfig
 from ..bundle.problem import Problem
@@ -187,8 +188,6 @@ def _evaluate(group, data: Level2Data, theta, corr: UniversalCorrection) -> Eval
 
 
 two_level_jit = eqx.filter_jit(two_level)
-_level_two_jit = eqx.filter_jit(_level_two)
-_evaluate_jit = eqx.filter_jit(_evaluate)
 
 
 def level_two_jit(
@@ -200,13 +199,15 @@ def level_two_jit(
     """:func:`level_two` compiled once per strip layout (model group and level-2 data): level-1
     problems of one strip with or without GCPs share it."""
     (group,) = problem.groups
-    return TwoLevelSolution(level1, *_level_two_jit(group, data, level1.theta[0], degree))
+    return TwoLevelSolution(
+        level1, *_exported.call(_level_two, group, data, level1.theta[0], degree)
+    )
 
 
 def evaluate_jit(problem: Problem, data: Level2Data, sol: TwoLevelSolution) -> Evaluation:
     """:func:`evaluate` compiled once per strip layout (as :func:`level_two_jit`)."""
     (group,) = problem.groups
-    return _evaluate_jit(group, data, sol.level1.theta[0], sol.correction)
+    return _exported.call(_evaluate, group, data, sol.level1.theta[0], sol.correction)
 
 
 @eqx.filter_jit

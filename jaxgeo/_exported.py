@@ -1,0 +1,179 @@
+"""Trace-free warm calls: compiled entry points kept on disk as serialized ``jax.export`` programs.
+
+The persistent compilation cache (:mod:`._jaxconfig`) spares a second run XLA's compilation, not
+jax's tracing, which is most of what is left: tracing the robust solve of ``jaxgeo demo`` takes
+~4 s of Python, its arithmetic milliseconds. :func:`call` runs a pure JAX function of concrete
+inputs through ``jax.export``: the first call with a new structure traces it once, exports it and
+writes the serialized program (StableHLO, with its output structure) to
+``<cache dir>/exported/<key>.jaxexport``; a later call -- in any process -- with the same key
+loads it and runs it without tracing (its XLA executable then comes from the compilation cache).
+
+The key is a SHA-256 of everything the program depends on: the function's module and name,
+the source of every jaxgeo module (any edit gives new keys), the jax and jaxlib versions, the
+backend, the input structure with its static (non-array) values pickled, and each array's shape
+and dtype. Anything that cannot be keyed or exported this way (an unpicklable static value, a
+host callback in the program) falls back to ``eqx.filter_jit`` -- slower, never different.
+Results are those of the jitted function (the same StableHLO; tested bit for bit).
+
+Off with the compilation cache (``JAXGEO_CACHE_DIR=off``) and inside transformations (tracers
+in the inputs): then :func:`call` is ``eqx.filter_jit(fn)``. Files are written atomically; at
+most ``MAX_ENTRIES`` are kept (least recently used first out).
+"""
+
+from __future__ import annotations
+
+import functools
+import hashlib
+import logging
+import os
+import pickle
+import tempfile
+from collections.abc import Callable
+from pathlib import Path
+from typing import Any
+
+import equinox as eqx
+import jax
+
+from ._jaxconfig import cache_dir
+
+SUFFIX = ".jaxexport"
+MAX_ENTRIES = 200
+"""Exported programs kept on disk (~0.3 MB each); older ones are removed when more are written."""
+
+_log = logging.getLogger(__name__)
+_loaded: dict[str, tuple[Any, Any, Any]] = {}
+
+
+@functools.cache
+def _source_digest() -> str:
+    """SHA-256 of every jaxgeo module's source (computed once per process, a few ms)."""
+    root = Path(__file__).resolve().parent
+    h = hashlib.sha256()
+    for path in sorted(root.rglob("*.py")):
+        h.update(str(path.relative_to(root)).encode())
+        h.update(path.read_bytes())
+    return h.hexdigest()
+
+
+@functools.cache
+def _filter_jit(fn: Callable) -> Callable:
+    return eqx.filter_jit(fn)
+
+
+def folder() -> Path | None:
+    """Where exported programs live, ``None`` when the compilation cache is off."""
+    base = cache_dir()
+    if base is None:
+        return None
+    env = os.environ.get("JAX_COMPILATION_CACHE_DIR")
+    return (Path(env) if env else base) / "exported"
+
+
+def _key(fn: Callable, treedef, static, leaves) -> str:
+    import jaxlib
+
+    h = hashlib.sha256()
+    parts = (
+        fn.__module__,
+        fn.__qualname__,
+        _source_digest(),
+        jax.__version__,
+        jaxlib.__version__,
+        jax.default_backend(),
+        tuple((tuple(x.shape), str(x.dtype), bool(getattr(x, "weak_type", False))) for x in leaves),
+    )
+    h.update(repr(parts).encode())
+    h.update(pickle.dumps((treedef, static), protocol=4))
+    return h.hexdigest()
+
+
+def _export(fn: Callable, treedef, static, leaves):
+    """Trace ``fn`` once on the leaves' shapes; returns the Exported and the output structure."""
+    from jax import export
+
+    out_parts = {}
+
+    def flat(*lv):
+        args, kwargs = eqx.combine(jax.tree.unflatten(treedef, lv), static)
+        out_dyn, out_static = eqx.partition(fn(*args, **kwargs), eqx.is_array)
+        out_leaves, out_def = jax.tree.flatten(out_dyn)
+        out_parts["def"], out_parts["static"] = out_def, out_static
+        return out_leaves
+
+    specs = [
+        jax.ShapeDtypeStruct(x.shape, x.dtype, weak_type=bool(getattr(x, "weak_type", False)))
+        for x in leaves
+    ]
+    exported = export.export(jax.jit(flat))(*specs)
+    return exported, out_parts["def"], out_parts["static"]
+
+
+def _write(path: Path, blob: bytes) -> None:
+    path.parent.mkdir(parents=True, exist_ok=True)
+    fd, tmp = tempfile.mkstemp(dir=path.parent, suffix=".tmp")
+    try:
+        with os.fdopen(fd, "wb") as f:
+            f.write(blob)
+        os.replace(tmp, path)
+    except BaseException:
+        Path(tmp).unlink(missing_ok=True)
+        raise
+    entries = sorted(path.parent.glob(f"*{SUFFIX}"), key=lambda p: p.stat().st_mtime)
+    for old in entries[:-MAX_ENTRIES]:
+        old.unlink(missing_ok=True)
+
+
+def _program(fn: Callable, treedef, static, leaves):
+    """The exported program for this call (memory, disk, or traced now), or ``None``."""
+    where = folder()
+    try:
+        key = _key(fn, treedef, static, leaves)
+    except Exception:  # an unpicklable static value: no stable key
+        return None
+    if key in _loaded:
+        return _loaded[key]
+    from jax import export
+
+    path = where / f"{key}{SUFFIX}"
+    try:
+        blob, template, out_static = pickle.loads(path.read_bytes())
+        found = (export.deserialize(blob), jax.tree.structure(template), out_static)
+        os.utime(path)
+    except FileNotFoundError:
+        found = None
+    except Exception as err:  # a damaged or foreign file: traced again and rewritten
+        _log.debug("exported program %s unreadable (%s): tracing again", path, err)
+        found = None
+    if found is None:
+        try:
+            exported, out_def, out_static = _export(fn, treedef, static, leaves)
+            # the output structure as a tree of placeholders, not a PyTreeDef: the pickled
+            # treedef of an equinox enumeration item does not unflatten
+            template = jax.tree.unflatten(out_def, list(range(out_def.num_leaves)))
+            blob = pickle.dumps((exported.serialize(), template, out_static), protocol=4)
+        except Exception as err:  # not exportable (e.g. a host callback): plain jit
+            _log.debug("%s not exported (%s)", fn.__qualname__, err)
+            return None
+        try:
+            _write(path, blob)
+        except OSError as err:  # a read-only cache: this process keeps the program in memory
+            _log.debug("exported program not written to %s (%s)", path, err)
+        found = (exported, out_def, out_static)
+    _loaded[key] = found
+    return found
+
+
+def call(fn: Callable, *args, **kwargs):
+    """``eqx.filter_jit(fn)(*args, **kwargs)``, traced at most once per structure across runs
+    (see the module docstring). ``fn`` must be a module-level pure function."""
+    dynamic, static = eqx.partition((args, kwargs), eqx.is_array)
+    leaves, treedef = jax.tree.flatten(dynamic)
+    if folder() is None or any(isinstance(x, jax.core.Tracer) for x in leaves):
+        return _filter_jit(fn)(*args, **kwargs)
+    program = _program(fn, treedef, static, leaves)
+    if program is None:
+        return _filter_jit(fn)(*args, **kwargs)
+    exported, out_def, out_static = program
+    out_leaves = exported.call(*leaves)
+    return eqx.combine(jax.tree.unflatten(out_def, out_leaves), out_static)

@@ -1,0 +1,107 @@
+"""Trace-free warm calls (``jaxgeo._exported``): results bit-equal to ``eqx.filter_jit``, traced
+once per structure across processes, safe fall-backs."""
+
+import json
+import os
+import pathlib
+import subprocess
+import sys
+
+import equinox as eqx
+import jax
+import jax.numpy as jnp
+import numpy as np
+import pytest
+
+from jaxgeo import _exported
+from jaxgeo.bundle.errors import RESULTS
+
+REPO = pathlib.Path(__file__).resolve().parents[1]
+TRACES = []
+
+
+class Out(eqx.Module):
+    value: jax.Array
+    result: RESULTS  # an equinox enumeration item: its pickled treedef would not unflatten
+    label: str = eqx.field(static=True)
+
+
+def fn(x, scale, *, label="fn"):
+    TRACES.append(label)  # runs only while tracing
+    y = jnp.sin(x) * scale
+    result = RESULTS.where(jnp.all(y < 10.0), RESULTS.successful, RESULTS.not_converged)
+    return Out(y, result, label)
+
+
+@pytest.fixture
+def cache(tmp_path, monkeypatch):
+    monkeypatch.setenv("JAXGEO_CACHE_DIR", str(tmp_path / "cache"))
+    monkeypatch.setattr(_exported, "_loaded", {})
+    TRACES.clear()
+    return tmp_path / "cache" / "exported"
+
+
+def test_same_results_and_traced_once_across_loads(cache):
+    x = np.linspace(0.0, 3.0, 7)
+    want = eqx.filter_jit(fn)(x, 2.0, label="want")
+    got = _exported.call(fn, x, 2.0, label="a")
+    assert TRACES == ["want", "a"]
+    assert len(list(cache.glob("*.jaxexport"))) == 1
+    _exported._loaded.clear()  # as a new process: the program comes from disk
+    again = _exported.call(fn, x, 2.0, label="a")
+    assert TRACES == ["want", "a"]  # not traced again
+    for out in (got, again):
+        np.testing.assert_array_equal(out.value, want.value)
+        assert out.result == want.result and out.label == "a"
+    # another static value or shape is another program
+    _exported.call(fn, x, 3.0, label="a")
+    _exported.call(fn, x[:3], 2.0, label="a")
+    assert len(list(cache.glob("*.jaxexport"))) == 3
+
+
+def test_damaged_file_is_traced_again(cache):
+    x = np.ones(4)
+    _exported.call(fn, x, 1.0)
+    (path,) = cache.glob("*.jaxexport")
+    path.write_bytes(b"not a program")
+    _exported._loaded.clear()
+    out = _exported.call(fn, x, 1.0)
+    np.testing.assert_array_equal(out.value, np.sin(x))
+    assert TRACES == ["fn", "fn"] and path.stat().st_size > 100
+
+
+def test_fallbacks_off_traced_and_unpicklable(cache, monkeypatch):
+    x = jnp.ones(3)
+    # inside a transformation: the jitted function, differentiable
+    grad = jax.grad(lambda v: _exported.call(fn, v, 2.0).value.sum())(x)
+    np.testing.assert_allclose(grad, 2.0 * np.cos(1.0))
+    # a static value without a stable key (a lambda): plain jit
+    out = _exported.call(fn, x, 1.0, label=lambda: None)
+    np.testing.assert_array_equal(out.value, np.sin(np.ones(3)))
+    assert not cache.exists()
+    monkeypatch.setenv("JAXGEO_CACHE_DIR", "off")
+    assert _exported.folder() is None
+    np.testing.assert_array_equal(_exported.call(fn, x, 1.0).value, np.sin(np.ones(3)))
+    assert not cache.exists()
+
+
+def test_demo_warm_run_equals_an_uncached_run(tmp_path):
+    """``jaxgeo demo --json`` twice on a fresh cache (the second loads the exported solve and
+    intersections) and once with the cache off: the same numbers."""
+    drop = ("JAX_COMPILATION_CACHE_DIR", "JAXGEO_CACHE_DIR", "XLA_FLAGS")
+    base = {k: v for k, v in os.environ.items() if k not in drop}
+    base["PYTHONPATH"] = str(REPO)
+
+    def demo(cache):
+        cmd = [sys.executable, "-m", "jaxgeo.cli", "demo", "--json"]
+        env = dict(base, JAXGEO_CACHE_DIR=cache)
+        run = subprocess.run(cmd, env=env, capture_output=True, text=True, timeout=600)
+        assert run.returncode == 0, run.stderr[-2000:]
+        out = json.loads(run.stdout)
+        out.pop("seconds")
+        return out
+
+    cache = str(tmp_path / "c")
+    first, second = demo(cache), demo(cache)
+    assert list((tmp_path / "c" / "exported").glob("*.jaxexport"))
+    assert first == second == demo("off")
