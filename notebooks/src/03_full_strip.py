@@ -178,5 +178,7 @@ print(f"check RMS plan over the sub-scenes after the last GCP of the violating l
 # level; the simulation's GCPs are surveyed to 0.1 m.
 
 # %%
-print(f"notebook run time {time.perf_counter() - T0:.0f} s wall, "
-      f"{time.process_time() - C0:.0f} s CPU (jaxgeo {jaxgeo.__version__})")
+print(
+    f"notebook run time {time.perf_counter() - T0:.0f} s wall, "
+    f"{time.process_time() - C0:.0f} s CPU (jaxgeo {jaxgeo.__version__})"
+)
