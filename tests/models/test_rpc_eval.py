@@ -1,0 +1,35 @@
+"""The numpy-in/numpy-out paths of ``jaxgeo.models.rpc_eval``: chunking, padding buckets and
+asynchronous collection give the same numbers as one traced call."""
+
+import jax
+import numpy as np
+import pytest
+
+from jaxgeo.models import rpc_eval
+
+
+@pytest.mark.parametrize("n", [1, 17, 100, 1000])
+def test_chunked_paths_equal_one_traced_call(pleiades, monkeypatch, n):
+    rpc, _ = pleiades
+    monkeypatch.setattr(rpc_eval, "CHUNK", 64)  # many chunks, the last one padded
+    monkeypatch.setattr(rpc_eval, "IN_FLIGHT", 3)
+    rng = np.random.default_rng(n)
+    go, gs = np.asarray(rpc.ground_offset), np.asarray(rpc.ground_scale)
+    ground = go + gs * rng.uniform(-0.9, 0.9, (n, 3))
+    xy = rpc.project(ground)
+    assert isinstance(xy, np.ndarray) and xy.shape == (n, 2)
+    traced = np.asarray(jax.jit(lambda r, g: r.project(g))(rpc, ground))
+    np.testing.assert_allclose(xy, traced, rtol=0, atol=1e-9)
+    back = rpc.localize(xy, ground[:, 2])
+    assert isinstance(back, np.ndarray) and back.shape == (n, 3)
+    np.testing.assert_allclose(back[:, :2], ground[:, :2], rtol=0, atol=1e-9)
+    # a batch shape is kept
+    np.testing.assert_array_equal(rpc.project(ground.reshape(1, n, 3))[0], xy)
+
+
+def test_buckets_pad_by_a_quarter_at_most():
+    sizes = np.unique(np.geomspace(17, 1e6, 400).astype(int))
+    buckets = np.array([rpc_eval._bucket(int(n)) for n in sizes])
+    assert np.all(buckets >= sizes) and np.all(buckets <= 1.25 * sizes)
+    assert len(np.unique(buckets)) <= 4 * 17  # four programs per octave at most
+    assert rpc_eval._bucket(1) == rpc_eval._bucket(16) == rpc_eval.MIN_BUCKET
