@@ -9,10 +9,12 @@ writes the serialized program (StableHLO, with its output structure) to
 loads it and runs it without tracing (its XLA executable then comes from the compilation cache).
 
 The key is a SHA-256 of everything the program depends on: the function's module and name,
-the source of every jaxgeo module (any edit gives new keys), the jax and jaxlib versions, the
-backend, the input structure with its static (non-array) values pickled, and each array's shape
-and dtype. Anything that cannot be keyed or exported this way (an unpicklable static value, a
-host callback in the program) falls back to ``eqx.filter_jit`` -- slower, never different.
+the source of every jaxgeo module (any edit gives new keys), the Python version and those of
+jax, jaxlib, equinox, optimistix, lineax, jaxtyping and numpy, the ``jax.config`` options and
+environment variables that change a trace, the backend, the input structure with its static
+(non-array) values pickled, and each array's shape and dtype. Anything that cannot be keyed or
+exported this way (an unpicklable static value, a host callback in the program) falls back to
+``eqx.filter_jit`` -- slower, never different.
 Results are those of the jitted function (the same StableHLO; tested bit for bit).
 
 Off with the compilation cache (``JAXGEO_CACHE_DIR=off``) and inside transformations (tracers
@@ -27,6 +29,7 @@ import hashlib
 import logging
 import os
 import pickle
+import sys
 import tempfile
 from collections.abc import Callable
 from pathlib import Path
@@ -38,6 +41,18 @@ import jax
 from ._jaxconfig import cache_dir
 
 SUFFIX = ".jaxexport"
+TRACED_BY = ("jax", "jaxlib", "equinox", "optimistix", "lineax", "jaxtyping", "numpy")
+"""Distributions whose versions are part of the key (their code is traced into the programs)."""
+JAX_OPTIONS = (
+    "jax_enable_x64",
+    "jax_default_matmul_precision",
+    "jax_numpy_dtype_promotion",
+    "jax_numpy_rank_promotion",
+    "jax_default_prng_impl",
+)
+"""``jax.config`` options that change what a trace produces (part of the key)."""
+ENVIRONMENT = ("EQX_ON_ERROR", "JAXGEO_TYPECHECK")
+"""Environment variables read while tracing (part of the key)."""
 MAX_ENTRIES = 200
 """Exported programs kept on disk (~0.3 MB each); older ones are removed when more are written."""
 
@@ -70,16 +85,30 @@ def folder() -> Path | None:
     return (Path(env) if env else base) / "exported"
 
 
-def _key(fn: Callable, treedef, static, leaves) -> str:
-    import jaxlib
+@functools.cache
+def _versions() -> tuple[str, ...]:
+    """Versions of everything that shapes a traced program besides jaxgeo's own source."""
+    from importlib.metadata import PackageNotFoundError, version
 
+    out = [sys.version]
+    for dist in TRACED_BY:
+        try:
+            out.append(f"{dist}=={version(dist)}")
+        except PackageNotFoundError:
+            out.append(f"{dist}: none")
+    return tuple(out)
+
+
+def _key(fn: Callable, treedef, static, leaves) -> str:
     h = hashlib.sha256()
+    config = {name: getattr(jax.config, name, None) for name in JAX_OPTIONS}
     parts = (
         fn.__module__,
         fn.__qualname__,
         _source_digest(),
-        jax.__version__,
-        jaxlib.__version__,
+        _versions(),
+        tuple(sorted(config.items())),
+        tuple((name, os.environ.get(name)) for name in ENVIRONMENT),
         jax.default_backend(),
         tuple((tuple(x.shape), str(x.dtype), bool(getattr(x, "weak_type", False))) for x in leaves),
     )

@@ -13,6 +13,7 @@ import json
 import re
 
 import equinox as eqx
+import jax
 import jax.numpy as jnp
 import numpy as np
 import pytest
@@ -411,3 +412,19 @@ def test_broken_seams_are_attributed(strip_quarter):
     assert re.search(r"scene_005 is probably wrong by \+(19\d|20\d) lines \(too large\)", text)
     assert re.search(r"scene_000 is probably wrong by \+1[45]\d lines", text), text
     assert "scene_008 | scene_009" in text and "from there on" in text
+
+
+def test_exported_programs_give_the_same_strip(quarter, result, tmp_path, monkeypatch):
+    """The CLI's warm path (level 1's solve, level 2 and the evaluation through serialized
+    ``jax.export`` programs, ``jaxgeo._exported``): the same numbers as the suite's plain jit."""
+    from jaxgeo import _exported
+    from jaxgeo.strip import UniversalCorrectionWarning
+
+    monkeypatch.setenv("JAXGEO_CACHE_DIR", str(tmp_path))
+    monkeypatch.setattr(_exported, "_loaded", {})
+    with pytest.warns(UniversalCorrectionWarning):
+        again = adjust_strip(quarter, _config())
+    assert len(list((tmp_path / "exported").glob("*.jaxexport"))) >= 3
+    for a, b in ((again.solution, result.solution), (again.evaluation, result.evaluation)):
+        for x, y in zip(jax.tree.leaves(a), jax.tree.leaves(b), strict=True):
+            np.testing.assert_array_equal(np.asarray(x), np.asarray(y))
