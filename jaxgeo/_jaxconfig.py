@@ -26,6 +26,9 @@ from pathlib import Path
 
 CACHE_ENV = "JAXGEO_CACHE_DIR"
 """Environment variable: the cache directory, or ``off``."""
+MARK_ENV = "_JAXGEO_EXPORTED_JAX_CACHE_DIR"
+"""Set beside the ``JAX_*`` cache variables jaxgeo exports for jax to read (the directory), so
+that a child process can tell them from a user's own (:func:`_forget_inherited`)."""
 CACHE_MAX_BYTES = 2 * 1024**3
 """Least-recently-used entries beyond this total size are evicted (jax's LRU cache)."""
 MIN_COMPILE_TIME_S = 0.0
@@ -68,9 +71,24 @@ def _settings(path: Path) -> dict[str, object]:
     return settings
 
 
+def _forget_inherited() -> None:
+    """Drop the cache variables a parent jaxgeo process exported (a child inherits them, and
+    would otherwise take the parent's cache for the user's own and ignore its own
+    ``JAXGEO_CACHE_DIR``, ``off`` included); a user's own ``JAX_COMPILATION_CACHE_DIR`` stays."""
+    mark = os.environ.get(MARK_ENV)
+    if mark is None:
+        return
+    if os.environ.get("JAX_COMPILATION_CACHE_DIR") == mark:
+        for name in _settings(Path(mark)):
+            os.environ.pop(name.upper(), None)
+    os.environ.pop(MARK_ENV, None)
+
+
 def configure() -> None:
     """float64 on; the persistent compilation cache on (unless off or set by the user)."""
     jax = sys.modules.get("jax")
+    if jax is None:
+        _forget_inherited()
     if jax is None:
         os.environ["JAX_ENABLE_X64"] = "1"
     else:
@@ -83,6 +101,7 @@ def configure() -> None:
             return
         for name, value in _settings(path).items():
             os.environ.setdefault(name.upper(), str(value))
+        os.environ[MARK_ENV] = str(path)
     else:
         if jax.config.jax_compilation_cache_dir is not None:
             return

@@ -44,3 +44,28 @@ def test_cache_dir_overridable_and_off(tmp_path):
 def test_a_users_own_jax_cache_dir_is_kept(tmp_path):
     out = _probe(tmp_path, JAX_COMPILATION_CACHE_DIR=str(tmp_path / "mine"))
     assert out["dir"] == str(tmp_path / "mine")
+
+
+def test_a_child_of_a_jaxgeo_process_keeps_its_own_setting(tmp_path):
+    """jaxgeo exports jax's cache variables before jax starts; a child process inherits them
+    and must still follow its own ``JAXGEO_CACHE_DIR`` (a directory, or ``off``)."""
+    parent = (
+        "import json, os, subprocess, sys, jaxgeo\n"
+        "out = {}\n"
+        "for value in (sys.argv[1], 'off'):\n"
+        "    env = dict(os.environ, JAXGEO_CACHE_DIR=value)\n"
+        f"    run = subprocess.run([sys.executable, '-c', {PROBE!r}], env=env,\n"
+        "                         capture_output=True, text=True, check=True)\n"
+        "    out[value] = json.loads(run.stdout.strip().splitlines()[-1])['dir']\n"
+        "print(json.dumps(out))\n"
+    )
+    drop = ("JAX_COMPILATION_CACHE_DIR", "JAXGEO_CACHE_DIR")
+    env = {k: v for k, v in os.environ.items() if k not in drop}
+    env.update(PYTHONPATH=str(REPO), XDG_CACHE_HOME=str(tmp_path / "xdg"))
+    child = str(tmp_path / "child")
+    run = subprocess.run(
+        [sys.executable, "-c", parent, child], env=env, capture_output=True, text=True,
+        timeout=300,
+    )  # fmt: skip
+    assert run.returncode == 0, run.stderr[-2000:]
+    assert json.loads(run.stdout.strip().splitlines()[-1]) == {child: child, "off": None}
