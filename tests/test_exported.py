@@ -79,6 +79,10 @@ def test_fallbacks_off_traced_and_unpicklable(cache, monkeypatch):
     out = _exported.call(fn, x, 1.0, label=lambda: None)
     np.testing.assert_array_equal(out.value, np.sin(np.ones(3)))
     assert not cache.exists()
+    # large inputs: plain jit (an export's slower first compilation does not pay off there)
+    monkeypatch.setattr(_exported, "MAX_ELEMENTS", 2)
+    np.testing.assert_array_equal(_exported.call(fn, x, 1.0).value, np.sin(np.ones(3)))
+    assert not cache.exists()
     monkeypatch.setenv("JAXGEO_CACHE_DIR", "off")
     assert _exported.folder() is None
     np.testing.assert_array_equal(_exported.call(fn, x, 1.0).value, np.sin(np.ones(3)))

@@ -65,18 +65,21 @@ def _block_priors(block) -> Float[Array, " q"]:
     return jnp.asarray(block.prior_residuals(), dtype=float).reshape(-1)
 
 
-def _padded_layout(block_start: tuple[int, ...]) -> tuple[np.ndarray, np.ndarray]:
-    """Static layout of block-sorted observations padded to ``(n_blocks, most)``: the index of
-    each padded entry into the observations (a block's last one repeated; 0 for an empty
-    block), and the padded position of each observation."""
+def _padded_layout(block_start: tuple[int, ...]) -> tuple[Int[Array, "b k"], Int[Array, " m"]]:
+    """Layout of block-sorted observations padded to ``(n_blocks, most)``: the index of each
+    padded entry into the observations (a block's last one repeated; 0 for an empty block),
+    and the padded position of each observation. Computed in the program from the (static)
+    block starts, not baked in as constants of the observations' size: the program, its
+    compilation and its serialized export stay small however many observations there are."""
     start = np.asarray(block_start)
     counts = np.diff(start)
     most = max(int(counts.max()), 1)
-    rank = np.arange(most)
-    index = start[:-1, None] + np.minimum(rank[None, :], np.maximum(counts[:, None] - 1, 0))
-    index = np.where(counts[:, None] > 0, index, 0)
-    block = np.repeat(np.arange(counts.size), counts)
-    position = block * most + (np.arange(start[-1]) - start[:-1][block])
+    first, count = jnp.asarray(start[:-1])[:, None], jnp.asarray(counts)[:, None]
+    rank = jnp.arange(most)[None, :]
+    index = jnp.where(count > 0, first + jnp.minimum(rank, jnp.maximum(count - 1, 0)), 0)
+    obs = jnp.arange(int(start[-1]))
+    block = jnp.searchsorted(jnp.asarray(start[1:]), obs, side="right")
+    position = block * most + (obs - jnp.asarray(start[:-1])[block])
     return index, position
 
 
