@@ -24,6 +24,7 @@ Files are written atomically; at most ``MAX_ENTRIES`` are kept (least recently u
 
 from __future__ import annotations
 
+import contextlib
 import functools
 import hashlib
 import logging
@@ -174,7 +175,8 @@ def _program(fn: Callable, treedef, static, leaves):
     try:
         blob, template, out_static = pickle.loads(path.read_bytes())
         found = (export.deserialize(blob), jax.tree.structure(template), out_static)
-        os.utime(path)
+        with contextlib.suppress(OSError):  # recently used (a read-only cache stays as it is)
+            os.utime(path)
     except FileNotFoundError:
         found = None
     except Exception as err:  # a damaged or foreign file: traced again and rewritten
