@@ -160,9 +160,9 @@ def _write(path: Path, blob: bytes) -> None:
         old.unlink(missing_ok=True)
 
 
-def _program(fn: Callable, treedef, static, leaves):
-    """The exported program for this call (memory, disk, or traced now), or ``None``."""
-    where = folder()
+def _program(where: Path, fn: Callable, treedef, static, leaves):
+    """The exported program for this call (memory, disk under ``where``, or traced now), or
+    ``None``."""
     try:
         key = _key(fn, treedef, static, leaves)
     except Exception:  # an unpicklable static value: no stable key
@@ -206,13 +206,14 @@ def call(fn: Callable, *args, **kwargs):
     (see the module docstring). ``fn`` must be a module-level pure function."""
     dynamic, static = eqx.partition((args, kwargs), eqx.is_array)
     leaves, treedef = jax.tree.flatten(dynamic)
+    where = folder()
     if (
-        folder() is None
+        where is None
         or any(isinstance(x, jax.core.Tracer) for x in leaves)
         or sum(int(np.size(x)) for x in leaves) > MAX_ELEMENTS
     ):
         return _filter_jit(fn)(*args, **kwargs)
-    program = _program(fn, treedef, static, leaves)
+    program = _program(where, fn, treedef, static, leaves)
     if program is None:
         return _filter_jit(fn)(*args, **kwargs)
     exported, out_def, out_static = program

@@ -89,7 +89,6 @@ def configure() -> None:
     jax = sys.modules.get("jax")
     if jax is None:
         _forget_inherited()
-    if jax is None:
         os.environ["JAX_ENABLE_X64"] = "1"
     else:
         jax.config.update("jax_enable_x64", True)

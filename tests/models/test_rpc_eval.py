@@ -33,3 +33,17 @@ def test_buckets_pad_by_a_quarter_at_most():
     assert np.all(buckets >= sizes) and np.all(buckets <= 1.25 * sizes)
     assert len(np.unique(buckets)) <= 4 * 17  # four programs per octave at most
     assert rpc_eval._bucket(1) == rpc_eval._bucket(16) == rpc_eval.MIN_BUCKET
+
+
+def test_localize_flags_what_the_chord_steps_cannot_reach(pleiades):
+    """Image points far outside the RPC's image (1e9 px) or NaN: NaN for those points only,
+    never a stalled value passed off as converged; the others are localised as usual."""
+    rpc, _ = pleiades
+    go, gs = np.asarray(rpc.ground_offset), np.asarray(rpc.ground_scale)
+    ground = go + gs * np.array([[0.1, -0.2, 0.3], [0.5, 0.5, -0.5], [-0.3, 0.2, 0.0]])
+    xy = rpc.project(ground)
+    xy[1] = [1e9, -1e9]
+    xy[2, 0] = np.nan
+    out = rpc.localize(xy, ground[:, 2])
+    assert np.all(np.isnan(out[1, :2])) and np.all(np.isnan(out[2, :2]))
+    np.testing.assert_allclose(out[0, :2], ground[0, :2], rtol=0, atol=1e-9)
