@@ -333,11 +333,16 @@ def memory_scaling(points: list[dict]) -> dict:
     """Growth between the smallest and the largest size (``*_growth_over_linear``: 1.0 when
     memory grows like the number of ties), and a least-squares split of the temporaries into
     ``bytes_per_tie * ties + dense_copies * 8 (6 S)^2`` (the dense reduced camera system, which
-    grows with the square of the number of sub-scenes)."""
+    grows with the square of the number of sub-scenes: about 0 when the banded solve is used),
+    and ``time_per_step_growth_over_linear``: the growth of the time of one solver step (two-level
+    call over level-1 steps) over that of the ties, 1.0 when linear."""
     a, b = points[0], points[-1]
     ratio = b["ties"] / a["ties"]
+    per_step = [p["jaxgeo_s"] / p["jaxgeo_steps"] for p in (a, b)]
     out = {
         "ties_ratio": ratio,
+        "time_per_step_s": [p["jaxgeo_s"] / p["jaxgeo_steps"] for p in points],
+        "time_per_step_growth_over_linear": per_step[1] / per_step[0] / ratio,
         "peak_ratio": b["peak_bytes"] / a["peak_bytes"],
         "temp_ratio": b["temp_bytes"] / a["temp_bytes"],
         "peak_growth_over_linear": b["peak_bytes"] / a["peak_bytes"] / ratio,

@@ -13,9 +13,10 @@ import jax
 import jax.numpy as jnp
 from jaxtyping import Array, Bool, Float
 
+from . import band
 from .factor import cho_solve, cholesky
 from .problem import Problem, Structure
-from .schur import Jacobians, NormalBlocks, reduced_system
+from .schur import Jacobians, NormalBlocks, reduced_system, u_diagonal
 
 INFLATION_MAX = 1e6
 """An unknown whose variance is this many times that of an uncorrelated one (its sigma amplified
@@ -25,13 +26,15 @@ INFLATION_MAX = 1e6
 class Covariance(eqx.Module):
     """Cofactor matrices (a priori sigma 1) of the unknowns in the solver's variables.
 
-    ``cc`` (N, N) camera parameters; ``pp`` (n, 3, 3) points (ENU metres); ``obs`` (M, 2) and
-    ``ground`` (c, 3): the diagonal of ``J Q J^T`` per observation (1 - redundancy number);
+    ``cc`` (N, N) camera parameters (a :class:`~.band.Band`, the inverse on the pattern of the
+    reduced system only, when it is banded); ``pp`` (n, 3, 3) points (ENU metres); ``obs``
+    (M, 2) and ``ground`` (c, 3): the diagonal of ``J Q J^T`` per observation (1 - redundancy
+    number);
     ``inflation_params`` (N,) / ``inflation_points`` (n, 3): ``Q_ii H_ii``, 1 for an
     uncorrelated unknown, huge (or NaN) for one the observations do not determine.
     """
 
-    cc: Float[Array, "N N"]
+    cc: Float[Array, "N N"] | band.Band
     pp: Float[Array, "n 3 3"]
     obs: Float[Array, "M 2"]
     ground: Float[Array, "c 3"]
@@ -44,15 +47,23 @@ def cofactors(jac: Jacobians, blocks: NormalBlocks, s: Structure) -> Covariance:
     diagonal of ``J Q J^T`` per observation (for redundancy numbers / standardised residuals)."""
     n = s.n_params
     big_s, vinv, y = reduced_system(blocks, s, 0.0)
-    qcc = cho_solve(cholesky(big_s), jnp.eye(n + 1))
-    pa, pb = s.obs_params[s.pair_a], s.obs_params[s.pair_b]
-    qab = qcc[pa[:, :, None], pb[:, None, :]]  # (K, P, P)
+    if s.band:  # the inverse only where the pattern of S is (linear in the sub-scenes)
+        qcc = band.selected_inverse(band.cholesky(big_s))
+        ob = s.obs_block
+        qab = qcc.blocks(ob[s.pair_a], ob[s.pair_b], s.width)  # (K, P, P)
+        qoo = qcc.blocks(ob, ob, s.width)
+        cc, diag_q = qcc, qcc.diagonal()
+    else:
+        qcc = cho_solve(cholesky(big_s), jnp.eye(n + 1))
+        pa, pb = s.obs_params[s.pair_a], s.obs_params[s.pair_b]
+        qab = qcc[pa[:, :, None], pb[:, None, :]]  # (K, P, P)
+        idx = s.obs_params
+        qoo = qcc[idx[:, :, None], idx[:, None, :]]
+        cc, diag_q = qcc[:n, :n], jnp.diagonal(qcc)[:n]
     t = jnp.einsum("kpi,kpq,kqj->kij", y[s.pair_a], qab, y[s.pair_b])
     qpp = vinv + jax.ops.segment_sum(t, s.pair_point, s.n_points)
     m = s.obs_point.shape[0]
     qcp = -jax.ops.segment_sum(jnp.einsum("kpq,kqj->kpj", qab, y[s.pair_b]), s.pair_a, m)
-    idx = s.obs_params
-    qoo = qcc[idx[:, :, None], idx[:, None, :]]
     jc, jp = jac.jc, jac.jp
     fit = (
         jnp.einsum("mkp,mpq,mkq->mk", jc, qoo, jc)
@@ -60,10 +71,10 @@ def cofactors(jac: Jacobians, blocks: NormalBlocks, s: Structure) -> Covariance:
         + jnp.einsum("mki,mij,mkj->mk", jp, qpp[s.obs_point], jp)
     )
     gfit = jnp.einsum("cki,cij,ckj->ck", jac.jg, qpp[s.ground_point], jac.jg)
-    infl_c = jnp.diagonal(qcc)[:n] * jnp.diagonal(blocks.u)[:n]
+    infl_c = diag_q * u_diagonal(blocks, s)
     infl_p = jnp.diagonal(qpp, axis1=1, axis2=2) * jnp.diagonal(blocks.v, axis1=1, axis2=2)
     return Covariance(
-        cc=qcc[:n, :n],
+        cc=cc,
         pp=qpp,
         obs=fit,
         ground=gfit,
@@ -74,7 +85,7 @@ def cofactors(jac: Jacobians, blocks: NormalBlocks, s: Structure) -> Covariance:
 
 def undetermined_unknowns(
     problem: Problem,
-    q_params: Float[Array, "N N"],
+    q_params: Float[Array, "N N"] | band.Band,
     inflation_params: Float[Array, " N"],
     inflation_points: Float[Array, "n 3"],
 ) -> tuple[Bool[Array, " N"], Bool[Array, " n"]]:
@@ -92,7 +103,7 @@ def undetermined_unknowns(
         ]
         + [jnp.zeros(0)]
     )
-    q = jnp.diagonal(q_params)
+    q = q_params.diagonal() if isinstance(q_params, band.Band) else jnp.diagonal(q_params)
     has_prior = wt > 0
     prior_ok = has_prior & (q * jnp.where(has_prior, wt, 0.0) ** 2 < 1.5)
     bad_p = ~(jnp.abs(inflation_params) < INFLATION_MAX) & ~prior_ok

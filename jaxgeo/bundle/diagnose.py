@@ -9,8 +9,10 @@ name them, e.g. a common shift of all images with no GCP.
 from __future__ import annotations
 
 import equinox as eqx
+import jax.numpy as jnp
 import numpy as np
 
+from .band import Band
 from .problem import Problem
 from .schur import reduced_system
 from .solve import blocks_at, initial_unknowns, unit_scales
@@ -23,6 +25,8 @@ SINGULAR_RTOL = 1e-10
 def _normal_matrices(problem: Problem, y, loss: str, loss_scale: float):
     _, blocks = blocks_at(problem, unit_scales(problem), y, loss, loss_scale)
     big_s, _, _ = reduced_system(blocks, problem.structure, 0.0)
+    if isinstance(big_s, Band):  # diagnostics only: the dense matrix, dummy row last
+        big_s = jnp.pad(big_s.todense(), ((0, 1), (0, 1)))
     return blocks.v, big_s, blocks.w
 
 

@@ -26,6 +26,7 @@ import jax.numpy as jnp
 import numpy as np
 from jaxtyping import Array, Float, Int, PyTree
 
+from .band import block_bandwidth, super_blocks
 from .observations import GroundObs, ImageObs
 
 
@@ -106,6 +107,10 @@ class Structure(eqx.Module):
     indices of every block (groups in order), ``pair_blocks`` (Q, 2) the distinct (block of
     ``a``, block of ``b``) of the pairs and ``pair_seg`` (K,) the index of a pair's among them:
     products are summed per block (pair) first (``segment_sum``), then added to the matrix.
+
+    ``band``: 0, or the number of parameter blocks per super-block when the reduced camera
+    system is solved as a block-banded matrix (:mod:`~jaxgeo.bundle.band`: one group whose
+    blocks share points only with blocks a few places away, e.g. a strip's sub-scenes).
     """
 
     obs_params: Int[Array, "M P"]
@@ -123,6 +128,11 @@ class Structure(eqx.Module):
     width: int = eqx.field(static=True)
     n_points: int = eqx.field(static=True)
     group_shapes: tuple[tuple[int, int], ...] = eqx.field(static=True)
+    band: int = eqx.field(static=True, default=0)
+
+    @property
+    def n_blocks(self) -> int:
+        return sum(b for b, _ in self.group_shapes)
 
 
 class Problem(eqx.Module):
@@ -195,6 +205,10 @@ def make_structure(
     all_params = np.concatenate(all_params) if all_params else np.zeros((0, width), np.int64)
     pairs = np.stack([obs_block[pair_a], obs_block[pair_b]], axis=1).reshape(-1, 2)
     pair_blocks, pair_seg = np.unique(pairs, axis=0, return_inverse=True)
+    band = 0
+    if len(groups) == 1:
+        bandwidth = block_bandwidth(pair_blocks)
+        band = super_blocks(groups[0].n_blocks, groups[0].n_params, bandwidth)
     return Structure(
         obs_params=jnp.asarray(obs_params),
         obs_point=jnp.asarray(obs_point),
@@ -211,6 +225,7 @@ def make_structure(
         width=width,
         n_points=n_points,
         group_shapes=tuple((g.n_blocks, g.n_params) for g in groups),
+        band=band,
     )
 
 

@@ -15,6 +15,7 @@ from typing import Any
 import numpy as np
 
 from ..io.tables import GroundPoints, Observations
+from .band import Band
 from .build import Setup
 from .config import DEFAULT_SOLVER, SolverConfig
 from .covariance import INFLATION_MAX, undetermined_unknowns
@@ -39,7 +40,9 @@ class AdjustResult:
     Models: ``models`` image name -> adjusted sensor model; ``blocks`` the user's keys ->
     adjusted models (multi-image models under their tuple key).
     Parameters: ``param_names`` (``image.leaf[index]``), ``params``, ``param_sigma``,
-    ``param_cov``.
+    ``param_cov`` (a dense array; for a banded problem such as a strip, a
+    ``scipy.sparse.csr_array`` holding the covariances within the band, between a sub-scene's
+    parameters and its neighbours': the others are not computed).
     Points: ``point_ids``, ``point_role`` (gcp / check / tie), ``ground`` ``(n, 3)``
     lon/lat/h, ``ground_sigma_m`` ``(n, 3)`` east/north/up, ``ground_cov_m2`` ``(n, 3, 3)``.
     Observations (in the order given: ``observation_ids``, ``observation_images``):
@@ -63,7 +66,7 @@ class AdjustResult:
     param_names: tuple[str, ...]
     params: np.ndarray
     param_sigma: np.ndarray
-    param_cov: np.ndarray
+    param_cov: Any
     point_ids: tuple[str, ...]
     point_role: tuple[str, ...]
     ground: np.ndarray
@@ -257,7 +260,7 @@ def _final_y(problem, sol):
 def _result(setup, sol, theta, s0, converged, message, solver, observations, ground, removed):
     problem = setup.problem
     var = s0**2 if np.isfinite(s0) else 1.0
-    q = np.asarray(sol.q_params)
+    q = sol.q_params.to_sparse() if isinstance(sol.q_params, Band) else np.asarray(sol.q_params)
     order = setup.obs_order
     m = len(observations.point_ids)
     img_r = np.asarray(sol.residuals_image)
@@ -301,7 +304,7 @@ def _result(setup, sol, theta, s0, converged, message, solver, observations, gro
         blocks=setup.blocks(problem.groups, theta),
         param_names=setup.param_names,
         params=flat,
-        param_sigma=np.sqrt(np.maximum(np.diag(q), 0.0) * var),
+        param_sigma=np.sqrt(np.maximum(q.diagonal(), 0.0) * var),
         param_cov=q * var,
         point_ids=setup.point_ids,
         point_role=setup.point_role,

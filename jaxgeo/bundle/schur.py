@@ -25,6 +25,7 @@ import jax.numpy as jnp
 import optimistix as optx
 from jaxtyping import Array, Float, Int, PyTree
 
+from . import band
 from .factor import cho_solve, cholesky, inv3_spd
 from .problem import Structure
 
@@ -61,9 +62,11 @@ class Jacobians(eqx.Module):
 
 class NormalBlocks(eqx.Module):
     """Blocks of ``J^T J`` and ``J^T r``: ``u`` (N+1, N+1) dense (last row/column a dummy for
-    padding), ``gc`` (N+1,), ``v`` (n, 3, 3), ``gp`` (n, 3), ``w`` (M, P, 3) per observation."""
+    padding), or (B, P, P) its diagonal blocks when the reduced system is banded
+    (``Structure.band``; ``U`` is block diagonal: an observation sees one camera block);
+    ``gc`` (N+1,), ``v`` (n, 3, 3), ``gp`` (n, 3), ``w`` (M, P, 3) per observation."""
 
-    u: Float[Array, "N1 N1"]
+    u: Float[Array, "N1 N1"] | Float[Array, "B P P"]
     gc: Float[Array, " N1"]
     v: Float[Array, "n 3 3"]
     gp: Float[Array, "n 3"]
@@ -162,10 +165,15 @@ def split_jacobians(fn: Callable, args: Any, y: PyTree, width: int) -> Jacobians
 def normal_blocks(jac: Jacobians, s: Structure) -> NormalBlocks:
     """Assemble :class:`NormalBlocks` from the Jacobian blocks (no dense ``J``)."""
     n1 = s.n_params + 1
-    u = add_per_block(jnp.zeros((n1, n1)), s, jnp.einsum("mkp,mkq->mpq", jac.jc, jac.jc))
+    jtj = jnp.einsum("mkp,mkq->mpq", jac.jc, jac.jc)
+    if s.band:  # one group: its blocks in order, the priors' blocks aligned with them
+        u = jax.ops.segment_sum(jtj, s.obs_block, s.n_blocks)
+    else:
+        u = add_per_block(jnp.zeros((n1, n1)), s, jtj)
     gc = add_per_block(jnp.zeros(n1), s, jnp.einsum("mkp,mk->mp", jac.jc, jac.r))
     for bidx, jpr, rpr in zip(s.block_params, jac.jpr, jac.rpr, strict=True):
-        u = u.at[bidx[:, :, None], bidx[:, None, :]].add(jnp.einsum("bqp,bqr->bpr", jpr, jpr))
+        prior = jnp.einsum("bqp,bqr->bpr", jpr, jpr)
+        u = u + prior if s.band else u.at[bidx[:, :, None], bidx[:, None, :]].add(prior)
         gc = gc.at[bidx].add(jnp.einsum("bqp,bq->bp", jpr, rpr))
     seg = jax.ops.segment_sum
     v = seg(jnp.einsum("mki,mkj->mij", jac.jp, jac.jp), s.obs_point, s.n_points)
@@ -182,12 +190,23 @@ def inv3(v: Float[Array, "n 3 3"]) -> Float[Array, "n 3 3"]:
     return inv3_spd(v)
 
 
+def u_diagonal(blocks: NormalBlocks, s: Structure) -> Float[Array, " N"]:
+    """The diagonal of ``U`` (N,), dense or banded storage."""
+    if s.band:
+        return jnp.diagonal(blocks.u, axis1=1, axis2=2).reshape(-1)
+    return jnp.diagonal(blocks.u)[: s.n_params]
+
+
 def damped(blocks: NormalBlocks, s: Structure, lam) -> tuple[Array, Array]:
     """``U + lam diag(U)`` (dummy row/column: identity) and ``V + lam diag(V)``."""
     n = s.n_params
-    du = jnp.clip(jnp.diagonal(blocks.u), DIAG_MIN, DIAG_MAX)
-    u = blocks.u + lam * jnp.diag(du)
-    u = u.at[n, :].set(0.0).at[:, n].set(0.0).at[n, n].set(1.0)
+    if s.band:
+        du = jnp.clip(jnp.diagonal(blocks.u, axis1=1, axis2=2), DIAG_MIN, DIAG_MAX)
+        u = blocks.u + lam * du[:, :, None] * jnp.eye(s.width)
+    else:
+        du = jnp.clip(jnp.diagonal(blocks.u), DIAG_MIN, DIAG_MAX)
+        u = blocks.u + lam * jnp.diag(du)
+        u = u.at[n, :].set(0.0).at[:, n].set(0.0).at[n, n].set(1.0)
     dv = jnp.clip(jnp.diagonal(blocks.v, axis1=1, axis2=2), DIAG_MIN, DIAG_MAX)
     v = blocks.v + lam * dv[:, :, None] * jnp.eye(3)
     return u, v
@@ -195,53 +214,51 @@ def damped(blocks: NormalBlocks, s: Structure, lam) -> tuple[Array, Array]:
 
 def reduced_system(
     blocks: NormalBlocks, s: Structure, lam: Float[Array, ""] | float
-) -> tuple[Float[Array, "N1 N1"], Float[Array, "n 3 3"], Float[Array, "M P 3"]]:
-    """``(S, V^-1, W V^-1)`` of the damped normal equations (damping ``lam * diag``)."""
+) -> tuple[Float[Array, "N1 N1"] | band.Band, Float[Array, "n 3 3"], Float[Array, "M P 3"]]:
+    """``(S, V^-1, W V^-1)`` of the damped normal equations (damping ``lam * diag``); ``S``
+    dense (N+1, N+1), or a :class:`~.band.Band` (N,) when ``Structure.band``."""
     n = s.n_params
     u, v = damped(blocks, s, lam)
     vinv = inv3(v)
     y = jnp.einsum("mpj,mjk->mpk", blocks.w, vinv[s.obs_point])
     sub = jnp.einsum("kpj,kqj->kpq", y[s.pair_a], blocks.w[s.pair_b])
+    if s.band:
+        summed = jax.ops.segment_sum(sub, s.pair_seg, s.pair_blocks.shape[0])
+        return band.assemble(u, s.pair_blocks, -summed, s.band, n), vinv, y
     big_s = add_per_pair(u, s, -sub)
     # the dummy (padding) parameter stays an identity row
     big_s = big_s.at[n, :].set(0.0).at[:, n].set(0.0).at[n, n].set(1.0)
     return big_s, vinv, y
 
 
+def factorise(big_s: Array | band.Band) -> Array | band.BandFactor:
+    """Cholesky factor of the reduced system, dense or banded (NaN if not positive definite)."""
+    return band.cholesky(big_s) if isinstance(big_s, band.Band) else cholesky(big_s)
+
+
+def solve_factored(chol: Array | band.BandFactor, rhs: Float[Array, " N1"]) -> Float[Array, " N1"]:
+    """``S^-1 rhs`` from :func:`factorise` (the dummy entry, last, stays 0 when banded)."""
+    if isinstance(chol, band.BandFactor):
+        return rhs.at[:-1].set(band.solve(chol, rhs[:-1])).at[-1].set(0.0)
+    return cho_solve(chol, rhs)
+
+
 def schur_solve(
-    blocks: NormalBlocks, s: Structure, lam: Float[Array, ""] | float, refine: int = 0
+    blocks: NormalBlocks, s: Structure, lam: Float[Array, ""] | float
 ) -> tuple[Float[Array, " N"], Float[Array, "n 3"]]:
     """Solve ``(J^T J + lam D) d = J^T r`` for the camera ``dc`` (N,) and point ``dp`` (n, 3).
 
-    ``refine`` steps of iterative refinement against the block matrix can recover accuracy lost
-    to the cancellation in the Schur complement; none are needed at our conditioning (the
-    solution agrees with a dense QR solve to the noise floor of the cost).
-    """
+    No iterative refinement: at our conditioning the solution agrees with a dense QR solve to
+    the noise floor of the cost."""
     n = s.n_params
     big_s, vinv, y = reduced_system(blocks, s, lam)
-    u, v = damped(blocks, s, lam)
-    chol = cholesky(big_s)
+    chol = factorise(big_s)
     idx, pt = s.obs_params, s.obs_point
-
-    def solve(gc, gp):
-        rhs = add_per_block(gc, s, -jnp.einsum("mpj,mj->mp", y, gp[pt])).at[n].set(0.0)
-        dc = cho_solve(chol, rhs)
-        back = jax.ops.segment_sum(jnp.einsum("mpj,mp->mj", blocks.w, dc[idx]), pt, s.n_points)
-        return dc, jnp.einsum("nij,nj->ni", vinv, gp - back)
-
-    def apply(dc, dp):
-        hc = add_per_block(u @ dc, s, jnp.einsum("mpj,mj->mp", blocks.w, dp[pt]))
-        cross = jnp.einsum("mpj,mp->mj", blocks.w, dc[idx])
-        hp = jnp.einsum("nij,nj->ni", v, dp) + jax.ops.segment_sum(cross, pt, s.n_points)
-        return hc.at[n].set(0.0), hp
-
-    gc = blocks.gc.at[n].set(0.0)
-    dc, dp = solve(gc, blocks.gp)
-    for _ in range(refine):
-        hc, hp = apply(dc, dp)
-        ec, ep = solve(gc - hc, blocks.gp - hp)
-        dc, dp = dc + ec, dp + ep
-    return dc[:n], dp
+    gc, gp = blocks.gc.at[n].set(0.0), blocks.gp
+    rhs = add_per_block(gc, s, -jnp.einsum("mpj,mj->mp", y, gp[pt])).at[n].set(0.0)
+    dc = solve_factored(chol, rhs)
+    back = jax.ops.segment_sum(jnp.einsum("mpj,mp->mj", blocks.w, dc[idx]), pt, s.n_points)
+    return dc[:n], jnp.einsum("nij,nj->ni", vinv, gp - back)
 
 
 class SchurState(eqx.Module):
@@ -268,7 +285,7 @@ def _zeros_state(s: Structure, m: int, c: int, priors: tuple[tuple[int, int], ..
         rpr=tuple(jnp.zeros((b, q)) for b, q in priors),
     )
     blocks = NormalBlocks(
-        u=jnp.zeros((n1, n1)),
+        u=jnp.zeros((s.n_blocks, p, p)) if s.band else jnp.zeros((n1, n1)),
         gc=jnp.zeros(n1),
         v=jnp.zeros((s.n_points, 3, 3)),
         gp=jnp.zeros((s.n_points, 3)),

@@ -21,6 +21,7 @@ import optimistix as optx
 from jaxtyping import Array, Bool, Float, Int
 
 from .. import geodesy
+from .band import Band
 from .config import DEFAULT_SOLVER, SolverConfig
 from .covariance import cofactors, undetermined_unknowns
 from .errors import RESULTS
@@ -33,6 +34,7 @@ from .schur import (
     split_jacobians,
     split_params,
     sum_squares,
+    u_diagonal,
 )
 
 
@@ -152,7 +154,9 @@ class Solution(eqx.Module):
             observation blocks concatenated (``project - measured``; not robust-weighted).
         residuals_ground: ``(c, 3)`` ground residuals divided by sigma (ENU adjusted - given).
         q_params: ``(N, N)`` cofactor matrix of all parameters (a priori sigma 1; multiply
-            by ``s0**2`` for the a posteriori covariance), groups in order, raveled.
+            by ``s0**2`` for the a posteriori covariance), groups in order, raveled; a
+            :class:`~jaxgeo.bundle.band.Band` when the reduced system is banded (strips): the
+            cofactors within the band only (neighbouring sub-scenes), linear in their number.
         q_points: ``(n_points, 3, 3)`` cofactor matrices of the points, ENU metres.
         redundancy_image: ``(M, 2)`` redundancy numbers of the image observations.
         redundancy_ground: ``(c, 3)`` redundancy numbers of the ground observations.
@@ -177,7 +181,7 @@ class Solution(eqx.Module):
     ground: Float[Array, "n 3"]
     residuals_image: Float[Array, "M 2"]
     residuals_ground: Float[Array, "c 3"]
-    q_params: Float[Array, "N N"]
+    q_params: Float[Array, "N N"] | Band
     q_points: Float[Array, "n 3 3"]
     redundancy_image: Float[Array, "M 2"]
     redundancy_ground: Float[Array, "c 3"]
@@ -220,7 +224,7 @@ def parameter_scales(
     _, blocks = blocks_at(
         problem, unit_scales(problem), initial_unknowns(problem), loss, loss_scale
     )
-    d = jnp.diagonal(blocks.u)[: problem.structure.n_params]
+    d = u_diagonal(blocks, problem.structure)
     sc = jnp.where(d > 0.0, 1.0 / jnp.sqrt(jnp.where(d > 0.0, d, 1.0)), 1.0)
     return jax.lax.stop_gradient(split_params(sc, problem.structure))
 
@@ -413,7 +417,10 @@ def solve(
     jac, blocks = blocks_at(weighted, scales, y, "l2", c)
     cov = cofactors(jac, blocks, s)
     flat_scale = jnp.concatenate([x.reshape(-1) for x in scales] + [jnp.zeros(0)])
-    q_params = cov.cc * flat_scale[:, None] * flat_scale[None, :]
+    if isinstance(cov.cc, Band):
+        q_params = cov.cc.scaled(flat_scale)
+    else:
+        q_params = cov.cc * flat_scale[:, None] * flat_scale[None, :]
     cost = sum_squares((jac.r, jac.rg, jac.rpr))
     gw = problem.ground.weight
     red = (

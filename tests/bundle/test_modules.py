@@ -9,6 +9,7 @@ import jaxgeo.bundle
 
 MODULES = (
     "adjustment",
+    "band",
     "build",
     "build.checks",
     "build.grouping",

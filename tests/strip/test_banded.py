@@ -1,0 +1,53 @@
+"""A strip's level 1 solved with the block-banded reduced system equals the dense solve."""
+
+import dataclasses
+
+import numpy as np
+import pytest
+
+from jaxgeo.bundle import band
+from jaxgeo.bundle.errors import RESULTS
+from jaxgeo.bundle.solve import solve_jit
+from jaxgeo.strip.config import STRIP_SOLVER
+
+
+@pytest.fixture(scope="module")
+def dense(strip_result):
+    problem = strip_result.setup.problem
+    assert problem.structure.band == 0  # 12 sub-scenes: too few super-blocks, dense
+    return problem, solve_jit(problem, STRIP_SOLVER)
+
+
+@pytest.mark.parametrize("extra", [0, 4])  # super-blocks of the bandwidth; wider, padded
+def test_banded_level1_equals_dense(dense, extra):
+    problem, want = dense
+    s = problem.structure
+    width = s.width
+    g = band.block_bandwidth(np.asarray(s.pair_blocks)) + extra
+    banded = dataclasses.replace(problem, structure=dataclasses.replace(s, band=g))
+    got = solve_jit(banded, STRIP_SOLVER)
+    assert isinstance(got.q_params, band.Band) and bool(got.result == RESULTS.successful)
+    assert bool(want.result == RESULTS.successful)
+    # rounding differs, so a step near the cost's noise floor may be taken or not
+    assert abs(int(got.num_steps) - int(want.num_steps)) <= 1
+    # equal within the solver's tolerance (1e-6 of each unknown's sigma)
+    sigma = np.sqrt(np.diag(np.asarray(want.q_params))).reshape(want.theta[0].shape)
+    assert np.max(np.abs(got.theta[0] - want.theta[0]) / sigma) < 1e-6
+    sigma_p = np.sqrt(np.diagonal(np.asarray(want.q_points), axis1=1, axis2=2))  # ENU m
+    moved = (np.asarray(got.ground) - np.asarray(want.ground)) * problem.metres_per_unit
+    assert np.max(np.abs(moved) / sigma_p) < 1e-6
+    np.testing.assert_allclose(got.s0, want.s0, rtol=1e-9)
+    np.testing.assert_allclose(got.redundancy_image, want.redundancy_image, atol=1e-9)
+    # cofactors compared as correlations (entries over sqrt(q_ii q_jj) of the dense solve)
+    d = np.sqrt(np.diagonal(np.asarray(want.q_points), axis1=1, axis2=2))
+    norm = d[:, :, None] * d[:, None, :]
+    np.testing.assert_allclose(got.q_points / norm, want.q_points / norm, rtol=0, atol=1e-7)
+    np.testing.assert_allclose(got.inflation_params, want.inflation_params, rtol=1e-7)
+    # the cofactors within the band: a sub-scene with itself and its neighbours
+    q, qd = np.asarray(got.q_params.todense()), np.asarray(want.q_params)
+    blocks = np.arange(q.shape[0]) // width
+    near = np.abs(blocks[:, None] - blocks[None, :]) <= g - extra
+    assert near.sum() > 3 * q.shape[0]
+    norm = np.sqrt(np.outer(np.diag(qd), np.diag(qd)))[near]
+    np.testing.assert_allclose(q[near] / norm, qd[near] / norm, rtol=0, atol=1e-7)
+    np.testing.assert_allclose(got.q_params.diagonal(), np.diag(qd), rtol=1e-7)
