@@ -86,6 +86,15 @@ def rows() -> list[tuple[str, str, str, str, str]]:
           "scipy least_squares", s["scipy_s"], where)]  # fmt: skip
     for label, ours, peer, theirs, w in timed:
         out.append((label, f"{ours:.2f} s", f"{peer} {theirs:.1f} s", f"{theirs / ours:.1f}x", w))
+    c, where = _load("strip-curve-20-1280-2core-cpu.json")
+    big, grow = c["memory"][-1], c["memory_scaling"]
+    out.append((
+        f"strip, {big['scenes']} sub-scenes, both levels (time per step, memory: growth from "
+        f"{c['memory'][0]['scenes']} over linear)",
+        f"{big['jaxgeo_s']:.2f} s, {big['peak_bytes'] / 2**20:.0f} MiB "
+        f"({grow['time_per_step_growth_over_linear']:.2f}x, "
+        f"{grow['peak_growth_over_linear']:.2f}x)", "", "", where,
+    ))  # fmt: skip
     a, where = _load("adjust-scale-100k-2core-cpu.json")
     first = next(iter(a["runs"]))
     for loss, r in a["runs"].items():
