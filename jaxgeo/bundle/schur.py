@@ -39,6 +39,12 @@ STAGNANT_STEPS = 3
 """Accepted steps in a row that fail to halve a decrement already under the cost's rounding
 noise (``NOISE_FLOOR`` of the cost) after which the solve has converged: the linear solve's own
 rounding then sets the decrement (seen at 320 sub-scenes: 3e-12 for ever, above ``tol**2``)."""
+NEGLIGIBLE_DAMPING = 1e-6
+"""Damping ``lambda`` (relative to ``diag(J^T J)``) at or below which a step is the undamped
+Gauss-Newton step that ``query`` already solved for the decrement: one factorisation per step
+instead of two once the trust region has grown (``lambda = damping / step_size``, 1e-4 at the
+start, 10x smaller after each very successful step). The trust region judges the step by the
+cost either way."""
 DIAG_MIN = 1e-6
 DIAG_MAX = 1e32
 
@@ -262,15 +268,18 @@ def schur_solve(
 
 
 class SchurState(eqx.Module):
-    """Descent state at the last accepted point: Jacobian blocks, normal blocks, and the squared
-    Newton decrement ``g^T H^-1 g`` (the squared length of the full Gauss-Newton step in units
-    of its own standard deviations; ``inf`` before the first query or when singular)."""
+    """Descent state at the last accepted point: Jacobian blocks, normal blocks, the undamped
+    Gauss-Newton step ``(dc, dp)`` and its squared Newton decrement ``g^T H^-1 g`` (the squared
+    length of the full Gauss-Newton step in units of its own standard deviations; ``inf``
+    before the first query or when singular)."""
 
     jac: Jacobians
     blocks: NormalBlocks
     decrement: Float[Array, ""]
     stagnant: Int[Array, ""]
     """Accepted steps in a row whose decrement did not halve the previous one."""
+    dc: Float[Array, " N"]
+    dp: Float[Array, "n 3"]
 
 
 def _zeros_state(s: Structure, m: int, c: int, priors: tuple[tuple[int, int], ...]) -> SchurState:
@@ -291,7 +300,8 @@ def _zeros_state(s: Structure, m: int, c: int, priors: tuple[tuple[int, int], ..
         gp=jnp.zeros((s.n_points, 3)),
         w=jnp.zeros((m, p, 3)),
     )
-    return SchurState(jac, blocks, jnp.array(jnp.inf), jnp.array(0))
+    zeros = (jnp.zeros(s.n_params), jnp.zeros((s.n_points, 3)))
+    return SchurState(jac, blocks, jnp.array(jnp.inf), jnp.array(0), *zeros)
 
 
 def split_params(flat: Float[Array, " N"], s: Structure) -> tuple[Float[Array, "b p"], ...]:
@@ -307,9 +317,10 @@ class SchurDescent(optx.AbstractDescent):
     """(Damped) Gauss-Newton step by the Schur complement of the point blocks.
 
     ``query`` builds the Jacobian and normal blocks once per accepted point (``width + 3``
-    JVPs of the linearised residuals) and the Newton decrement; ``step`` solves the damped
-    system for the trust region's step size, ``lambda = damping / step_size`` with Marquardt's
-    ``diag(J^T J)`` scaling (Levenberg-Marquardt), or returns ``step_size`` times the
+    JVPs of the linearised residuals), the undamped Gauss-Newton step and its Newton decrement;
+    ``step`` solves the damped system for the trust region's step size, ``lambda = damping /
+    step_size`` with Marquardt's ``diag(J^T J)`` scaling (Levenberg-Marquardt; the query's step
+    itself once ``lambda <= NEGLIGIBLE_DAMPING``), or returns ``step_size`` times the
     Gauss-Newton step when ``damped`` is False.
     """
 
@@ -337,17 +348,22 @@ class SchurDescent(optx.AbstractDescent):
         dec = jnp.dot(blocks.gc[: s.n_params], dc) + jnp.sum(blocks.gp * dp)
         dec = jnp.where(jnp.isfinite(dec), dec, jnp.inf)
         stagnant = jnp.where(dec > 0.5 * state.decrement, state.stagnant + 1, 0)
-        return SchurState(jac, blocks, dec, stagnant)
+        return SchurState(jac, blocks, dec, stagnant, dc, dp)
 
     def step(self, step_size, state: SchurState):
         s = self.structure
         if self.damped:
             tiny = jnp.finfo(jnp.result_type(step_size)).tiny
             lam = self.damping / jnp.maximum(step_size, tiny)
-            dc, dp = schur_solve(state.blocks, s, lam)
+            # negligible damping: the query's undamped step, without a second factorisation
+            dc, dp = jax.lax.cond(
+                lam <= NEGLIGIBLE_DAMPING,
+                lambda: (state.dc, state.dp),
+                lambda: schur_solve(state.blocks, s, lam),
+            )
             scale = 1.0
         else:
-            dc, dp = schur_solve(state.blocks, s, 0.0)
+            dc, dp = state.dc, state.dp
             scale = step_size
         finite = jnp.all(jnp.isfinite(dc)) & jnp.all(jnp.isfinite(dp))
         # a non-finite damped step is rejected by the trust region, which then damps more
