@@ -60,3 +60,21 @@ def test_without_the_rule_the_solve_runs_to_max_steps(small, monkeypatch):
     res, warned = _adjust_at_the_floor(small, monkeypatch, 10**6)
     assert not res.converged and warned
     assert res.num_steps == 40
+
+
+@pytest.mark.parametrize("negligible", [-1.0, float("inf")])
+def test_reused_undamped_step_reaches_the_same_solution(small, monkeypatch, negligible):
+    """``step`` reuses the query's undamped Gauss-Newton step once the damping is negligible
+    (one factorisation per step). Never reusing it (a second, damped factorisation every step)
+    and always reusing it (Gauss-Newton steps judged by the trust region) give the same
+    solution as the default."""
+    ref = adjust(small.models, small.obs, small.ground, bias="affine", solver=L2)
+    monkeypatch.setattr(schur, "NEGLIGIBLE_DAMPING", negligible)
+    jax.clear_caches()  # the constant is read when the solve is traced
+    res = adjust(small.models, small.obs, small.ground, bias="affine", solver=L2)
+    jax.clear_caches()
+    assert ref.converged and res.converged
+    for name in small.models:
+        got, want = res.parameters(name), ref.parameters(name)
+        for key, (value, sigma) in want.items():
+            assert abs(got[key][0] - value) <= 1e-6 * sigma, (name, key)
