@@ -2,12 +2,14 @@
 
     python benchmarks/localization.py [--sizes 1e4 1e6] [--repeats 3]
 
-Prints one JSON object: for each size, points/s of jaxgeo (numpy in and out, the shared guarded
-Newton, a convergence flag per point) and of GDAL's RPC transformer (rasterio
-``RPCTransformer.xy``, GDAL's own iterative inverse), their ratio, the fraction of points jaxgeo
-flags as converged, the max re-projection error of each (px) and the max disagreement in
-metres-equivalent degrees. shareloc and rpcm are not installed here (shareloc builds a C++
-extension, rpcm's srtm4 dependency does not build): they are left out, not estimated.
+Timing: best of ``repeats`` calls after a warm-up (GDAL ``repeats - 2``), more for small sizes
+(:func:`repeats_for`, the same for both). Prints one JSON object: for each size, points/s of
+jaxgeo (numpy in and out, the shared guarded Newton, a convergence flag per point) and of GDAL's
+RPC transformer (rasterio ``RPCTransformer.xy``, GDAL's own iterative inverse), their ratio, the
+fraction of points jaxgeo flags as converged, the max re-projection error of each (px) and the
+max disagreement in metres-equivalent degrees. shareloc and rpcm are not installed here
+(shareloc builds a C++ extension, rpcm's srtm4 dependency does not build): they are left out,
+not estimated.
 """
 
 from __future__ import annotations
@@ -35,6 +37,17 @@ def gdal_localize(rpcs, xy: np.ndarray, h: np.ndarray) -> np.ndarray:
         # GDAL pixel/line = ours + 0.5
         lon, lat = t.xy(xy[:, 1] + 0.5, xy[:, 0] + 0.5, zs=h, offset="ul")
     return np.stack([np.asarray(lon), np.asarray(lat), h], axis=-1)
+
+
+SMALL_WORK = 100_000
+"""Points timed per size at least (up to 1000 calls): a 100-point call takes ~0.2 ms, and the
+best of 3 such calls on a shared machine measures the noise, not the call."""
+
+
+def repeats_for(n: int, repeats: int) -> int:
+    """Timed calls for ``n`` points: ``repeats``, or more for small ``n`` (every
+    implementation of one size gets the same rule)."""
+    return max(repeats, min(1000, SMALL_WORK // max(n, 1)))
 
 
 def best_time(fn, repeats: int) -> tuple[float, object]:
@@ -66,8 +79,9 @@ def main() -> None:
         )
         xy = np.asarray(rpc.project(truth))
         h = truth[:, 2].copy()
-        t_jax, g_jax = best_time(lambda xy=xy, h=h: rpc.localize(xy, h), args.repeats)
-        reps = max(1, args.repeats - 2)
+        reps = repeats_for(n, args.repeats)
+        t_jax, g_jax = best_time(lambda xy=xy, h=h: rpc.localize(xy, h), reps)
+        reps = repeats_for(n, max(1, args.repeats - 2))
         t_gdal, g_gdal = best_time(lambda xy=xy, h=h: gdal_localize(rpcs, xy, h), reps)
         ok = np.all(np.isfinite(g_jax), axis=-1)
         err_jax = np.abs(np.asarray(rpc.project(g_jax[ok])) - xy[ok]).max()

@@ -1,14 +1,16 @@
-"""RPC projection speed: ``rpc.project(numpy array)`` as README writes it, against numpy, GDAL's RPC
-transformer and the previous monomial-form kernel, same run.
+"""RPC projection speed: ``rpc.project(numpy array)`` as README writes it, against numpy, GDAL's
+RPC transformer and the previous monomial-form kernel, same run.
 
     python benchmarks/projection.py [--sizes 1e2 1e4 1e6 1e7] [--repeats 3]
 
 Prints one JSON object: for each size, points/s of each implementation (best of ``repeats``
-after a warm-up), the ratios, the fraction of the compute bound (``--bound`` points/s; 184 flop
-and 40 B a point: ~850 M/s on the 2-core AVX-512 CPU of the issue) and the max disagreement in
-px. ``jaxgeo`` is the plain call ``rpc.project(ground)`` with numpy in and out (no jit written by
-the user); ``monomial_jit`` the former formulation (20 monomials, ``eqx.filter_jit``, jax array
-in). The RPC is the real Pleiades scene of ../shared/data/real (read by GDAL itself).
+calls after a warm-up, GDAL ``repeats - 2``; more calls for small sizes, the same number for
+every implementation: :func:`repeats_for`), the ratios, the fraction of the compute bound
+(``--bound`` points/s; 184 flop and 40 B a point: ~850 M/s on the 2-core AVX-512 CPU of the
+issue) and the max disagreement in px. ``jaxgeo`` is the plain call ``rpc.project(ground)`` with
+numpy in and out (no jit written by the user); ``monomial_jit`` the former formulation (20
+monomials, ``eqx.filter_jit``, jax array in). The RPC is the real Pleiades scene of
+../shared/data/real (read by GDAL itself).
 """
 
 from __future__ import annotations
@@ -66,6 +68,17 @@ def gdal_project(rpcs, ground: np.ndarray) -> np.ndarray:
     return np.stack([np.asarray(cols), np.asarray(rows)], axis=-1) - 0.5
 
 
+SMALL_WORK = 100_000
+"""Points timed per size at least (up to 1000 calls): a 100-point call takes ~0.2 ms, and the
+best of 3 such calls on a shared machine measures the noise, not the call."""
+
+
+def repeats_for(n: int, repeats: int) -> int:
+    """Timed calls for ``n`` points: ``repeats``, or more for small ``n`` (every
+    implementation of one size gets the same rule)."""
+    return max(repeats, min(1000, SMALL_WORK // max(n, 1)))
+
+
 def best_time(fn, repeats: int) -> tuple[float, object]:
     out = fn()  # warm-up (and compilation for jax)
     best = np.inf
@@ -98,10 +111,12 @@ def main() -> None:
             rpc.ground_scale
         )
         ground_dev = jax.device_put(ground)
-        t_jax, p_jax = best_time(lambda g=ground: rpc.project(g), args.repeats)
-        t_old, _ = best_time(lambda g=ground_dev: old(rpc, g).block_until_ready(), args.repeats)
-        t_np, p_np = best_time(lambda g=ground: numpy_project(vendor, g), args.repeats)
-        t_gdal, p_gdal = best_time(lambda g=ground: gdal_project(rpcs, g), max(1, args.repeats - 2))
+        reps = repeats_for(n, args.repeats)
+        t_jax, p_jax = best_time(lambda g=ground: rpc.project(g), reps)
+        t_old, _ = best_time(lambda g=ground_dev: old(rpc, g).block_until_ready(), reps)
+        t_np, p_np = best_time(lambda g=ground: numpy_project(vendor, g), reps)
+        reps = repeats_for(n, max(1, args.repeats - 2))
+        t_gdal, p_gdal = best_time(lambda g=ground: gdal_project(rpcs, g), reps)
         results.append(
             {
                 "points": n,
