@@ -2,11 +2,14 @@
 
 import dataclasses
 
+import equinox as eqx
+import jax.numpy as jnp
 import numpy as np
 import pytest
 
 from jaxgeo.bundle import band
-from jaxgeo.bundle.errors import RESULTS
+from jaxgeo.bundle.errors import RESULTS, SingularNormalEquations
+from jaxgeo.bundle.result import finish
 from jaxgeo.bundle.solve import solve_jit
 from jaxgeo.strip import UniversalCorrectionWarning, adjust_strip
 from jaxgeo.strip.config import STRIP_SOLVER
@@ -77,3 +80,22 @@ def test_banded_strip_end_to_end_equals_dense(strip_quarter, strip_result, monke
     cov = got.level1.param_cov
     assert cov.shape == (got.level1.params.size,) * 2 and cov.nnz < cov.shape[0] ** 2
     np.testing.assert_allclose(np.sqrt(cov.diagonal()), got.level1.param_sigma, rtol=1e-12)
+
+
+def test_banded_singular_sub_scene_is_named(dense, strip_result):
+    """A sub-scene that no observation sees: the banded factor's NaN becomes the same named
+    error as the dense solve's (``SingularNormalEquations`` naming its parameters)."""
+    problem, _ = dense
+    s = problem.structure
+    (img,) = problem.images
+    gone = jnp.asarray(np.asarray(s.obs_block) == 5)
+    blind = eqx.tree_at(lambda q: q.images[0].weight, problem, jnp.where(gone, 0.0, img.weight))
+    g = band.block_bandwidth(np.asarray(s.pair_blocks))
+    blind = dataclasses.replace(blind, structure=dataclasses.replace(s, band=g))
+    sol = solve_jit(blind, STRIP_SOLVER)
+    assert bool(sol.result == RESULTS.undetermined)
+    setup = dataclasses.replace(strip_result.setup, problem=blind)
+    strip = strip_result.strip
+    name = strip.names[5]
+    with pytest.raises(SingularNormalEquations, match=rf"{name}\.bias\.shift_px\[0\]"):
+        finish(setup, sol, strip.observations, strip.ground, STRIP_SOLVER)
