@@ -17,7 +17,7 @@ import numpy as np
 from jaxtyping import Array, ArrayLike, Bool, Float, PyTree
 
 from .base import AbstractSensorModel, nothing
-from .rpc_eval import is_concrete, localize_concrete, project_concrete, project_lph
+from .rpc_eval import is_concrete, localize_concrete, project_concrete, project_stacked
 
 TermOrder = Literal["RPC00B", "RPC00A"]
 
@@ -205,8 +205,7 @@ class RPC(AbstractSensorModel):
             raise ValueError(
                 f"ground coordinates must have a last axis of size 3, got {ground.shape}"
             )
-        x, y = project_lph(self, ground[..., 0], ground[..., 1], ground[..., 2])
-        return jnp.stack([x, y], axis=-1)
+        return project_stacked(self, ground[..., 0], ground[..., 1], ground[..., 2])
 
     def localize(
         self,

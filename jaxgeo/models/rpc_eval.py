@@ -47,6 +47,18 @@ def rational(c, lon, lat, h):
     return a0 + lon * (a1 + lon * (a2 + lon * c[11]))
 
 
+def project_stacked(rpc, lon, lat, h):
+    """:func:`project_lph` with the four polynomials evaluated as one (a quarter of the traced
+    operations: a smaller program to compile inside the adjustment)."""
+    go, gs = rpc.ground_offset, rpc.ground_scale
+    lon = lon - 360.0 * jnp.ceil((lon - go[0] - 180.0) / 360.0)
+    ln, pn, hn = (lon - go[0]) / gs[0], (lat - go[1]) / gs[1], (h - go[2]) / gs[2]
+    coef = jnp.stack([rpc.num[0], rpc.den[0], rpc.num[1], rpc.den[1]], axis=-1)
+    v = rational(coef, ln[..., None], pn[..., None], hn[..., None])
+    xy = jnp.stack([v[..., 0] / v[..., 1], v[..., 2] / v[..., 3]], axis=-1)
+    return rpc.image_offset + rpc.image_scale * xy
+
+
 def project_lph(rpc, lon, lat, h):
     """``(x, y)`` px of ground ``lon_deg, lat_deg, h_m`` given as separate arrays."""
     go, gs = rpc.ground_offset, rpc.ground_scale

@@ -425,6 +425,24 @@ def test_exported_programs_give_the_same_strip(quarter, result, tmp_path, monkey
     with pytest.warns(UniversalCorrectionWarning):
         again = adjust_strip(quarter, _config())
     assert len(list((tmp_path / "exported").glob("*.jaxexport"))) >= 3
+    # the same program, compiled from its serialized form: with XLA's default CPU emitters the
+    # numbers are bit-identical; the suite compiles with the legacy ones (tests/conftest.py),
+    # which round the two copies differently (3e-8 m on the tie gaps), so equal to rounding
     for a, b in ((again.solution, result.solution), (again.evaluation, result.evaluation)):
-        for x, y in zip(jax.tree.leaves(a), jax.tree.leaves(b), strict=True):
-            np.testing.assert_array_equal(np.asarray(x), np.asarray(y))
+        _assert_same_to_rounding(a, b)
+
+
+def _assert_same_to_rounding(a, b):
+    """Equal leaves up to 1e-6 of each array's largest value; geodetic points (``ground``,
+    degrees and metres) to 0.1 mm; integers exactly."""
+    leaves = jax.tree_util.tree_leaves_with_path(a)
+    for (path, x), y in zip(leaves, jax.tree.leaves(b), strict=True):
+        x, y, name = np.asarray(x), np.asarray(y), jax.tree_util.keystr(path)
+        if not np.issubdtype(y.dtype, np.floating):
+            np.testing.assert_array_equal(x, y, err_msg=name)
+        elif name.endswith(".ground"):
+            metres = np.abs(x - y) * np.array([111e3, 111e3, 1.0])
+            assert np.max(metres) < 1e-4, name
+        else:
+            scale = float(np.max(np.abs(y), initial=0.0, where=np.isfinite(y)))
+            np.testing.assert_allclose(x, y, rtol=1e-6, atol=1e-6 * scale, err_msg=name)
