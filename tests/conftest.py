@@ -77,6 +77,32 @@ def pytest_configure(config):
     config.addinivalue_line("filterwarnings", "error::jaxgeo.errors.JaxgeoWarning")
 
 
+# The longest test files (25-60 s each on a 2-core machine, mostly compilation), run first:
+# ``--dist loadfile`` hands files to the xdist workers in collection order, so a long file left
+# for the end keeps one worker busy while the other waits.
+LONGEST_FIRST = (
+    "notebooks/test_notebook_02.py",
+    "strip/test_solve.py",
+    "notebooks/test_notebook_01.py",
+    "bundle/test_transforms.py",
+    "models/test_affine3d.py",
+    "test_exported.py",
+    "cli/test_adjust.py",
+    "notebooks/test_notebook_03.py",
+    "bundle/test_physical.py",
+    "notebooks/test_notebook_04.py",
+    "models/test_kepler.py",
+)
+
+
+def pytest_collection_modifyitems(config, items):
+    def rank(item):
+        path = item.path.relative_to(REPO / "tests").as_posix()
+        return LONGEST_FIRST.index(path) if path in LONGEST_FIRST else len(LONGEST_FIRST)
+
+    items.sort(key=rank)  # stable: the other files, and the tests in a file, keep their order
+
+
 @pytest.fixture(autouse=True, scope="module")
 def _release_compiled_programs():
     """Free every compiled program after each test module.
