@@ -113,16 +113,22 @@ def taylor_coefficients(
     products for ``s`` and the acceleration, the power rule ``k s0 w_k = sum_j (j/2 - k)`` ...
     ``s_j w_(k-j)`` (``alpha + 1 = -1/2``) for ``w``. Loop-free and differentiable.
     """
-    r = [jnp.asarray(position_m, dtype=float), jnp.asarray(velocity_m_s, dtype=float)]
-    s, w = [], []
+    r = jnp.zeros((order + 1, 3))
+    r = r.at[0].set(jnp.asarray(position_m, dtype=float))
+    r = r.at[1].set(jnp.asarray(velocity_m_s, dtype=float))
+    s = w = jnp.zeros(0)
+    # each Cauchy product as one whole-array expression over the terms so far (a few operations
+    # per order instead of one per term: a smaller program wherever the orbit is traced)
     for k in range(order - 1):
-        s.append(sum(jnp.dot(r[j], r[k - j]) for j in range(k + 1)))
+        s = jnp.append(s, jnp.sum(r[: k + 1] * r[k::-1]))
         if k == 0:
-            w.append(s[0] ** -1.5)
+            w_k = s[0] ** -1.5
         else:
-            w.append(sum((-0.5 * j - k) * s[j] * w[k - j] for j in range(1, k + 1)) / (k * s[0]))
-        r.append(-gm * sum(r[j] * w[k - j] for j in range(k + 1)) / ((k + 1) * (k + 2)))
-    return jnp.stack(r)
+            j = np.arange(1, k + 1)
+            w_k = jnp.sum((-0.5 * j - k) * s[1 : k + 1] * w[::-1]) / (k * s[0])
+        w = jnp.append(w, w_k)
+        r = r.at[k + 2].set(-gm * (w[::-1] @ r[: k + 1]) / ((k + 1) * (k + 2)))
+    return r
 
 
 def taylor_state(
@@ -164,12 +170,24 @@ def mounting(along_track_angle_deg: float, across_track_angle_deg: float) -> Flo
 
 
 def _rotate(vector, axis, angle, transpose=False):
-    """Elementary rotation ``R_axis(angle)`` (or its transpose) applied to a 3-vector."""
+    """Elementary rotation ``R_axis(angle)`` (or its transpose) applied to a 3-vector.
+
+    ``v + (c - 1) m v + s K v`` with constant ``m`` (ones on the rotated plane) and ``K`` (the
+    plane's quarter turn): a few whole-vector operations, not one per component (the Kepler
+    model applies three per ray, and a solve traces dozens of rays)."""
     c, s = jnp.cos(angle), (-1.0 if transpose else 1.0) * jnp.sin(angle)
-    i, j = {0: (1, 2), 1: (2, 0), 2: (0, 1)}[axis]
-    out = [vector[0], vector[1], vector[2]]
-    out[i], out[j] = c * vector[i] - s * vector[j], s * vector[i] + c * vector[j]
-    return jnp.stack(out)
+    return vector + (c - 1.0) * (_PLANE[axis] * vector) + s * (_QUARTER[axis] @ vector)
+
+
+def _plane_constants():
+    plane, quarter = np.zeros((3, 3)), np.zeros((3, 3, 3))
+    for axis, (i, j) in enumerate(((1, 2), (2, 0), (0, 1))):
+        plane[axis, [i, j]] = 1.0
+        quarter[axis, i, j], quarter[axis, j, i] = -1.0, 1.0
+    return plane, quarter
+
+
+_PLANE, _QUARTER = _plane_constants()
 
 
 # --- initial values from metadata (numpy, run once) -------------------------------------------
