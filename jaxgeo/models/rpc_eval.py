@@ -47,12 +47,19 @@ def rational(c, lon, lat, h):
     return a0 + lon * (a1 + lon * (a2 + lon * c[11]))
 
 
+def _normalized(rpc, lon, lat, h):
+    """Normalised ``L, P, H`` of ground ``lon_deg, lat_deg, h_m`` (separate arrays)."""
+    go, gs = rpc.ground_offset, rpc.ground_scale
+    # lon - lon_off into (-180, 180] (antimeridian; see RPC.normalize_ground): whole turns come
+    # off the longitude itself, so lon and lon +- 360 give bit-identical values
+    lon = lon - 360.0 * jnp.ceil((lon - go[0] - 180.0) / 360.0)
+    return (lon - go[0]) / gs[0], (lat - go[1]) / gs[1], (h - go[2]) / gs[2]
+
+
 def project_stacked(rpc, lon, lat, h):
     """:func:`project_lph` with the four polynomials evaluated as one (a quarter of the traced
-    operations: a smaller program to compile inside the adjustment)."""
-    go, gs = rpc.ground_offset, rpc.ground_scale
-    lon = lon - 360.0 * jnp.ceil((lon - go[0] - 180.0) / 360.0)
-    ln, pn, hn = (lon - go[0]) / gs[0], (lat - go[1]) / gs[1], (h - go[2]) / gs[2]
+    operations: a smaller program to compile inside the adjustment); ``(..., 2)`` px."""
+    ln, pn, hn = _normalized(rpc, lon, lat, h)
     coef = jnp.stack([rpc.num[0], rpc.den[0], rpc.num[1], rpc.den[1]], axis=-1)
     v = rational(coef, ln[..., None], pn[..., None], hn[..., None])
     xy = jnp.stack([v[..., 0] / v[..., 1], v[..., 2] / v[..., 3]], axis=-1)
@@ -61,11 +68,7 @@ def project_stacked(rpc, lon, lat, h):
 
 def project_lph(rpc, lon, lat, h):
     """``(x, y)`` px of ground ``lon_deg, lat_deg, h_m`` given as separate arrays."""
-    go, gs = rpc.ground_offset, rpc.ground_scale
-    # lon - lon_off into (-180, 180] (antimeridian; see RPC.normalize_ground): whole turns come
-    # off the longitude itself, so lon and lon +- 360 give bit-identical values
-    lon = lon - 360.0 * jnp.ceil((lon - go[0] - 180.0) / 360.0)
-    ln, pn, hn = (lon - go[0]) / gs[0], (lat - go[1]) / gs[1], (h - go[2]) / gs[2]
+    ln, pn, hn = _normalized(rpc, lon, lat, h)
     x = rational(rpc.num[0], ln, pn, hn) / rational(rpc.den[0], ln, pn, hn)
     y = rational(rpc.num[1], ln, pn, hn) / rational(rpc.den[1], ln, pn, hn)
     return rpc.image_offset[0] + rpc.image_scale[0] * x, rpc.image_offset[1] + rpc.image_scale[
