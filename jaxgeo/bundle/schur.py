@@ -27,6 +27,7 @@ from jaxtyping import Array, Float, Int, PyTree
 
 from . import band
 from .factor import cho_solve, cholesky, inv3_spd
+from .loss import newton_corrected
 from .problem import Structure
 
 NOISE_FLOOR = 1e-9
@@ -331,6 +332,8 @@ class SchurDescent(optx.AbstractDescent):
     args: Any = None
     """The residual function and its arguments: given, the Jacobian blocks come from
     :func:`split_jacobians` (faster) instead of the solver's linearisation."""
+    robust: tuple[str, float] | None = eqx.field(static=True, default=None)
+    """``(loss, c)``: ``fn`` gives plain residuals, modelled by :func:`~.loss.newton_corrected`."""
 
     def init(self, y, f_info_struct) -> SchurState:
         img, gnd, pr = f_info_struct.residual
@@ -341,6 +344,9 @@ class SchurDescent(optx.AbstractDescent):
         s = self.structure
         if self.fn is not None:
             jac = split_jacobians(self.fn, self.args, y, s.width)
+            if self.robust is not None:
+                r, jc, jp = newton_corrected(jac.r, (jac.jc, jac.jp), *self.robust)
+                jac = eqx.tree_at(lambda j: (j.r, j.jc, j.jp), jac, (r, jc, jp))
         else:
             jac = jacobians(f_info.jac.mv, f_info.residual, y, s.width)
         blocks = normal_blocks(jac, s)
@@ -454,6 +460,7 @@ class StructuredGaussNewton(optx.AbstractGaussNewton):
         verbose: bool = False,
         fn: Callable | None = None,
         args: Any = None,
+        robust: tuple[str, float] | None = None,
     ):
         if method not in ("lm", "gn"):
             raise ValueError(f"method must be 'lm' or 'gn', got {method!r}")
@@ -461,7 +468,7 @@ class StructuredGaussNewton(optx.AbstractGaussNewton):
         self.atol = 0.0
         self.norm = optx.max_norm
         self.descent = SchurDescent(
-            structure, damping=damping, damped=method == "lm", fn=fn, args=args
+            structure, damping=damping, damped=method == "lm", fn=fn, args=args, robust=robust
         )
         self.search = NoiseTolerantTrustRegion() if method == "lm" else optx.LearningRate(1.0)
         self.verbose = _print_verbose if verbose else _silent

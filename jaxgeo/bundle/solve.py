@@ -25,6 +25,7 @@ from .band import Band
 from .config import DEFAULT_SOLVER, SolverConfig
 from .covariance import cofactors, undetermined_unknowns
 from .errors import RESULTS
+from .loss import irls_weights, robust
 from .problem import Problem
 from .schur import (
     Jacobians,
@@ -36,27 +37,6 @@ from .schur import (
     sum_squares,
     u_diagonal,
 )
-
-
-def robust(r: Float[Array, "m k"], loss: str, c: float) -> Float[Array, "m k"]:
-    """Residual vectors rescaled so that their squared norm is ``rho(|r|^2)`` (Huber, Cauchy).
-
-    Gauss-Newton on the rescaled residuals minimises ``sum rho(|r_i|^2)``; ``c`` is the
-    threshold in a priori sigmas.
-    """
-    if loss == "l2":
-        return r
-    s = jnp.sum(r**2, axis=-1)
-    pos = s > 0.0
-    safe = jnp.where(pos, s, 1.0)  # double-where: finite gradients at r = 0
-    if loss == "huber":
-        rho = jnp.where(safe <= c**2, safe, 2.0 * c * jnp.sqrt(safe) - c**2)
-    elif loss == "cauchy":
-        rho = c**2 * jnp.log1p(safe / c**2)
-    else:
-        raise ValueError(f"unknown loss {loss!r}; expected 'l2', 'huber' or 'cauchy'")
-    factor = jnp.where(pos, jnp.sqrt(rho / safe), 1.0)
-    return r * factor[..., None]
 
 
 def _take(tree, index):
@@ -240,18 +220,6 @@ nil; its rows leave the redundancy. (:func:`~.snooping.snoop` also moves its mea
 last solution's prediction, so that a point left with removed observations only stays put.)"""
 
 
-def irls_weights(s: Float[Array, " m"], loss: str, c: float) -> Float[Array, " m"]:
-    """IRLS weights ``rho'(s)`` of squared residual norms ``s`` (in a priori sigmas): Huber
-    ``min(1, c / sqrt(s))``, Cauchy ``1 / (1 + s / c^2)``; ``c`` the threshold in sigmas."""
-    if loss == "l2":
-        return jnp.ones_like(s)
-    if loss == "huber":
-        return jnp.where(s <= c**2, 1.0, c / jnp.sqrt(jnp.maximum(s, c**2)))
-    if loss == "cauchy":
-        return 1.0 / (1.0 + s / c**2)
-    raise ValueError(f"unknown loss {loss!r}; expected 'l2', 'huber' or 'cauchy'")
-
-
 def _weighted(problem: Problem, w_img, w_gnd) -> Problem:
     """``problem`` with its image weights times ``sqrt(w_img)`` (M,) (blocks concatenated) and
     its ground weights times ``sqrt(w_gnd)`` (c,)."""
@@ -325,8 +293,17 @@ def solve(
     def with_args(args, tol=solver.tol):  # the Schur descent evaluates the Jacobian blocks
         if optimiser is not None:
             return optimiser
+        problem_, scales_, loss_, c_ = args
+        # a robust loss: the descent linearises the plain residuals and models rho itself
+        robust_ = None if loss_ == "l2" else (loss_, c_)
         return StructuredGaussNewton(
-            s, tol=tol, method=solver.method, verbose=verbose, fn=residuals, args=args
+            s,
+            tol=tol,
+            method=solver.method,
+            verbose=verbose,
+            fn=residuals,
+            args=(problem_, scales_, "l2", c_),
+            robust=robust_,
         )
 
     # the reweighting's solves need not be exact: their weights are refined by the next one

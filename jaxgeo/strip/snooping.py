@@ -7,7 +7,7 @@ universal correction) and gets the same treatment here with the same settings
 (``SolverConfig.loss``, ``loss_scale``, ``irls_*``, ``blunder_k``, ``remove_blunders``,
 ``snooping_rounds``): GCP measurements removed at level 1 (image observation or coordinates) are
 left out; the others are fitted with the robust loss' IRLS weights
-(:func:`jaxgeo.bundle.solve.irls_weights`), tested with ``w = e / (sigma sqrt(r))`` (``r`` the
+(:func:`jaxgeo.bundle.loss.irls_weights`), tested with ``w = e / (sigma sqrt(r))`` (``r`` the
 redundancy number of the weighted fit) and the worst removed, refitted, until none is flagged.
 
 A wrong line offset shifts every formed tie of a sub-scene by the same amount: the sub-scene's
@@ -25,9 +25,10 @@ import jax.numpy as jnp
 import numpy as np
 
 from ..bundle.config import SolverConfig
+from ..bundle.loss import irls_weights
 from ..bundle.problem import Problem
 from ..bundle.snooping import MAX_REMOVED_FRACTION, ROBUST_FRACTION
-from ..bundle.solve import Solution, irls_weights
+from ..bundle.solve import Solution
 from ..models.rpc_fit import project_points
 from .delivery import Strip
 from .level1 import Level1Input

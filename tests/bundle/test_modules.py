@@ -22,6 +22,7 @@ MODULES = (
     "errors",
     "export",
     "factor",
+    "loss",
     "observations",
     "problem",
     "report",

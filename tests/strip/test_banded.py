@@ -34,8 +34,9 @@ def test_banded_level1_equals_dense(dense, extra):
     got = solve_jit(banded, STRIP_SOLVER)
     assert isinstance(got.q_params, band.Band) and bool(got.result == RESULTS.successful)
     assert bool(want.result == RESULTS.successful)
-    # rounding differs, so a step near the cost's noise floor may be taken or not
-    assert abs(int(got.num_steps) - int(want.num_steps)) <= 1
+    # rounding differs, so a step or two near the cost's noise floor may be taken or not (the
+    # robust solve's last decrements, 1e-10 to 1e-11, are below the cost's rounding)
+    assert abs(int(got.num_steps) - int(want.num_steps)) <= 2
     # equal within the solver's tolerance (1e-6 of each unknown's sigma)
     sigma = np.sqrt(np.diag(np.asarray(want.q_params))).reshape(want.theta[0].shape)
     assert np.max(np.abs(got.theta[0] - want.theta[0]) / sigma) < 1e-6
