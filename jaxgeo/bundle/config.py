@@ -40,7 +40,9 @@ class SolverConfig(eqx.Module):
         loss_scale: the robust loss' threshold ``c`` in a priori sigmas (> 0; default 3: a
             clean observation is rarely beyond it).
         irls_iterations: reweighted solves at most after the least-squares start (>= 1).
-        irls_tol: stop reweighting when no weight changes by more than this (> 0).
+        irls_tol: stop reweighting when no weight changes by more than this (> 0; default
+            1e-2). The reweighting only brings the solve near the M-estimate: a last solve of
+            the robust objective itself converges to it (to ``tol``) whatever this is.
         tol: stop when the remaining Gauss-Newton step is below ``tol`` of its standard
             deviation (``"dense"``: optimistix' rtol = atol = ``tol``); >= 0.
         max_steps: solver steps at most (>= 1; a robust loss' least-squares start counts too).
@@ -58,7 +60,7 @@ class SolverConfig(eqx.Module):
     max_steps: int = eqx.field(static=True, default=50)
     blunder_k: float = eqx.field(static=True, default=BLUNDER_K)
     irls_iterations: int = eqx.field(static=True, default=20)
-    irls_tol: float = eqx.field(static=True, default=1e-3)
+    irls_tol: float = eqx.field(static=True, default=1e-2)
     remove_blunders: bool = eqx.field(static=True, default=True)
     snooping_rounds: int = eqx.field(static=True, default=30)
 

@@ -34,9 +34,9 @@ from .schur import (
     normal_blocks,
     split_jacobians,
     split_params,
-    sum_squares,
     u_diagonal,
 )
+from .trust_region import sum_squares
 
 
 def _take(tree, index):
@@ -87,7 +87,8 @@ def residuals(y, args):
     """Weighted residuals ``(image per observation block, ground, prior per group)``.
 
     ``y = (z, u)`` (see :mod:`~jaxgeo.bundle.problem`); ``args = (problem, scales, loss,
-    loss_scale)``: the loss (``"l2"``, ``"huber"``, ``"cauchy"``) on the image residuals.
+    loss_scale)``: the loss (``"l2"``, ``"huber"``, ``"cauchy"``) on the image and ground
+    residuals (per observation: an image point's 2-vector, a GCP's 3-vector).
     """
     problem, scales, loss, loss_scale = args
     z, u = y
@@ -113,6 +114,7 @@ def residuals(y, args):
     gnd = jax.vmap(lambda g, o, w: geodesy.geodetic_to_enu(g, o) * w)(
         ground[gobs.point], gobs.lonlath, gobs.weight
     )
+    gnd = robust(gnd, loss, loss_scale)
     prior = []
     for grp, blocks, th, mean, wt in zip(
         problem.groups, stacked, theta, problem.prior_mean, problem.prior_weight, strict=True
@@ -149,7 +151,8 @@ class Solution(eqx.Module):
             unknowns not determined; takes precedence), ``not_converged`` (maximum number of
             steps, or IRLS weights still changing), or optimistix' own (``nonfinite``...);
             ``num_steps``: solver steps taken (all IRLS solves).
-        weight_image, weight_ground: ``(M,)``, ``(c,)`` final IRLS weights (1 for ``"l2"``);
+        weight_image, weight_ground: ``(M,)``, ``(c,)`` IRLS weights ``rho'(|r|^2)`` at the
+            solution (1 for ``"l2"``; where the reweighting failed, its last ones);
             ``cost``, ``s0``, the covariance and redundancy numbers are those of the problem
             weighted with them.
         redundancy: rows minus unknowns, without the removed observations' rows.
@@ -256,7 +259,10 @@ def solve(
     ``solver.irls_iterations`` weighted least-squares solves, each with the weights
     ``rho'(|r|^2)`` of the previous solution held fixed and started from it, until no weight
     changes by more than ``solver.irls_tol`` (else ``RESULTS.not_converged``). Each inner solve
-    is an ordinary least-squares problem, on which the trust region works as designed.
+    is an ordinary least-squares problem, on which the trust region works as designed. A last
+    Levenberg-Marquardt solve of ``sum rho(|r|^2)`` itself (image and ground residuals) goes
+    from there to the M-estimate, with Newton's model of ``rho``
+    (:func:`~.loss.newton_corrected`): two steps from a settled reweighting.
 
     ``removed_image`` (M,, blocks concatenated) / ``removed_ground`` (c,): observations taken
     out as gross errors (weight ``REMOVED_WEIGHT``, rows out of the redundancy); arrays, so that
@@ -373,10 +379,11 @@ def solve(
             result,
         )
         y, w_i, w_g = jax.lax.stop_gradient((y, w_i, w_g))
-        # the final solve minimises sum rho(|r|^2) over the image residuals itself (IRLS' fixed
-        # point, so one or two steps from there), with the ground weights held: its implicit
-        # derivative is that of the M-estimate, not of a weighted least-squares problem
-        args = (_weighted(problem, base_i, base_g * w_g), scales, loss, c)
+        # the final solve minimises sum rho(|r|^2) over the image and ground residuals itself
+        # (IRLS' fixed point, so two steps from there with Newton's model of rho): its answer
+        # does not depend on how far the reweighting went, and its implicit derivative is that
+        # of the M-estimate, not of a weighted least-squares problem
+        args = (_weighted(problem, base_i, base_g), scales, loss, c)
         last = optx.least_squares(
             residuals,
             with_args(args),
@@ -390,6 +397,10 @@ def solve(
         y = jax.tree.map(lambda a, b: jnp.where(ok, a, b), last.value, y)
         result = RESULTS.where(ok, RESULTS.promote(last.result), result)
         steps = steps + jnp.where(ok, last.stats["num_steps"], 0)
+        # the weights at the M-estimate itself (the reweighting's last ones are up to
+        # ``irls_tol`` off): the covariance and the reported weights are those of the solution
+        w_at = reweight(jax.lax.stop_gradient(y), outer)
+        w_i, w_g = (jnp.where(ok, a, b) for a, b in zip(w_at, (w_i, w_g), strict=True))
     weighted = _weighted(problem, base_i * w_i, base_g * w_g)
     jac, blocks = blocks_at(weighted, scales, y, "l2", c)
     cov = cofactors(jac, blocks, s)

@@ -85,8 +85,14 @@ class Level2Snooping:
     converged: bool
 
 
+LEVEL2_IRLS_TOL = 1e-3
+"""Weight change below which level 2's reweighting stops (or ``SolverConfig.irls_tol``, if
+tighter): level 2 has no final robust solve, its last reweighted fit is the answer."""
+
+
 def _irls(problem, data, level1, degree, solver, keep):
     """Robust level-2 fit: least squares, then reweighted fits until the weights settle."""
+    tol = min(float(solver.irls_tol), LEVEL2_IRLS_TOL)
     sigma = np.asarray(data.gcp_sigma_m)
     w = keep.astype(float)
     for _ in range(solver.irls_iterations + 1):
@@ -97,7 +103,7 @@ def _irls(problem, data, level1, degree, solver, keep):
         e = np.asarray(sol.gcp_error_level2_m) / sigma[:, None]
         new = keep * np.asarray(irls_weights(jnp.asarray(np.sum(e**2, axis=1)), solver.loss,
                                              float(solver.loss_scale)))  # fmt: skip
-        if np.max(np.abs(new - w), initial=0.0) <= solver.irls_tol:
+        if np.max(np.abs(new - w), initial=0.0) <= tol:
             return sol, w, True
         w = new
     return sol, w, False

@@ -30,6 +30,7 @@ MODULES = (
     "schur",
     "snooping",
     "solve",
+    "trust_region",
 )
 
 
