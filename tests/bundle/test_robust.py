@@ -3,8 +3,10 @@
 import dataclasses
 
 import numpy as np
+import pytest
 
 from jaxgeo.bundle import SolverConfig, adjust
+from jaxgeo.bundle.errors import PoorFitWarning
 from tests.bundle.conftest import TRUE_BIAS
 
 
@@ -49,3 +51,37 @@ def test_blunder_on_a_gcp_is_flagged_and_huber_resists_it(block):
     }
     assert err["l2"] > 2 * err["huber"]
     assert err["huber"] < err["clean"] + 1.5
+
+
+def test_robust_answer_does_not_depend_on_where_the_reweighting_stops(block):
+    # the reweighting only brings the solve near the M-estimate; the last (robust, Newton)
+    # solve goes to it, to the solver's tolerance, however loose irls_tol is
+    xy = block.obs.xy.copy()
+    xy[2, 0] += 12.0  # a blunder on a GCP, and one on another observation
+    xy[7, 1] -= 9.0
+    obs = dataclasses.replace(block.obs, xy=xy)
+    runs = {
+        tol: adjust(
+            block.models,
+            obs,
+            block.ground,
+            bias="affine",
+            solver=SolverConfig(irls_tol=tol, remove_blunders=False),
+        )
+        for tol in (0.2, 1e-2, 1e-3)
+    }
+    ref = runs[1e-3]  # the former default
+    assert all(r.converged for r in runs.values())
+    for tol in (0.2, 1e-2):
+        assert np.max(np.abs((runs[tol].params - ref.params) / ref.param_sigma)) < 1e-5
+        np.testing.assert_allclose(runs[tol].s0, ref.s0, rtol=1e-7)
+    # and the robust loss did act: the blunders move the least-squares answer far more
+    with pytest.warns(PoorFitWarning):  # s0 ~3 with the blunders kept
+        l2 = adjust(
+            block.models,
+            obs,
+            block.ground,
+            bias="affine",
+            solver=SolverConfig(loss="l2", remove_blunders=False),
+        )
+    assert np.max(np.abs((l2.params - ref.params) / ref.param_sigma)) > 100 * 1e-5
