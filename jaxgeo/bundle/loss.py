@@ -11,6 +11,10 @@ import jax.numpy as jnp
 from jaxtyping import Array, Float
 
 
+def _unknown(loss: str) -> ValueError:
+    return ValueError(f"unknown loss {loss!r}; expected 'l2', 'huber' or 'cauchy'")
+
+
 def robust(r: Float[Array, "m k"], loss: str, c: float) -> Float[Array, "m k"]:
     """Residual vectors rescaled so that their squared norm is ``rho(|r|^2)`` (Huber, Cauchy).
 
@@ -27,7 +31,7 @@ def robust(r: Float[Array, "m k"], loss: str, c: float) -> Float[Array, "m k"]:
     elif loss == "cauchy":
         rho = c**2 * jnp.log1p(safe / c**2)
     else:
-        raise ValueError(f"unknown loss {loss!r}; expected 'l2', 'huber' or 'cauchy'")
+        raise _unknown(loss)
     factor = jnp.where(pos, jnp.sqrt(rho / safe), 1.0)
     return r * factor[..., None]
 
@@ -41,7 +45,7 @@ def irls_weights(s: Float[Array, " m"], loss: str, c: float) -> Float[Array, " m
         return jnp.where(s <= c**2, 1.0, c / jnp.sqrt(jnp.maximum(s, c**2)))
     if loss == "cauchy":
         return 1.0 / (1.0 + s / c**2)
-    raise ValueError(f"unknown loss {loss!r}; expected 'l2', 'huber' or 'cauchy'")
+    raise _unknown(loss)
 
 
 def curvature_ratio(s: Float[Array, " m"], loss: str, c: float) -> Float[Array, " m"]:
@@ -56,7 +60,7 @@ def curvature_ratio(s: Float[Array, " m"], loss: str, c: float) -> Float[Array, 
     if loss == "cauchy":
         t = s / c**2
         return (1.0 - t) / (1.0 + t)
-    raise ValueError(f"unknown loss {loss!r}; expected 'l2', 'huber' or 'cauchy'")
+    raise _unknown(loss)
 
 
 CURVATURE_FLOOR = 0.1

@@ -330,13 +330,16 @@ def solve(
         )
         return sol.value, RESULTS.promote(sol.result), sol.stats["num_steps"]
 
-    def reweight(y, problem=problem):
-        img, gnd, _ = residuals(y, (problem, scales, "l2", c))
+    def weights(img, gnd):  # IRLS weights of plain residuals (image blocks, ground)
         r = jnp.concatenate(img) if img else jnp.zeros((0, 2))
         return (
             irls_weights(jnp.sum(r**2, axis=-1), loss, c),
             irls_weights(jnp.sum(gnd**2, axis=-1), loss, c),
         )
+
+    def reweight(y, problem=problem):
+        img, gnd, _ = residuals(y, (problem, scales, "l2", c))
+        return weights(img, gnd)
 
     limit = (
         solver.irls_iterations
@@ -399,9 +402,11 @@ def solve(
         y = jax.tree.map(lambda a, b: jnp.where(ok, a, b), last.value, y)
         result = RESULTS.where(ok, RESULTS.promote(last.result), result)
         steps = steps + jnp.where(ok, last.stats["num_steps"], 0)
+    plain_img, plain_gnd, _ = residuals(y, (problem, scales, "l2", c))
+    if loss != "l2":
         # the weights at the M-estimate itself (the reweighting's last ones are up to
         # ``irls_tol`` off): the covariance and the reported weights are those of the solution
-        w_at = reweight(jax.lax.stop_gradient(y), outer)
+        w_at = jax.lax.stop_gradient(weights(plain_img, plain_gnd))
         w_i, w_g = (jnp.where(ok, a, b) for a, b in zip(w_at, (w_i, w_g), strict=True))
     weighted = _weighted(problem, base_i * w_i, base_g * w_g)
     jac, blocks = blocks_at(weighted, scales, y, "l2", c)
@@ -426,7 +431,6 @@ def solve(
         result == RESULTS.nonlinear_max_steps_reached, RESULTS.not_converged, result
     )
     result = RESULTS.where(jnp.any(bad_params) | jnp.any(bad_points), RESULTS.undetermined, result)
-    plain_img, plain_gnd, _ = residuals(y, (problem, scales, "l2", c))
     out = Solution(
         theta=thetas(problem, y[0], scales),
         ground=problem.ground_points(y[1]),
