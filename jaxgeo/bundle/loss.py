@@ -26,14 +26,20 @@ def robust(r: Float[Array, "m k"], loss: str, c: float) -> Float[Array, "m k"]:
     s = jnp.sum(r**2, axis=-1)
     pos = s > 0.0
     safe = jnp.where(pos, s, 1.0)  # double-where: finite gradients at r = 0
-    if loss == "huber":
-        rho = jnp.where(safe <= c**2, safe, 2.0 * c * jnp.sqrt(safe) - c**2)
-    elif loss == "cauchy":
-        rho = c**2 * jnp.log1p(safe / c**2)
-    else:
-        raise _unknown(loss)
-    factor = jnp.where(pos, jnp.sqrt(rho / safe), 1.0)
+    factor = jnp.where(pos, jnp.sqrt(rho(safe, loss, c) / safe), 1.0)
     return r * factor[..., None]
+
+
+def rho(s: Float[Array, " m"], loss: str, c: float) -> Float[Array, " m"]:
+    """The loss ``rho(s)`` of squared residual norms ``s`` (in a priori sigmas): ``s``,
+    Huber ``s`` within ``c`` and ``2 c sqrt(s) - c^2`` beyond, Cauchy ``c^2 log(1 + s/c^2)``."""
+    if loss == "l2":
+        return s
+    if loss == "huber":
+        return jnp.where(s <= c**2, s, 2.0 * c * jnp.sqrt(jnp.maximum(s, c**2)) - c**2)
+    if loss == "cauchy":
+        return c**2 * jnp.log1p(s / c**2)
+    raise _unknown(loss)
 
 
 def irls_weights(s: Float[Array, " m"], loss: str, c: float) -> Float[Array, " m"]:

@@ -22,27 +22,12 @@ from typing import Any
 import equinox as eqx
 import jax
 import jax.numpy as jnp
-import optimistix as optx
-from jaxtyping import Array, Float, Int, PyTree
+from jaxtyping import Array, Float, PyTree
 
 from . import band
 from .factor import cho_solve, cholesky, inv3_spd
-from .loss import newton_corrected
 from .problem import Structure
-from .trust_region import NOISE_FLOOR, NoiseTolerantTrustRegion
 
-CONVERGED_FLOOR = 1e-16
-"""Relative cost reduction promised by the full step below which the solve has converged."""
-STAGNANT_STEPS = 3
-"""Accepted steps in a row that fail to halve a decrement already under the cost's rounding
-noise (``NOISE_FLOOR`` of the cost) after which the solve has converged: the linear solve's own
-rounding then sets the decrement (seen at 320 sub-scenes: 3e-12 for ever, above ``tol**2``)."""
-NEGLIGIBLE_DAMPING = 1e-6
-"""Damping ``lambda`` (relative to ``diag(J^T J)``) at or below which a step is the undamped
-Gauss-Newton step that ``query`` already solved for the decrement: one factorisation per step
-instead of two once the trust region has grown (``lambda = damping / step_size``, 1e-4 at the
-start, 10x smaller after each very successful step). The trust region judges the step by the
-cost either way."""
 DIAG_MIN = 1e-6
 DIAG_MAX = 1e32
 
@@ -75,49 +60,6 @@ class NormalBlocks(eqx.Module):
     v: Float[Array, "n 3 3"]
     gp: Float[Array, "n 3"]
     w: Float[Array, "M P 3"]
-
-
-def colours(y: PyTree, width: int) -> PyTree:
-    """The ``width + 3`` tangents of the colouring, stacked on a leading axis, shaped like ``y``."""
-    z, u = y
-    eye = jnp.eye(width, dtype=u.dtype)
-    zs = tuple(
-        jnp.concatenate(
-            [
-                jnp.broadcast_to(eye[:, None, : zg.shape[1]], (width, *zg.shape)),
-                jnp.zeros((3, *zg.shape), zg.dtype),
-            ]
-        )
-        for zg in z
-    )
-    us = jnp.concatenate(
-        [
-            jnp.zeros((width, *u.shape), u.dtype),
-            jnp.broadcast_to(jnp.eye(3, dtype=u.dtype)[:, None, :], (3, *u.shape)),
-        ]
-    )
-    return zs, us
-
-
-def jacobians(linear: Callable, residual: PyTree, y: PyTree, width: int) -> Jacobians:
-    """The non-zero Jacobian blocks from ``width + 3`` JVPs of ``linear`` (the linearised
-    residual function) at ``y``; ``residual`` is the residual pytree ``(img, gnd, prior)``."""
-    out_img, out_gnd, out_pr = jax.vmap(linear)(colours(y, width))
-    img, gnd, pr = residual
-
-    def split(o):  # (P + 3, m, k) -> (m, k, P), (m, k, 3)
-        return jnp.moveaxis(o[:width], 0, -1), jnp.moveaxis(o[width:], 0, -1)
-
-    jc, jp = zip(*(split(o) for o in out_img), strict=True) if out_img else ((), ())
-    return Jacobians(
-        jc=jnp.concatenate(jc) if jc else jnp.zeros((0, 2, width)),
-        jp=jnp.concatenate(jp) if jp else jnp.zeros((0, 2, 3)),
-        r=jnp.concatenate(img) if img else jnp.zeros((0, 2)),
-        jg=jnp.moveaxis(out_gnd[width:], 0, -1),
-        rg=gnd,
-        jpr=tuple(jnp.moveaxis(o[:width], 0, -1) for o in out_pr),
-        rpr=tuple(pr),
-    )
 
 
 def add_per_block(target: Array, s: Structure, values: Array) -> Array:
@@ -265,41 +207,35 @@ def schur_solve(
     return dc[:n], jnp.einsum("nij,nj->ni", vinv, gp - back)
 
 
-class SchurState(eqx.Module):
-    """Descent state at the last accepted point: Jacobian blocks, normal blocks, the undamped
-    Gauss-Newton step ``(dc, dp)`` and its squared Newton decrement ``g^T H^-1 g`` (the squared
-    length of the full Gauss-Newton step in units of its own standard deviations; ``inf``
-    before the first query or when singular)."""
-
-    jac: Jacobians
-    blocks: NormalBlocks
-    decrement: Float[Array, ""]
-    stagnant: Int[Array, ""]
-    """Accepted steps in a row whose decrement did not halve the previous one."""
-    dc: Float[Array, " N"]
-    dp: Float[Array, "n 3"]
-
-
-def _zeros_state(s: Structure, m: int, c: int, priors: tuple[tuple[int, int], ...]) -> SchurState:
+def zero_blocks(s: Structure, m: int) -> NormalBlocks:
+    """All-zero :class:`NormalBlocks` of ``m`` image observations (a solver's initial state)."""
     n1, p = s.n_params + 1, s.width
-    jac = Jacobians(
-        jc=jnp.zeros((m, 2, p)),
-        jp=jnp.zeros((m, 2, 3)),
-        r=jnp.zeros((m, 2)),
-        jg=jnp.zeros((c, 3, 3)),
-        rg=jnp.zeros((c, 3)),
-        jpr=tuple(jnp.zeros((b, q, p)) for b, q in priors),
-        rpr=tuple(jnp.zeros((b, q)) for b, q in priors),
-    )
-    blocks = NormalBlocks(
+    return NormalBlocks(
         u=jnp.zeros((s.n_blocks, p, p)) if s.band else jnp.zeros((n1, n1)),
         gc=jnp.zeros(n1),
         v=jnp.zeros((s.n_points, 3, 3)),
         gp=jnp.zeros((s.n_points, 3)),
         w=jnp.zeros((m, p, 3)),
     )
-    zeros = (jnp.zeros(s.n_params), jnp.zeros((s.n_points, 3)))
-    return SchurState(jac, blocks, jnp.array(jnp.inf), jnp.array(0), *zeros)
+
+
+def model_change(
+    blocks: NormalBlocks, s: Structure, dc: Float[Array, " N"], dp: Float[Array, "n 3"]
+) -> Float[Array, ""]:
+    """``g^T d + d^T H d / 2`` for the step ``d = (dc, dp)``: the change of half the cost that
+    the quadratic model of the normal blocks predicts (``g = J^T r``, ``H = J^T J``), from
+    ``U``, ``W`` and ``V`` without the Jacobian."""
+    n = s.n_params
+    if s.band:
+        dcb = dc.reshape(s.n_blocks, s.width)
+        uu = jnp.einsum("bp,bpq,bq->", dcb, blocks.u, dcb)
+    else:
+        uu = jnp.dot(dc, blocks.u[:n, :n] @ dc)
+    dc1 = jnp.concatenate([dc, jnp.zeros(1)])  # the dummy (padding) parameter
+    ww = jnp.einsum("mp,mpj,mj->", dc1[s.obs_params], blocks.w, dp[s.obs_point])
+    vv = jnp.einsum("ni,nij,nj->", dp, blocks.v, dp)
+    g = jnp.dot(blocks.gc[:n], dc) + jnp.sum(blocks.gp * dp)
+    return g + 0.5 * (uu + 2.0 * ww + vv)
 
 
 def split_params(flat: Float[Array, " N"], s: Structure) -> tuple[Float[Array, "b p"], ...]:
@@ -309,145 +245,3 @@ def split_params(flat: Float[Array, " N"], s: Structure) -> tuple[Float[Array, "
         out.append(flat[start : start + b * p].reshape(b, p))
         start += b * p
     return tuple(out)
-
-
-class SchurDescent(optx.AbstractDescent):
-    """(Damped) Gauss-Newton step by the Schur complement of the point blocks.
-
-    ``query`` builds the Jacobian and normal blocks once per accepted point (``width + 3``
-    JVPs of the linearised residuals), the undamped Gauss-Newton step and its Newton decrement;
-    ``step`` solves the damped system for the trust region's step size, ``lambda = damping /
-    step_size`` with Marquardt's ``diag(J^T J)`` scaling (Levenberg-Marquardt; the query's step
-    itself once ``lambda <= NEGLIGIBLE_DAMPING``), or returns ``step_size`` times the
-    Gauss-Newton step when ``damped`` is False.
-    """
-
-    structure: Structure
-    damping: float = 1e-4
-    damped: bool = eqx.field(static=True, default=True)
-    fn: Callable | None = eqx.field(static=True, default=None)
-    args: Any = None
-    """The residual function and its arguments: given, the Jacobian blocks come from
-    :func:`split_jacobians` (faster) instead of the solver's linearisation."""
-    robust: tuple[str, float] | None = eqx.field(static=True, default=None)
-    """``(loss, c)``: ``fn`` gives plain residuals, modelled by :func:`~.loss.newton_corrected`."""
-
-    def init(self, y, f_info_struct) -> SchurState:
-        img, gnd, pr = f_info_struct.residual
-        m = sum(x.shape[0] for x in img)
-        return _zeros_state(self.structure, m, gnd.shape[0], tuple(x.shape for x in pr))
-
-    def query(self, y, f_info, state) -> SchurState:
-        s = self.structure
-        if self.fn is not None:
-            jac = split_jacobians(self.fn, self.args, y, s.width)
-            if self.robust is not None:
-                r, jc, jp = newton_corrected(jac.r, (jac.jc, jac.jp), *self.robust)
-                rg, jg = newton_corrected(jac.rg, (jac.jg,), *self.robust)
-                jac = eqx.tree_at(lambda j: (j.r, j.jc, j.jp, j.rg, j.jg), jac, (r, jc, jp, rg, jg))
-        else:
-            jac = jacobians(f_info.jac.mv, f_info.residual, y, s.width)
-        blocks = normal_blocks(jac, s)
-        dc, dp = schur_solve(blocks, s, 0.0)
-        dec = jnp.dot(blocks.gc[: s.n_params], dc) + jnp.sum(blocks.gp * dp)
-        dec = jnp.where(jnp.isfinite(dec), dec, jnp.inf)
-        stagnant = jnp.where(dec > 0.5 * state.decrement, state.stagnant + 1, 0)
-        return SchurState(jac, blocks, dec, stagnant, dc, dp)
-
-    def step(self, step_size, state: SchurState):
-        s = self.structure
-        if self.damped:
-            tiny = jnp.finfo(jnp.result_type(step_size)).tiny
-            lam = self.damping / jnp.maximum(step_size, tiny)
-            # negligible damping: the query's undamped step, without a second factorisation
-            dc, dp = jax.lax.cond(
-                lam <= NEGLIGIBLE_DAMPING,
-                lambda: (state.dc, state.dp),
-                lambda: schur_solve(state.blocks, s, lam),
-            )
-            scale = 1.0
-        else:
-            dc, dp = state.dc, state.dp
-            scale = step_size
-        finite = jnp.all(jnp.isfinite(dc)) & jnp.all(jnp.isfinite(dp))
-        # a non-finite damped step is rejected by the trust region, which then damps more
-        result = optx.RESULTS.where(
-            finite | self.damped, optx.RESULTS.successful, optx.RESULTS.nonfinite
-        )
-        return (split_params(-scale * dc, s), -scale * dp), result
-
-
-class StructuredGaussNewton(optx.AbstractGaussNewton):
-    """Levenberg-Marquardt (or Gauss-Newton) over the Schur-complement descent.
-
-    ``method="lm"``: :class:`SchurDescent` with Marquardt-scaled damping inside
-    :class:`NoiseTolerantTrustRegion`; ``method="gn"``: undamped steps of length 1.
-
-    Termination is scale-free: the solve stops when the full Gauss-Newton step at the current
-    point is shorter than ``tol`` of its own standard deviation (``g^T H^-1 g < tol^2``) or
-    promises less than ``CONVERGED_FLOOR`` of the cost, or when it promises less than the cost's
-    rounding noise and has stopped shrinking (``STAGNANT_STEPS``: large, ill-conditioned reduced
-    systems, where the solve's rounding keeps it above ``tol**2``), or when ``max_rejections``
-    steps in a row were rejected (the damping grew by 4^k without any decrease of the cost: the
-    cost is at its floating-point floor). The Cauchy criterion of optimistix on the raw
-    parameters is off (``rtol = atol = 0``): parameters of very different units (pixels, pixels
-    per pixel, metres) make it meaningless.
-    """
-
-    rtol: float
-    atol: float
-    norm: Callable[[PyTree], Array]
-    descent: SchurDescent
-    search: Any
-    verbose: Callable[..., None]
-    tol: float = eqx.field(static=True)
-    max_rejections: int = eqx.field(static=True)
-
-    def __init__(
-        self,
-        structure: Structure,
-        tol: float = 1e-6,
-        method: str = "lm",
-        damping: float = 1e-4,
-        max_rejections: int = 8,
-        verbose: bool = False,
-        fn: Callable | None = None,
-        args: Any = None,
-        robust: tuple[str, float] | None = None,
-    ):
-        if method not in ("lm", "gn"):
-            raise ValueError(f"method must be 'lm' or 'gn', got {method!r}")
-        self.rtol = 0.0
-        self.atol = 0.0
-        self.norm = optx.max_norm
-        self.descent = SchurDescent(
-            structure, damping=damping, damped=method == "lm", fn=fn, args=args, robust=robust
-        )
-        self.search = NoiseTolerantTrustRegion() if method == "lm" else optx.LearningRate(1.0)
-        self.verbose = _print_verbose if verbose else _silent
-        self.tol = tol
-        self.max_rejections = max_rejections
-
-    def terminate(self, fn, y, args, options, state, tags):
-        # the decrement is the cost reduction the full step promises: below 1e-12 of the cost
-        # it is under the rounding noise of the cost itself and no step can be verified
-        cost = sum((jnp.sum(r**2) for r in jax.tree.leaves(state.f_info.residual)), 0.0)
-        floor = jnp.maximum(self.tol**2, CONVERGED_FLOOR * cost)
-        dec = state.descent_state.decrement
-        small = dec < floor
-        small |= (dec < NOISE_FLOOR * cost) & (state.descent_state.stagnant >= STAGNANT_STEPS)
-        stalled = state.num_steps_since_acceptance >= self.max_rejections
-        done = (small & ~state.first_step) | stalled | state.terminate
-        return done, state.result
-
-
-def _silent(**kwargs):
-    del kwargs
-
-
-def _print_verbose(**kwargs):
-    keep = ("num_steps", "accepted_steps", "loss_this_step", "loss_last_accepted_step", "step_size")
-    jax.debug.print(
-        " ".join(f"{kwargs[k][0]}: {{{k}}}" for k in keep if k in kwargs),
-        **{k: kwargs[k][1] for k in keep if k in kwargs},
-    )

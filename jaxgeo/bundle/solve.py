@@ -25,12 +25,12 @@ from .band import Band
 from .config import DEFAULT_SOLVER, SolverConfig
 from .covariance import cofactors, undetermined_unknowns
 from .errors import RESULTS
+from .lm import StructuredGaussNewton
 from .loss import irls_weights, robust
 from .problem import Problem
 from .schur import (
     Jacobians,
     NormalBlocks,
-    StructuredGaussNewton,
     normal_blocks,
     split_jacobians,
     split_params,
@@ -306,11 +306,11 @@ def solve(
         robust_ = None if loss_ == "l2" else (loss_, c_)
         return StructuredGaussNewton(
             s,
+            residuals,
+            (problem_, scales_, "l2", c_),
             tol=tol,
             method=solver.method,
             verbose=verbose,
-            fn=residuals,
-            args=(problem_, scales_, "l2", c_),
             robust=robust_,
         )
 

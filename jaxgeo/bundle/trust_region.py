@@ -1,13 +1,12 @@
-"""The trust region of the structured Levenberg-Marquardt solve: optimistix' classical one,
-tolerant of the cost's rounding noise near the optimum."""
+"""The trust region of the structured Levenberg-Marquardt solve: optimistix' classical one
+(``optx.ClassicalTrustRegion``), tolerant of the cost's rounding noise near the optimum."""
 
 from __future__ import annotations
 
 import equinox as eqx
 import jax
 import jax.numpy as jnp
-import optimistix as optx
-from jaxtyping import Array, Float
+from jaxtyping import Array, Bool, Float
 
 NOISE_FLOOR = 1e-9
 """Relative cost change below which a step cannot be verified by evaluating the cost: pixel
@@ -15,45 +14,40 @@ coordinates of ~1e4 carry ~1e-11 px of rounding, which makes the sum of squares 
 ~1e-10 relative (measured on the Pleiades pair)."""
 
 
-class _TrustRegionState(eqx.Module):
-    step_size: Float[Array, ""]
+class TrustRegion(eqx.Module):
+    """Accept a step when the cost fell by at least ``low_cutoff`` of the decrease the model
+    predicted; grow the region ``high_constant`` times when it fell by more than
+    ``high_cutoff`` of it, shrink it ``low_constant`` times on a rejection. A step whose
+    predicted and actual changes are both below the cost's rounding noise (``NOISE_FLOOR`` of
+    the cost) is accepted: near the optimum the quadratic model is exact to second order while
+    the cost cannot resolve the improvement, and the classical test would reject good steps at
+    random until the damping stalls the solve short of the optimum."""
 
+    high_cutoff: float = eqx.field(static=True, default=0.99)
+    low_cutoff: float = eqx.field(static=True, default=0.01)
+    high_constant: float = eqx.field(static=True, default=10.0)
+    low_constant: float = eqx.field(static=True, default=0.25)
+    noise: float = eqx.field(static=True, default=NOISE_FLOOR)
 
-class NoiseTolerantTrustRegion(optx.AbstractSearch):
-    """``optx.ClassicalTrustRegion``, except that a step whose predicted and actual changes of
-    the cost are both below its rounding noise (``NOISE_FLOOR`` of the cost) is accepted.
-
-    Near the optimum the quadratic model is exact to second order while the cost cannot
-    resolve the improvement: the classical test then rejects good steps at random, and the
-    damping grows until the solve stalls short of the optimum.
-    """
-
-    high_cutoff: float = 0.99
-    low_cutoff: float = 0.01
-    high_constant: float = 10.0
-    low_constant: float = 0.25
-    noise: float = NOISE_FLOOR
-
-    def init(self, y, f_info_struct) -> _TrustRegionState:
-        del y, f_info_struct
-        return _TrustRegionState(step_size=jnp.array(1.0))
-
-    def step(self, first_step, y, y_eval, f_info, f_eval_info, state):
-        y_diff = jax.tree.map(lambda a, b: a - b, y_eval, y)
-        predicted = f_info.jac.mv(y_diff)
-        rtr = sum_squares(f_info.residual)
-        model = sum_squares(jax.tree.map(lambda a, b: a + b, predicted, f_info.residual))
-        reduction = 0.5 * (model - rtr)  # predicted change of the cost (negative: decrease)
-        f_min, f_min_eval = f_info.as_min(), f_eval_info.as_min()
-        diff = f_min_eval - f_min
-        noise = self.noise * jnp.abs(f_min)
-        tiny = (-reduction <= noise) & (diff <= 10.0 * noise) & jnp.isfinite(f_min_eval)
-        accept = (diff <= self.low_cutoff * reduction) | tiny | first_step
-        good = (diff < self.high_cutoff * reduction) & (reduction < 0) & ~first_step
+    def update(
+        self,
+        first_step: Bool[Array, ""],
+        f: Float[Array, ""],
+        f_eval: Float[Array, ""],
+        predicted: Float[Array, ""],
+        step_size: Float[Array, ""],
+    ) -> tuple[Bool[Array, ""], Float[Array, ""]]:
+        """``(accept, new step size)`` for a step from cost ``f`` to ``f_eval`` whose model
+        predicted the change ``predicted`` (negative: a decrease). The first step (the
+        starting point's evaluation) is accepted as it is."""
+        diff = f_eval - f
+        noise = self.noise * jnp.abs(f)
+        tiny = (-predicted <= noise) & (diff <= 10.0 * noise) & jnp.isfinite(f_eval)
+        accept = (diff <= self.low_cutoff * predicted) | tiny | first_step
+        good = (diff < self.high_cutoff * predicted) & (predicted < 0) & ~first_step
         mul = jnp.where(good, self.high_constant, 1.0)
         mul = jnp.where(accept, mul, self.low_constant)
-        new = mul * state.step_size
-        return new, accept, optx.RESULTS.successful, _TrustRegionState(step_size=new)
+        return accept, mul * step_size
 
 
 def sum_squares(tree) -> Float[Array, ""]:

@@ -22,6 +22,7 @@ MODULES = (
     "errors",
     "export",
     "factor",
+    "lm",
     "loss",
     "observations",
     "problem",

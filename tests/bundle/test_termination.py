@@ -12,7 +12,7 @@ import warnings
 import jax
 import pytest
 
-from jaxgeo.bundle import NotConvergedWarning, SolverConfig, adjust, schur
+from jaxgeo.bundle import NotConvergedWarning, SolverConfig, adjust, lm
 from tests.bundle.conftest import make_block
 
 
@@ -27,8 +27,8 @@ robust default runs several, each ending by the same rule, and compiles twice as
 
 
 def _adjust_at_the_floor(small, monkeypatch, stagnant_steps):
-    monkeypatch.setattr(schur, "CONVERGED_FLOOR", 0.0)
-    monkeypatch.setattr(schur, "STAGNANT_STEPS", stagnant_steps)
+    monkeypatch.setattr(lm, "CONVERGED_FLOOR", 0.0)
+    monkeypatch.setattr(lm, "STAGNANT_STEPS", stagnant_steps)
     jax.clear_caches()  # the constants are read when the solve is traced
     with warnings.catch_warnings(record=True) as caught:
         warnings.simplefilter("always")
@@ -46,7 +46,7 @@ def _adjust_at_the_floor(small, monkeypatch, stagnant_steps):
 def test_stagnant_decrement_ends_the_solve(small, monkeypatch):
     ref = adjust(small.models, small.obs, small.ground, bias="affine", solver=L2)
     assert ref.converged
-    res, warned = _adjust_at_the_floor(small, monkeypatch, schur.STAGNANT_STEPS)
+    res, warned = _adjust_at_the_floor(small, monkeypatch, lm.STAGNANT_STEPS)
     assert res.converged and not warned
     assert res.num_steps < 40
     for name in small.models:
@@ -69,7 +69,7 @@ def test_reused_undamped_step_reaches_the_same_solution(small, monkeypatch, negl
     and always reusing it (Gauss-Newton steps judged by the trust region) give the same
     solution as the default."""
     ref = adjust(small.models, small.obs, small.ground, bias="affine", solver=L2)
-    monkeypatch.setattr(schur, "NEGLIGIBLE_DAMPING", negligible)
+    monkeypatch.setattr(lm, "NEGLIGIBLE_DAMPING", negligible)
     jax.clear_caches()  # the constant is read when the solve is traced
     res = adjust(small.models, small.obs, small.ground, bias="affine", solver=L2)
     jax.clear_caches()

@@ -1,0 +1,262 @@
+"""The structured Levenberg-Marquardt (or Gauss-Newton) solver: an optimistix least-squares
+solver whose steps are Schur-complement solves (:mod:`.schur`).
+
+One step evaluates the residuals and their Jacobian blocks once, at the candidate point
+(:func:`~.schur.split_jacobians`: ``width + 3`` JVPs; with a robust loss, the plain residuals
+corrected by :func:`~.loss.newton_corrected`); the trust region judges the candidate by the
+cost against the change the quadratic model at the last accepted point predicted, computed from
+that point's normal blocks (:func:`~.schur.model_change`); an accepted candidate's blocks are
+assembled and its undamped Gauss-Newton step solved; then the next candidate is the damped step
+from the accepted point. The state carries the normal blocks, not a linearisation of the
+residual function: under ``vmap`` every leaf of a while loop's state is selected per problem at
+every step, and a small state is a small step program.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable
+from typing import Any
+
+import equinox as eqx
+import jax
+import jax.numpy as jnp
+import optimistix as optx
+from jaxtyping import Array, Bool, Float, Int, PyTree
+
+from .loss import newton_corrected, rho
+from .problem import Structure
+from .schur import (
+    NormalBlocks,
+    model_change,
+    normal_blocks,
+    schur_solve,
+    split_jacobians,
+    split_params,
+    zero_blocks,
+)
+from .trust_region import NOISE_FLOOR, TrustRegion
+
+CONVERGED_FLOOR = 1e-16
+"""Relative cost reduction promised by the full step below which the solve has converged."""
+STAGNANT_STEPS = 3
+"""Accepted steps in a row that fail to halve a decrement already under the cost's rounding
+noise (``NOISE_FLOOR`` of the cost) after which the solve has converged: the linear solve's own
+rounding then sets the decrement (seen at 320 sub-scenes: 3e-12 for ever, above ``tol**2``)."""
+NEGLIGIBLE_DAMPING = 1e-6
+"""Damping ``lambda`` (relative to ``diag(J^T J)``) at or below which a step is the undamped
+Gauss-Newton step already solved at the accepted point: one factorisation per step instead of
+two once the trust region has grown (``lambda = damping / step_size``, 1e-4 at the start, 10x
+smaller after each very successful step). The trust region judges the step by the cost either
+way."""
+
+
+class LMState(eqx.Module):
+    """State of :class:`StructuredGaussNewton` at the last accepted point ``y``.
+
+    ``cost``: sum of squared (or ``rho``-) residuals at ``y``; ``blocks`` the normal blocks
+    there (of the corrected residuals with a robust loss); ``dc, dp`` the undamped Gauss-Newton
+    step and ``decrement`` its squared Newton decrement ``g^T H^-1 g`` (the squared length of
+    the step in units of its own standard deviations; ``inf`` before the first step or when
+    singular); ``stagnant`` accepted steps in a row whose decrement did not halve."""
+
+    first_step: Bool[Array, ""]
+    y_eval: PyTree
+    cost: Float[Array, ""]
+    blocks: NormalBlocks
+    dc: Float[Array, " N"]
+    dp: Float[Array, "n 3"]
+    decrement: Float[Array, ""]
+    stagnant: Int[Array, ""]
+    step_size: Float[Array, ""]
+    since_acceptance: Int[Array, ""]
+    result: optx.RESULTS
+
+
+def _flat(z) -> Float[Array, " N"]:
+    return jnp.concatenate([x.reshape(-1) for x in z] + [jnp.zeros(0)])
+
+
+class StructuredGaussNewton(optx.AbstractLeastSquaresSolver):
+    """Levenberg-Marquardt (``method="lm"``: Marquardt-scaled damping ``lambda diag(J^T J)``,
+    clamped as in :mod:`.schur`, inside a :class:`~.trust_region.TrustRegion`) or Gauss-Newton
+    (``"gn"``: undamped steps of length 1) over the Schur-complement solve.
+
+    ``fn(y, args)`` gives the plain residuals ``(image blocks, ground, priors)``; ``robust``
+    ``(loss, c)`` minimises ``sum rho(|r|^2)`` over the image and ground residuals instead of
+    their squares, with Newton's model of ``rho`` (:func:`~.loss.newton_corrected`). The
+    function given to ``optx.least_squares`` is not evaluated by the steps: it defines the
+    objective for optimistix' implicit derivative and must match (its residuals' squares sum to
+    this cost).
+
+    Termination is scale-free: the solve stops when the full Gauss-Newton step at the current
+    point is shorter than ``tol`` of its own standard deviation (``g^T H^-1 g < tol^2``) or
+    promises less than ``CONVERGED_FLOOR`` of the cost, or when it promises less than the cost's
+    rounding noise and has stopped shrinking (``STAGNANT_STEPS``: large, ill-conditioned reduced
+    systems, where the solve's rounding keeps it above ``tol**2``), or when ``max_rejections``
+    steps in a row were rejected (the damping grew by 4^k without any decrease of the cost: the
+    cost is at its floating-point floor). Parameters of very different units (pixels, pixels
+    per pixel, metres) make a criterion on the raw parameters meaningless.
+    """
+
+    structure: Structure
+    fn: Callable = eqx.field(static=True)
+    args: Any
+    robust: tuple[str, float] | None = eqx.field(static=True)
+    tol: float = eqx.field(static=True)
+    damped: bool = eqx.field(static=True)
+    damping: float = eqx.field(static=True)
+    max_rejections: int = eqx.field(static=True)
+    verbose: bool = eqx.field(static=True)
+    search: TrustRegion
+    rtol: float
+    atol: float
+    norm: Callable[[PyTree], Array]
+
+    def __init__(
+        self,
+        structure: Structure,
+        fn: Callable,
+        args: Any,
+        tol: float = 1e-6,
+        method: str = "lm",
+        damping: float = 1e-4,
+        max_rejections: int = 8,
+        verbose: bool = False,
+        robust: tuple[str, float] | None = None,
+    ):
+        if method not in ("lm", "gn"):
+            raise ValueError(f"method must be 'lm' or 'gn', got {method!r}")
+        self.structure = structure
+        self.fn = fn
+        self.args = args
+        self.robust = robust
+        self.tol = tol
+        self.damped = method == "lm"
+        self.damping = damping
+        self.max_rejections = max_rejections
+        self.verbose = verbose
+        self.search = TrustRegion()
+        self.rtol = self.atol = 0.0  # optimistix' criterion on the raw parameters: off
+        self.norm = optx.max_norm
+
+    def evaluate(self, y) -> tuple[NormalBlocks, Float[Array, ""]]:
+        """Normal blocks and cost (sum of squares, or of ``rho``) at ``y``."""
+        jac = split_jacobians(self.fn, self.args, y, self.structure.width)
+        prior = sum((jnp.sum(r**2) for r in jac.rpr), jnp.zeros(()))
+        if self.robust is None:
+            cost = jnp.sum(jac.r**2) + jnp.sum(jac.rg**2) + prior
+        else:
+            loss, c = self.robust
+            cost = sum(jnp.sum(rho(jnp.sum(r**2, axis=-1), loss, c)) for r in (jac.r, jac.rg))
+            cost = cost + prior
+            r, jc, jp = newton_corrected(jac.r, (jac.jc, jac.jp), loss, c)
+            rg, jg = newton_corrected(jac.rg, (jac.jg,), loss, c)
+            jac = eqx.tree_at(lambda j: (j.r, j.jc, j.jp, j.rg, j.jg), jac, (r, jc, jp, rg, jg))
+        return normal_blocks(jac, self.structure), cost
+
+    def init(self, fn, y, args, options, f_struct, aux_struct, tags) -> LMState:
+        del fn, args, options, f_struct, aux_struct, tags
+        s = self.structure
+        m = s.obs_point.shape[0]
+        return LMState(
+            first_step=jnp.array(True),
+            y_eval=y,
+            cost=jnp.array(jnp.inf),
+            blocks=zero_blocks(s, m),
+            dc=jnp.zeros(s.n_params),
+            dp=jnp.zeros((s.n_points, 3)),
+            decrement=jnp.array(jnp.inf),
+            stagnant=jnp.array(0),
+            step_size=jnp.array(1.0),
+            since_acceptance=jnp.array(0),
+            result=optx.RESULTS.successful,
+        )
+
+    def step(self, fn, y, args, options, state: LMState, tags):
+        del fn, args, options, tags
+        s = self.structure
+        blocks_eval, cost_eval = self.evaluate(state.y_eval)
+        if self.damped:
+            z_diff, u_diff = jax.tree.map(lambda a, b: a - b, state.y_eval, y)
+            change = model_change(state.blocks, s, _flat(z_diff), u_diff)
+            accept, step_size = self.search.update(
+                state.first_step, 0.5 * state.cost, 0.5 * cost_eval, change, state.step_size
+            )
+        else:
+            accept, step_size = jnp.array(True), jnp.array(1.0)
+
+        def accepted():  # the undamped step and its decrement at the new point
+            dc, dp = schur_solve(blocks_eval, s, 0.0)
+            dec = jnp.dot(blocks_eval.gc[: s.n_params], dc) + jnp.sum(blocks_eval.gp * dp)
+            dec = jnp.where(jnp.isfinite(dec), dec, jnp.inf)
+            stagnant = jnp.where(dec > 0.5 * state.decrement, state.stagnant + 1, 0)
+            return blocks_eval, cost_eval, dc, dp, dec, stagnant
+
+        def rejected():
+            return state.blocks, state.cost, state.dc, state.dp, state.decrement, state.stagnant
+
+        blocks, cost, dc, dp, dec, stagnant = jax.lax.cond(accept, accepted, rejected)
+        y = jax.tree.map(lambda a, b: jnp.where(accept, a, b), state.y_eval, y)
+        if self.verbose:
+            jax.debug.print(
+                "Step: {k} cost: {c} candidate: {ce} accepted: {a} step size: {t}",
+                k=state.since_acceptance,
+                c=state.cost,
+                ce=cost_eval,
+                a=accept,
+                t=step_size,
+            )
+        dc_step, dp_step, result = self._step(step_size, blocks, dc, dp)
+        y_eval = (
+            tuple(a - b for a, b in zip(y[0], split_params(dc_step, s), strict=True)),
+            y[1] - dp_step,
+        )
+        new = LMState(
+            first_step=jnp.array(False),
+            y_eval=y_eval,
+            cost=cost,
+            blocks=blocks,
+            dc=dc,
+            dp=dp,
+            decrement=dec,
+            stagnant=stagnant,
+            step_size=step_size,
+            since_acceptance=jnp.where(accept, 0, state.since_acceptance + 1),
+            result=result,
+        )
+        return y, new, None
+
+    def _step(self, step_size, blocks: NormalBlocks, dc, dp):
+        """The damped step ``(dc, dp)`` for the trust region's ``step_size`` (``lambda =
+        damping / step_size``; the undamped one once ``lambda <= NEGLIGIBLE_DAMPING``), or the
+        Gauss-Newton step itself when not damped."""
+        if not self.damped:
+            finite = jnp.all(jnp.isfinite(dc)) & jnp.all(jnp.isfinite(dp))
+            result = optx.RESULTS.where(finite, optx.RESULTS.successful, optx.RESULTS.nonfinite)
+            return dc, dp, result
+        tiny = jnp.finfo(jnp.result_type(step_size)).tiny
+        lam = self.damping / jnp.maximum(step_size, tiny)
+        # a non-finite damped step is rejected by the trust region, which then damps more
+        dc, dp = jax.lax.cond(
+            lam <= NEGLIGIBLE_DAMPING,
+            lambda: (dc, dp),
+            lambda: schur_solve(blocks, self.structure, lam),
+        )
+        return dc, dp, optx.RESULTS.successful
+
+    def terminate(self, fn, y, args, options, state: LMState, tags):
+        del fn, y, args, options, tags
+        # the decrement is the cost reduction the full step promises: below 1e-16 of the cost
+        # it is under the rounding noise of the cost itself and no step can be verified
+        cost = state.cost
+        floor = jnp.maximum(self.tol**2, CONVERGED_FLOOR * cost)
+        dec = state.decrement
+        small = dec < floor
+        small |= (dec < NOISE_FLOOR * cost) & (state.stagnant >= STAGNANT_STEPS)
+        stalled = state.since_acceptance >= self.max_rejections
+        done = (small & ~state.first_step) | stalled
+        return done, state.result
+
+    def postprocess(self, fn, y, aux, args, options, state, tags, result):
+        del fn, args, options, state, tags, result
+        return y, aux, {}
