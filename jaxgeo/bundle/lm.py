@@ -23,9 +23,10 @@ import jax.numpy as jnp
 import optimistix as optx
 from jaxtyping import Array, Bool, Float, Int, PyTree
 
-from .loss import newton_corrected, rho
+from .loss import corrected, irls_weights, newton_factors, rho
 from .problem import Structure
 from .schur import (
+    Jacobians,
     NormalBlocks,
     model_change,
     normal_blocks,
@@ -50,6 +51,36 @@ smaller after each very successful step). The trust region judges the step by th
 way."""
 
 
+class Reweighting(eqx.Module):
+    """The reweighting that brings a robust solve near its M-estimate first (iteratively
+    reweighted least squares, as a globalisation): weighted least squares with the weights
+    ``rho'(|r|^2)`` of the last point held fixed, to ``inner_tol``; then new weights from
+    there, until no weight moves by more than ``tol`` after at least two weighted solves (the
+    first with ``w_img, w_gnd``: ones for least squares); then Newton's model of ``rho``
+    itself to the solver's ``tol``. Each reweighting continues from the point where the last
+    weighted solve stopped, evaluated once (no restart). More than ``limit`` reweightings
+    without settling end the solve with ``RESULTS.nonlinear_max_steps_reached``."""
+
+    loss: str = eqx.field(static=True)
+    c: float = eqx.field(static=True)
+    tol: float = eqx.field(static=True)
+    inner_tol: float = eqx.field(static=True)
+    limit: Int[Array, ""] | int
+    w_img: Float[Array, " M"]
+    w_gnd: Float[Array, " c"]
+
+
+class Weights(eqx.Module):
+    """The reweighting's state: ``final`` (Newton's model of ``rho`` from here on), the weights
+    of the weighted solve under way, the reweightings done, the last change of the weights."""
+
+    final: Bool[Array, ""]
+    img: Float[Array, " M"]
+    gnd: Float[Array, " c"]
+    rounds: Int[Array, ""]
+    change: Float[Array, ""]
+
+
 class LMState(eqx.Module):
     """State of :class:`StructuredGaussNewton` at the last accepted point ``y``.
 
@@ -70,6 +101,7 @@ class LMState(eqx.Module):
     step_size: Float[Array, ""]
     since_acceptance: Int[Array, ""]
     result: optx.RESULTS
+    weights: Weights | None
 
 
 def _flat(z) -> Float[Array, " N"]:
@@ -83,10 +115,11 @@ class StructuredGaussNewton(optx.AbstractLeastSquaresSolver):
 
     ``fn(y, args)`` gives the plain residuals ``(image blocks, ground, priors)``; ``robust``
     ``(loss, c)`` minimises ``sum rho(|r|^2)`` over the image and ground residuals instead of
-    their squares, with Newton's model of ``rho`` (:func:`~.loss.newton_corrected`). The
-    function given to ``optx.least_squares`` is not evaluated by the steps: it defines the
-    objective for optimistix' implicit derivative and must match (its residuals' squares sum to
-    this cost).
+    their squares, with Newton's model of ``rho`` (:func:`~.loss.newton_corrected`), after the
+    ``reweighting`` (:class:`Reweighting`) when one is given. The function given to
+    ``optx.least_squares`` is not evaluated by the steps: it defines the objective for
+    optimistix' implicit derivative and must match (its residuals' squares sum to the robust
+    cost).
 
     Termination is scale-free: the solve stops when the full Gauss-Newton step at the current
     point is shorter than ``tol`` of its own standard deviation (``g^T H^-1 g < tol^2``) or
@@ -95,13 +128,15 @@ class StructuredGaussNewton(optx.AbstractLeastSquaresSolver):
     systems, where the solve's rounding keeps it above ``tol**2``), or when ``max_rejections``
     steps in a row were rejected (the damping grew by 4^k without any decrease of the cost: the
     cost is at its floating-point floor). Parameters of very different units (pixels, pixels
-    per pixel, metres) make a criterion on the raw parameters meaningless.
+    per pixel, metres) make a criterion on the raw parameters meaningless. A weighted solve of
+    the reweighting ends by the same rules at ``inner_tol``.
     """
 
     structure: Structure
     fn: Callable = eqx.field(static=True)
     args: Any
     robust: tuple[str, float] | None = eqx.field(static=True)
+    reweighting: Reweighting | None
     tol: float = eqx.field(static=True)
     damped: bool = eqx.field(static=True)
     damping: float = eqx.field(static=True)
@@ -123,13 +158,17 @@ class StructuredGaussNewton(optx.AbstractLeastSquaresSolver):
         max_rejections: int = 8,
         verbose: bool = False,
         robust: tuple[str, float] | None = None,
+        reweighting: Reweighting | None = None,
     ):
         if method not in ("lm", "gn"):
             raise ValueError(f"method must be 'lm' or 'gn', got {method!r}")
+        if reweighting is not None and robust is None:
+            raise ValueError("a reweighting needs a robust loss")
         self.structure = structure
         self.fn = fn
         self.args = args
         self.robust = robust
+        self.reweighting = reweighting
         self.tol = tol
         self.damped = method == "lm"
         self.damping = damping
@@ -139,25 +178,45 @@ class StructuredGaussNewton(optx.AbstractLeastSquaresSolver):
         self.rtol = self.atol = 0.0  # optimistix' criterion on the raw parameters: off
         self.norm = optx.max_norm
 
-    def evaluate(self, y) -> tuple[NormalBlocks, Float[Array, ""]]:
-        """Normal blocks and cost (sum of squares, or of ``rho``) at ``y``."""
-        jac = split_jacobians(self.fn, self.args, y, self.structure.width)
+    def model(self, jac: Jacobians, weights: Weights | None) -> tuple[NormalBlocks, Array]:
+        """Normal blocks and cost of the plain Jacobian blocks ``jac``: sums of squares
+        (least squares), of ``rho`` (robust: Newton's model), or weighted least squares (a
+        reweighting not yet ``final``)."""
         prior = sum((jnp.sum(r**2) for r in jac.rpr), jnp.zeros(()))
+        sq = (jnp.sum(jac.r**2, axis=-1), jnp.sum(jac.rg**2, axis=-1))
         if self.robust is None:
-            cost = jnp.sum(jac.r**2) + jnp.sum(jac.rg**2) + prior
-        else:
-            loss, c = self.robust
-            cost = sum(jnp.sum(rho(jnp.sum(r**2, axis=-1), loss, c)) for r in (jac.r, jac.rg))
-            cost = cost + prior
-            r, jc, jp = newton_corrected(jac.r, (jac.jc, jac.jp), loss, c)
-            rg, jg = newton_corrected(jac.rg, (jac.jg,), loss, c)
-            jac = eqx.tree_at(lambda j: (j.r, j.jc, j.jp, j.rg, j.jg), jac, (r, jc, jp, rg, jg))
+            return normal_blocks(jac, self.structure), sum(jnp.sum(x) for x in sq) + prior
+        loss, c = self.robust
+        factors, cost = [], prior
+        for k, sk in enumerate(sq):
+            sqrt_rho1, root = newton_factors(sk, loss, c)
+            terms = rho(sk, loss, c)
+            if weights is not None:  # the reweighting's weighted least squares until final
+                w = (weights.img, weights.gnd)[k]
+                sqrt_rho1 = jnp.where(weights.final, sqrt_rho1, jnp.sqrt(w))
+                root = jnp.where(weights.final, root, 1.0)
+                terms = jnp.where(weights.final, terms, w * sk)
+            factors.append((sqrt_rho1, root))
+            cost = cost + jnp.sum(terms)
+        r, jc, jp = corrected(jac.r, (jac.jc, jac.jp), *factors[0])
+        rg, jg = corrected(jac.rg, (jac.jg,), *factors[1])
+        jac = eqx.tree_at(lambda j: (j.r, j.jc, j.jp, j.rg, j.jg), jac, (r, jc, jp, rg, jg))
         return normal_blocks(jac, self.structure), cost
 
     def init(self, fn, y, args, options, f_struct, aux_struct, tags) -> LMState:
         del fn, args, options, f_struct, aux_struct, tags
         s = self.structure
         m = s.obs_point.shape[0]
+        rw = self.reweighting
+        weights = None
+        if rw is not None:
+            weights = Weights(
+                final=jnp.array(False),
+                img=jnp.asarray(rw.w_img, float),
+                gnd=jnp.asarray(rw.w_gnd, float),
+                rounds=jnp.array(0),
+                change=jnp.array(jnp.inf),
+            )
         return LMState(
             first_step=jnp.array(True),
             y_eval=y,
@@ -170,18 +229,74 @@ class StructuredGaussNewton(optx.AbstractLeastSquaresSolver):
             step_size=jnp.array(1.0),
             since_acceptance=jnp.array(0),
             result=optx.RESULTS.successful,
+            weights=weights,
         )
+
+    def _converged(self, state: LMState, tol: float) -> tuple[Array, Array]:
+        """``(small, stalled)``: the decrement at the accepted point is below ``tol`` (or the
+        floors), or ``max_rejections`` steps in a row were rejected."""
+        cost = state.cost
+        floor = jnp.maximum(tol**2, CONVERGED_FLOOR * cost)
+        dec = state.decrement
+        small = dec < floor
+        small |= (dec < NOISE_FLOOR * cost) & (state.stagnant >= STAGNANT_STEPS)
+        small &= ~state.first_step
+        return small, state.since_acceptance >= self.max_rejections
+
+    def _reweigh(self, state: LMState, y):
+        """Whether the weighted solve under way has ended, and the point to evaluate: its
+        last, tiny, step ``state.y_eval`` when it converged (to ``inner_tol``), the accepted
+        point ``y`` when it stalled."""
+        small, stalled = self._converged(state, self.reweighting.inner_tol)
+        reweigh = ~state.weights.final & (small | stalled)
+        point = jax.tree.map(lambda a, b: jnp.where(reweigh & ~small, b, a), state.y_eval, y)
+        return reweigh, point
+
+    def _next_weights(self, w: Weights, reweigh, jac: Jacobians) -> tuple[Weights, Array]:
+        """The weights ``rho'(|r|^2)`` of the plain residuals of ``jac`` for the next weighted
+        solve, ``final`` once they settled (at least two weighted solves), and whether the
+        reweighting failed (``limit`` reweightings without settling)."""
+        rw = self.reweighting
+        new_img = irls_weights(jnp.sum(jac.r**2, axis=-1), rw.loss, rw.c)
+        new_gnd = irls_weights(jnp.sum(jac.rg**2, axis=-1), rw.loss, rw.c)
+        change = jnp.maximum(
+            jnp.max(jnp.abs(new_img - w.img), initial=0.0),
+            jnp.max(jnp.abs(new_gnd - w.gnd), initial=0.0),
+        )
+        rounds = w.rounds + 1
+        settled = (rounds >= 2) & (change <= rw.tol)
+        failed = reweigh & ~settled & (rounds > rw.limit)
+        new = Weights(
+            final=w.final | (reweigh & settled),
+            img=jnp.where(reweigh, new_img, w.img),
+            gnd=jnp.where(reweigh, new_gnd, w.gnd),
+            rounds=jnp.where(reweigh, rounds, w.rounds),
+            change=jnp.where(reweigh, change, w.change),
+        )
+        return new, failed
 
     def step(self, fn, y, args, options, state: LMState, tags):
         del fn, args, options, tags
         s = self.structure
-        blocks_eval, cost_eval = self.evaluate(state.y_eval)
+        weights, point = state.weights, state.y_eval
+        reweigh = failed = jnp.array(False)
+        if weights is not None:
+            reweigh, point = self._reweigh(state, y)
+        # one evaluation: the plain residuals and Jacobian blocks, then the weights (a
+        # function of these residuals) and the model
+        jac = split_jacobians(self.fn, self.args, point, s.width)
+        if weights is not None:
+            weights, failed = self._next_weights(weights, reweigh, jac)
+        blocks_eval, cost_eval = self.model(jac, weights)
         if self.damped:
-            z_diff, u_diff = jax.tree.map(lambda a, b: a - b, state.y_eval, y)
+            z_diff, u_diff = jax.tree.map(lambda a, b: a - b, point, y)
             change = model_change(state.blocks, s, _flat(z_diff), u_diff)
             accept, step_size = self.search.update(
                 state.first_step, 0.5 * state.cost, 0.5 * cost_eval, change, state.step_size
             )
+            # a new weighted solve (or the final one) starts from the reweighting's point
+            accept = accept | reweigh
+            step_size = jnp.where(reweigh, 1.0, step_size)
         else:
             accept, step_size = jnp.array(True), jnp.array(1.0)
 
@@ -190,23 +305,24 @@ class StructuredGaussNewton(optx.AbstractLeastSquaresSolver):
             dec = jnp.dot(blocks_eval.gc[: s.n_params], dc) + jnp.sum(blocks_eval.gp * dp)
             dec = jnp.where(jnp.isfinite(dec), dec, jnp.inf)
             stagnant = jnp.where(dec > 0.5 * state.decrement, state.stagnant + 1, 0)
-            return blocks_eval, cost_eval, dc, dp, dec, stagnant
+            return blocks_eval, cost_eval, dc, dp, dec, jnp.where(reweigh, 0, stagnant)
 
         def rejected():
             return state.blocks, state.cost, state.dc, state.dp, state.decrement, state.stagnant
 
         blocks, cost, dc, dp, dec, stagnant = jax.lax.cond(accept, accepted, rejected)
-        y = jax.tree.map(lambda a, b: jnp.where(accept, a, b), state.y_eval, y)
+        y = jax.tree.map(lambda a, b: jnp.where(accept, a, b), point, y)
         if self.verbose:
             jax.debug.print(
-                "Step: {k} cost: {c} candidate: {ce} accepted: {a} step size: {t}",
-                k=state.since_acceptance,
+                "cost: {c} candidate: {ce} accepted: {a} step size: {t} decrement: {d}",
                 c=state.cost,
                 ce=cost_eval,
                 a=accept,
                 t=step_size,
+                d=dec,
             )
         dc_step, dp_step, result = self._step(step_size, blocks, dc, dp)
+        result = optx.RESULTS.where(failed, optx.RESULTS.nonlinear_max_steps_reached, result)
         y_eval = (
             tuple(a - b for a, b in zip(y[0], split_params(dc_step, s), strict=True)),
             y[1] - dp_step,
@@ -223,6 +339,7 @@ class StructuredGaussNewton(optx.AbstractLeastSquaresSolver):
             step_size=step_size,
             since_acceptance=jnp.where(accept, 0, state.since_acceptance + 1),
             result=result,
+            weights=weights,
         )
         return y, new, None
 
@@ -246,16 +363,11 @@ class StructuredGaussNewton(optx.AbstractLeastSquaresSolver):
 
     def terminate(self, fn, y, args, options, state: LMState, tags):
         del fn, y, args, options, tags
-        # the decrement is the cost reduction the full step promises: below 1e-16 of the cost
-        # it is under the rounding noise of the cost itself and no step can be verified
-        cost = state.cost
-        floor = jnp.maximum(self.tol**2, CONVERGED_FLOOR * cost)
-        dec = state.decrement
-        small = dec < floor
-        small |= (dec < NOISE_FLOOR * cost) & (state.stagnant >= STAGNANT_STEPS)
-        stalled = state.since_acceptance >= self.max_rejections
-        done = (small & ~state.first_step) | stalled
-        return done, state.result
+        small, stalled = self._converged(state, self.tol)
+        done = small | stalled
+        if state.weights is not None:
+            done &= state.weights.final
+        return done | (state.result != optx.RESULTS.successful), state.result
 
     def postprocess(self, fn, y, aux, args, options, state, tags, result):
         del fn, args, options, state, tags, result

@@ -75,6 +75,31 @@ is flat or concave along ``r``: Huber and Cauchy beyond their threshold), so tha
 stays positive definite."""
 
 
+def newton_factors(s: Float[Array, " m"], loss: str, c: float) -> tuple[Array, Array]:
+    """``(sqrt(rho'), 1 - a)`` of :func:`newton_corrected` at squared residual norms ``s``."""
+    sqrt_rho1 = jnp.sqrt(irls_weights(s, loss, c))
+    return sqrt_rho1, jnp.sqrt(jnp.clip(curvature_ratio(s, loss, c), CURVATURE_FLOOR, 1.0))
+
+
+def corrected(
+    r: Float[Array, "m k"],
+    jacobians: tuple[Float[Array, "m k _"], ...],
+    sqrt_rho1: Float[Array, " m"],
+    root: Float[Array, " m"],
+) -> tuple[Array, ...]:
+    """``sqrt(rho') / (1 - a) r`` and ``sqrt(rho') (I - a r r^T / s) J`` per observation
+    (:func:`newton_corrected`); ``root = 1 - a = 1`` gives IRLS' rows ``sqrt(w) r``,
+    ``sqrt(w) J`` with the weights ``w = sqrt_rho1**2``."""
+    s = jnp.sum(r**2, axis=-1)
+    a_s = jnp.where(s > 0.0, (1.0 - root) / jnp.where(s > 0.0, s, 1.0), 0.0)  # a / s
+
+    def rows(j):  # sqrt(rho') (I - a r r^T / s) J
+        rj = jnp.einsum("mk,mkp->mp", r, j)
+        return (j - jnp.einsum("mk,mp->mkp", a_s[:, None] * r, rj)) * sqrt_rho1[:, None, None]
+
+    return (r * (sqrt_rho1 / root)[:, None], *(rows(j) for j in jacobians))
+
+
 def newton_corrected(
     r: Float[Array, "m k"], jacobians: tuple[Float[Array, "m k _"], ...], loss: str, c: float
 ) -> tuple[Array, ...]:
@@ -87,13 +112,4 @@ def newton_corrected(
     ``rho' J^T J`` (Ceres' choice when ``rho'' < 0``) or Gauss-Newton on the residuals rescaled
     to ``sqrt(rho)`` converge linearly (5-7 steps from a reweighting converged to 1e-3 to
     1e-6 sigma on the demo's 9-GCP bias problems, against 2)."""
-    s = jnp.sum(r**2, axis=-1)
-    sqrt_rho1 = jnp.sqrt(irls_weights(s, loss, c))
-    root = jnp.sqrt(jnp.clip(curvature_ratio(s, loss, c), CURVATURE_FLOOR, 1.0))
-    a_s = jnp.where(s > 0.0, (1.0 - root) / jnp.where(s > 0.0, s, 1.0), 0.0)  # a / s
-
-    def rows(j):  # sqrt(rho') (I - a r r^T / s) J
-        rj = jnp.einsum("mk,mkp->mp", r, j)
-        return (j - jnp.einsum("mk,mp->mkp", a_s[:, None] * r, rj)) * sqrt_rho1[:, None, None]
-
-    return (r * (sqrt_rho1 / root)[:, None], *(rows(j) for j in jacobians))
+    return corrected(r, jacobians, *newton_factors(jnp.sum(r**2, axis=-1), loss, c))

@@ -25,7 +25,7 @@ from .band import Band
 from .config import DEFAULT_SOLVER, SolverConfig
 from .covariance import cofactors, undetermined_unknowns
 from .errors import RESULTS
-from .lm import StructuredGaussNewton
+from .lm import Reweighting, StructuredGaussNewton
 from .loss import irls_weights, robust
 from .problem import Problem
 from .schur import (
@@ -257,14 +257,18 @@ def solve(
     cross-checks only).
 
     A robust ``solver.loss`` (on the image observations and the GCP coordinates) is solved by
-    iteratively reweighted least squares: least squares first, then up to
+    iteratively reweighted least squares first: least squares, then up to
     ``solver.irls_iterations`` weighted least-squares solves, each with the weights
-    ``rho'(|r|^2)`` of the previous solution held fixed and started from it, until no weight
-    changes by more than ``solver.irls_tol`` (else ``RESULTS.not_converged``). Each inner solve
-    is an ordinary least-squares problem, on which the trust region works as designed. A last
-    Levenberg-Marquardt solve of ``sum rho(|r|^2)`` itself (image and ground residuals) goes
-    from there to the M-estimate, with Newton's model of ``rho``
-    (:func:`~.loss.newton_corrected`): two steps from a settled reweighting.
+    ``rho'(|r|^2)`` of the previous solution held fixed and continuing from it, until no weight
+    changes by more than ``solver.irls_tol`` (else ``RESULTS.not_converged``); each is an
+    ordinary least-squares problem, on which the trust region works as designed. Then
+    Levenberg-Marquardt on ``sum rho(|r|^2)`` itself (image and ground residuals) goes from
+    there to the M-estimate, with Newton's model of ``rho`` (:func:`~.loss.newton_corrected`):
+    two steps from a settled reweighting. All of it is one optimistix solve
+    (:class:`~.lm.StructuredGaussNewton` with a :class:`~.lm.Reweighting`): one loop of
+    ``solver.max_steps`` steps at most, in which each problem of a ``vmap`` goes through the
+    phases at its own pace; ``Solution.num_steps`` counts them all. ``method="dense"``
+    solves least squares, then the robust objective from there (no reweighting).
 
     ``removed_image`` (M,, blocks concatenated) / ``removed_ground`` (c,): observations taken
     out as gross errors (weight ``REMOVED_WEIGHT``, rows out of the redundancy); arrays, so that
@@ -289,124 +293,58 @@ def solve(
     base_i = jnp.where(rem_i, REMOVED_WEIGHT**2, 1.0)
     base_g = jnp.where(rem_g, REMOVED_WEIGHT**2, 1.0)
     y0 = initial_unknowns(problem)
-    if solver.method == "dense":
-        scales = parameter_scales(problem, "l2", c)
-        optimiser = optx.LevenbergMarquardt(
-            rtol=solver.tol, atol=solver.tol, linear_solver=lx.QR(), verbose=verbose
-        )
-    else:
-        scales = unit_scales(problem)
-        optimiser = None
-
-    def with_args(args, tol=solver.tol):  # the Schur descent evaluates the Jacobian blocks
-        if optimiser is not None:
-            return optimiser
-        problem_, scales_, loss_, c_ = args
-        # a robust loss: the descent linearises the plain residuals and models rho itself
-        robust_ = None if loss_ == "l2" else (loss_, c_)
-        return StructuredGaussNewton(
-            s,
-            residuals,
-            (problem_, scales_, "l2", c_),
-            tol=tol,
-            method=solver.method,
-            verbose=verbose,
-            robust=robust_,
-        )
-
-    # the reweighting's solves need not be exact: their weights are refined by the next one
-    # and the final solve polishes the answer to ``solver.tol``
-    inner_tol = solver.tol if loss == "l2" else max(solver.tol, IRLS_INNER_TOL)
-
-    def inner(y, w_i, w_g, problem=problem):
-        args = (_weighted(problem, base_i * w_i, base_g * w_g), scales, "l2", c)
-        sol = optx.least_squares(
-            residuals,
-            with_args(args, inner_tol),
-            y,
-            args=args,
-            max_steps=solver.max_steps,
-            throw=False,
-        )
-        return sol.value, RESULTS.promote(sol.result), sol.stats["num_steps"]
-
-    def weights(img, gnd):  # IRLS weights of plain residuals (image blocks, ground)
-        r = jnp.concatenate(img) if img else jnp.zeros((0, 2))
-        return (
-            irls_weights(jnp.sum(r**2, axis=-1), loss, c),
-            irls_weights(jnp.sum(gnd**2, axis=-1), loss, c),
-        )
-
-    def reweight(y, problem=problem):
-        img, gnd, _ = residuals(y, (problem, scales, "l2", c))
-        return weights(img, gnd)
-
     limit = (
         solver.irls_iterations
         if irls_limit is None
         else jnp.minimum(irls_limit, solver.irls_iterations)
     )
     ones_i, ones_g = jnp.ones(m), jnp.ones(n_g)
-    w_i, w_g = ones_i, ones_g
-    if loss == "l2":
-        y, result, steps = inner(y0 if start is None else start[0], ones_i, ones_g)
+    y_s, wi_s, wg_s = (y0, ones_i, ones_g) if start is None else start
+    y_s, wi_s, wg_s = jax.lax.stop_gradient((y_s, wi_s, wg_s))
+    base = _weighted(problem, base_i, base_g)  # removed observations weighted out
+    scales = _scales(problem, solver, c)
+    # the objective: sum rho(|r|^2) of the image and ground residuals (optimistix'
+    # implicit derivative is that of the M-estimate)
+    args = (base, scales, loss, c)
+    if solver.method == "dense":
+        y, result, steps = _dense(args, y_s, solver, verbose)
+        w_i, w_g = ones_i, ones_g
     else:
-        # the reweighting loop (a while_loop: no reverse-mode derivative) runs on a copy of the
-        # problem cut from the autodiff graph; one final solve of the robust objective from its
-        # answer carries the derivatives (implicit function theorem through optimistix)
-        outer = jax.tree.map(lambda x: jax.lax.stop_gradient(x) if eqx.is_array(x) else x, problem)
-
-        # solve k (k = 0: least squares) uses the weights of solve k-1's answer; at least two
-        # solves, then on while the weights move. One traced copy of the least-squares solve
-        # (the first solve inside the loop, not before it: a third less to compile)
-        def cond(carry):
-            k, change, res = carry[-3], carry[-2], carry[-1]
-            go = (k <= limit) & ((k < 2) | (change > solver.irls_tol))
-            return go & (res == RESULTS.successful)
-
-        def body(carry):
-            y, _, _, wi, wg, steps, k, _, _ = carry
-            y, res, st = inner(y, wi, wg, outer)
-            wi2, wg2 = reweight(y, outer)
-            change = jnp.maximum(
-                jnp.max(jnp.abs(wi2 - wi), initial=0.0), jnp.max(jnp.abs(wg2 - wg), initial=0.0)
-            )
-            return y, wi, wg, wi2, wg2, steps + st, k + 1, change, res
-
-        y_s, wi_s, wg_s = (y0, ones_i, ones_g) if start is None else start
-        y_s, wi_s, wg_s = jax.lax.stop_gradient((y_s, wi_s, wg_s))
-        carry = (y_s, wi_s, wg_s, wi_s, wg_s, jnp.array(0), jnp.array(0))
-        carry = (*carry, jnp.array(jnp.inf), RESULTS.successful)
-        y, w_i, w_g, _, _, steps, k, change, result = jax.lax.while_loop(cond, body, carry)
-        result = RESULTS.where(
-            (change > solver.irls_tol) & (result == RESULTS.successful),
-            RESULTS.not_converged,
-            result,
-        )
-        y, w_i, w_g = jax.lax.stop_gradient((y, w_i, w_g))
-        # the final solve minimises sum rho(|r|^2) over the image and ground residuals itself
-        # (IRLS' fixed point, so two steps from there with Newton's model of rho): its answer
-        # does not depend on how far the reweighting went, and its implicit derivative is that
-        # of the M-estimate, not of a weighted least-squares problem
-        args = (_weighted(problem, base_i, base_g), scales, loss, c)
-        last = optx.least_squares(
+        robust_ = None if loss == "l2" else (loss, c)
+        reweighting = None
+        if robust_ is not None:
+            # the reweighting's weighted solves need not be exact: their weights are
+            # refined by the next one and the final solve polishes the answer to ``tol``
+            inner_tol = max(solver.tol, IRLS_INNER_TOL)
+            reweighting = Reweighting(loss, c, solver.irls_tol, inner_tol, limit, wi_s, wg_s)
+        optimiser = StructuredGaussNewton(
+            s,
             residuals,
-            with_args(args),
-            y,
-            args=args,
-            max_steps=solver.max_steps,
-            throw=False,
+            (base, scales, "l2", c),
+            tol=solver.tol,
+            method=solver.method,
+            verbose=verbose,
+            robust=robust_,
+            reweighting=reweighting,
         )
-        # only a converged reweighting is polished; a failed one is returned as it stopped
-        ok = result == RESULTS.successful
-        y = jax.tree.map(lambda a, b: jnp.where(ok, a, b), last.value, y)
-        result = RESULTS.where(ok, RESULTS.promote(last.result), result)
-        steps = steps + jnp.where(ok, last.stats["num_steps"], 0)
+        sol = optx.least_squares(
+            residuals, optimiser, y_s, args=args, max_steps=solver.max_steps, throw=False
+        )
+        y, result, steps = sol.value, RESULTS.promote(sol.result), sol.stats["num_steps"]
+        weights = sol.state.weights
+        w_i, w_g = (ones_i, ones_g) if weights is None else (weights.img, weights.gnd)
+    ok = result == RESULTS.successful
     plain_img, plain_gnd, _ = residuals(y, (problem, scales, "l2", c))
     if loss != "l2":
         # the weights at the M-estimate itself (the reweighting's last ones are up to
-        # ``irls_tol`` off): the covariance and the reported weights are those of the solution
-        w_at = jax.lax.stop_gradient(weights(plain_img, plain_gnd))
+        # ``irls_tol`` off): the covariance and the reported weights are those of the solution;
+        # where the reweighting failed, its last ones
+        w_at = jax.lax.stop_gradient(
+            (
+                irls_weights(jnp.sum(plain_img_all(plain_img) ** 2, axis=-1), loss, c),
+                irls_weights(jnp.sum(plain_gnd**2, axis=-1), loss, c),
+            )
+        )
         w_i, w_g = (jnp.where(ok, a, b) for a, b in zip(w_at, (w_i, w_g), strict=True))
     weighted = _weighted(problem, base_i * w_i, base_g * w_g)
     jac, blocks = blocks_at(weighted, scales, y, "l2", c)
@@ -434,7 +372,7 @@ def solve(
     out = Solution(
         theta=thetas(problem, y[0], scales),
         ground=problem.ground_points(y[1]),
-        residuals_image=jnp.concatenate(plain_img) if plain_img else jnp.zeros((0, 2)),
+        residuals_image=plain_img_all(plain_img),
         residuals_ground=plain_gnd,
         q_params=q_params,
         q_points=cov.pp,
@@ -454,6 +392,41 @@ def solve(
     if throw:
         out = result.error_if(out, result != RESULTS.successful)
     return out
+
+
+def plain_img_all(img) -> Float[Array, "M 2"]:
+    """Image residual blocks concatenated (``(0, 2)`` without image observations)."""
+    return jnp.concatenate(img) if img else jnp.zeros((0, 2))
+
+
+def _scales(problem: Problem, solver: SolverConfig, c: float):
+    """Parameter scales: Jacobi scaling for the dense solve, 1 for the Schur solves."""
+    if solver.method == "dense":
+        return parameter_scales(problem, "l2", c)
+    return unit_scales(problem)
+
+
+def _dense(args, y, solver: SolverConfig, verbose: bool):
+    """optimistix' own Levenberg-Marquardt with a dense QR (``method="dense"``): least squares,
+    then (a robust loss) the robust objective from there, no reweighting."""
+    optimiser = optx.LevenbergMarquardt(
+        rtol=solver.tol, atol=solver.tol, linear_solver=lx.QR(), verbose=verbose
+    )
+
+    def run(a, y):
+        sol = optx.least_squares(
+            residuals, optimiser, y, args=a, max_steps=solver.max_steps, throw=False
+        )
+        return sol.value, RESULTS.promote(sol.result), sol.stats["num_steps"]
+
+    problem, scales, loss, c = args
+    y, result, steps = run((problem, scales, "l2", c), y)
+    if loss == "l2":
+        return y, result, steps
+    y2, result2, steps2 = run(args, y)
+    ok = result == RESULTS.successful
+    y = jax.tree.map(lambda a, b: jnp.where(ok, a, b), y2, y)
+    return y, RESULTS.where(ok, result2, result), steps + jnp.where(ok, steps2, 0)
 
 
 solve_jit = eqx.filter_jit(solve)
