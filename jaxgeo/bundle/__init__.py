@@ -4,7 +4,8 @@ result and report -> export.
 ``jaxgeo.adjust`` (tables in, :class:`AdjustResult` out; :mod:`.adjustment`) is the one-call
 entry point. The stages, each a module: :mod:`.observations` and :mod:`.problem` (the arrays),
 :mod:`.build` (checks, grouping, initial points, priors), :mod:`.solve` (the pure, jittable,
-vmappable solve; :mod:`.schur` its descent, :mod:`.covariance` the cofactors and singularity
+vmappable solve; :mod:`.lm` its solver, :mod:`.schur` the steps' linear algebra, :mod:`.batch`
+and :mod:`.lanes` many problems in one call, :mod:`.covariance` the cofactors and singularity
 test, :mod:`.diagnose` the host-side naming of undetermined unknowns), :mod:`.result`,
 :mod:`.report`, :mod:`.export`; :mod:`.config` the solver settings, :mod:`.errors` the errors
 and :class:`RESULTS`. The functions ``build`` and ``solve`` live in their modules

@@ -2,10 +2,13 @@
 
 Each problem has its own models, measurements, control and priors, but the same sparsity (the
 same images, points and observation pattern: e.g. 10 000 scenes each bias-adjusted with its 9
-GCPs, or Monte-Carlo draws of one block). :func:`solve_batch` stacks them leaf-wise and runs
-:func:`~jaxgeo.bundle.solve.solve` over them with ``jax.lax.map`` in vmapped chunks of
-``chunk`` problems: a chunk runs until its slowest member converges (a vmapped while-loop), so
-chunks confine stragglers and bound memory. The small factorisations are LAPACK-free
+GCPs, or Monte-Carlo draws of one block). :func:`solve_batch` stacks them leaf-wise and
+solves them as a queue over ``chunk`` vmapped lanes (:mod:`~jaxgeo.bundle.lanes`): a lane
+takes the next problem once its own has converged, so that a straggler holds up one lane, not
+a chunk; the statistics of the solutions (covariance, redundancy numbers) follow in vmapped
+chunks of ``chunk`` problems. The iterates, results and step counts are those of
+:func:`~jaxgeo.bundle.solve.solve` on each problem (not its implicit derivative: vmap ``solve``
+to differentiate). The small factorisations are LAPACK-free
 (:mod:`~jaxgeo.bundle.factor`), which removes the hang of >= 1000 vmapped problems in jaxlib's
 batched LAPACK; problems whose reduced system is larger (LAPACK) run one at a time. With
 several local devices (``jax.local_device_count() > 1``) the problems are sharded over them
@@ -26,11 +29,14 @@ import equinox as eqx
 import jax
 import jax.numpy as jnp
 import numpy as np
+import optimistix as optx
 
 from .config import DEFAULT_SOLVER, SolverConfig
+from .errors import RESULTS
 from .factor import UNROLL_MAX
+from .lanes import run_queue
 from .problem import Problem
-from .solve import Solution, solve
+from .solve import Solution, finish, setup, solve
 
 DEFAULT_CHUNK = 512
 """Problems per vmapped chunk of :func:`solve_batch`."""
@@ -100,11 +106,29 @@ def _solve_stacked(stacked: Problem, solver: SolverConfig, chunk: int, mesh) -> 
     structure = stacked.structure
     dyn, static = eqx.partition(_without_structure(stacked), eqx.is_array)
 
+    def problem(d):
+        return _with_structure(eqx.combine(d, static), structure)
+
     def one(d):
-        return solve(_with_structure(eqx.combine(d, static), structure), solver)
+        return solve(problem(d), solver)
+
+    def make(d):
+        st = setup(problem(d), solver)
+        return st.optimiser, st.y
 
     def run(d):  # the problems of one device (all of them without a mesh)
-        return jax.lax.map(one, d, batch_size=chunk)
+        if solver.method == "dense":
+            return jax.lax.map(one, d, batch_size=chunk)
+        # a queue over ``chunk`` vmapped lanes: a problem that converges early frees its lane
+        y, code, steps, weights = run_queue(make, d, lanes=chunk, max_steps=solver.max_steps)
+        result = RESULTS.promote(jax.tree.map(lambda _: code, optx.RESULTS.successful))
+
+        def fin(args):
+            d1, y1, r1, s1, w1 = args
+            p = problem(d1)
+            return finish(p, solver, setup(p, solver), y1, r1, s1, w1)
+
+        return jax.lax.map(fin, (d, y, result, steps, weights), batch_size=chunk)
 
     if mesh is None:
         return run(dyn)

@@ -45,7 +45,8 @@ class SolverConfig(eqx.Module):
             the robust objective itself converges to it (to ``tol``) whatever this is.
         tol: stop when the remaining Gauss-Newton step is below ``tol`` of its standard
             deviation (``"dense"``: optimistix' rtol = atol = ``tol``); >= 0.
-        max_steps: solver steps at most (>= 1; a robust loss' least-squares start counts too).
+        max_steps: solver steps at most, in all (>= 1; a robust loss' least-squares start and
+            reweighting count too).
         blunder_k: flag observations whose standardised residual exceeds this (> 0).
         remove_blunders: data snooping (:mod:`jaxgeo.bundle.snooping`): remove the flagged
             observations (the worst first) and re-solve until none is flagged (default); with
@@ -57,7 +58,7 @@ class SolverConfig(eqx.Module):
     loss: Loss = eqx.field(static=True, default="cauchy")
     loss_scale: float = eqx.field(static=True, default=3.0)
     tol: float = eqx.field(static=True, default=1e-6)
-    max_steps: int = eqx.field(static=True, default=50)
+    max_steps: int = eqx.field(static=True, default=100)
     blunder_k: float = eqx.field(static=True, default=BLUNDER_K)
     irls_iterations: int = eqx.field(static=True, default=20)
     irls_tol: float = eqx.field(static=True, default=1e-2)
@@ -88,5 +89,5 @@ class SolverConfig(eqx.Module):
 
 
 DEFAULT_SOLVER = SolverConfig()
-"""The default settings: Levenberg-Marquardt, Cauchy loss at 3 sigma (IRLS), ``tol`` 1e-6, 50
+"""The default settings: Levenberg-Marquardt, Cauchy loss at 3 sigma (IRLS), ``tol`` 1e-6, 100
 steps per solve, gross errors removed by data snooping."""

@@ -323,6 +323,10 @@ class StructuredGaussNewton(optx.AbstractLeastSquaresSolver):
             )
         dc_step, dp_step, result = self._step(step_size, blocks, dc, dp)
         result = optx.RESULTS.where(failed, optx.RESULTS.nonlinear_max_steps_reached, result)
+        # a non-finite cost where a point is accepted regardless (the start, a reweighting):
+        # non-finite measurements or models; nothing after it could be trusted
+        bad = accept & ~jnp.isfinite(cost_eval)
+        result = optx.RESULTS.where(bad, optx.RESULTS.nonfinite, result)
         y_eval = (
             tuple(a - b for a, b in zip(y[0], split_params(dc_step, s), strict=True)),
             y[1] - dp_step,

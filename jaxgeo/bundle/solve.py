@@ -25,7 +25,7 @@ from .band import Band
 from .config import DEFAULT_SOLVER, SolverConfig
 from .covariance import cofactors, undetermined_unknowns
 from .errors import RESULTS
-from .lm import Reweighting, StructuredGaussNewton
+from .lm import Reweighting, StructuredGaussNewton, Weights
 from .loss import irls_weights, robust
 from .problem import Problem
 from .schur import (
@@ -147,10 +147,11 @@ class Solution(eqx.Module):
             determined.
         cost: sum of squared weighted residuals at the solution.
         s0: a posteriori standard deviation of unit weight (NaN without redundancy).
-        result: :class:`~jaxgeo.bundle.errors.RESULTS`: ``successful``, ``undetermined`` (some
-            unknowns not determined; takes precedence), ``not_converged`` (maximum number of
-            steps, or IRLS weights still changing), or optimistix' own (``nonfinite``...);
-            ``num_steps``: solver steps taken (all IRLS solves).
+        result: :class:`~jaxgeo.bundle.errors.RESULTS`: ``successful``, ``nonfinite``
+            (non-finite measurements, models or cost: takes precedence), ``undetermined``
+            (some unknowns not determined), ``not_converged`` (maximum number of steps, or
+            IRLS weights still changing), or optimistix' own; ``num_steps``: solver steps
+            taken (the reweighting's included).
         weight_image, weight_ground: ``(M,)``, ``(c,)`` IRLS weights ``rho'(|r|^2)`` at the
             solution (1 for ``"l2"``; where the reweighting failed, its last ones);
             ``cost``, ``s0``, the covariance and redundancy numbers are those of the problem
@@ -285,6 +286,55 @@ def solve(
     error with the :class:`~jaxgeo.bundle.errors.RESULTS` message) on any result other than
     ``successful``; under ``vmap`` each problem has its own result.
     """
+    st = setup(
+        problem,
+        solver,
+        removed_image=removed_image,
+        removed_ground=removed_ground,
+        irls_limit=irls_limit,
+        start=start,
+        verbose=verbose,
+    )
+    if st.optimiser is None:
+        y, result, steps = _dense(st.args, st.y, solver, verbose)
+        weights = None
+    else:
+        sol = optx.least_squares(
+            residuals, st.optimiser, st.y, args=st.args, max_steps=solver.max_steps, throw=False
+        )
+        y, result, steps = sol.value, RESULTS.promote(sol.result), sol.stats["num_steps"]
+        weights = sol.state.weights
+    out = finish(problem, solver, st, y, result, steps, weights)
+    if throw:
+        out = out.result.error_if(out, out.result != RESULTS.successful)
+    return out
+
+
+class Setup(eqx.Module):
+    """What :func:`solve` prepares before its iterations (:func:`setup`) and needs after them
+    (:func:`finish`): the solver (``None`` for ``method="dense"``), the starting unknowns, the
+    objective's ``args``, the removed observations and their weight factors."""
+
+    optimiser: StructuredGaussNewton | None
+    y: Any
+    args: Any
+    removed_image: Bool[Array, " M"]
+    removed_ground: Bool[Array, " c"]
+    base_image: Float[Array, " M"]
+    base_ground: Float[Array, " c"]
+
+
+def setup(
+    problem: Problem,
+    solver: SolverConfig = DEFAULT_SOLVER,
+    *,
+    removed_image: Bool[Array, " M"] | None = None,
+    removed_ground: Bool[Array, " c"] | None = None,
+    irls_limit: Int[Array, ""] | None = None,
+    start: tuple[Any, Float[Array, " M"], Float[Array, " c"]] | None = None,
+    verbose: bool = False,
+) -> Setup:
+    """The solver, start and objective of :func:`solve` (same arguments)."""
     s = problem.structure
     loss, c = solver.loss, float(solver.loss_scale)
     m, n_g = s.obs_point.shape[0], problem.ground.point.shape[0]
@@ -292,24 +342,21 @@ def solve(
     rem_g = jnp.zeros(n_g, bool) if removed_ground is None else jnp.asarray(removed_ground)
     base_i = jnp.where(rem_i, REMOVED_WEIGHT**2, 1.0)
     base_g = jnp.where(rem_g, REMOVED_WEIGHT**2, 1.0)
-    y0 = initial_unknowns(problem)
     limit = (
         solver.irls_iterations
         if irls_limit is None
         else jnp.minimum(irls_limit, solver.irls_iterations)
     )
     ones_i, ones_g = jnp.ones(m), jnp.ones(n_g)
-    y_s, wi_s, wg_s = (y0, ones_i, ones_g) if start is None else start
+    y_s, wi_s, wg_s = (initial_unknowns(problem), ones_i, ones_g) if start is None else start
     y_s, wi_s, wg_s = jax.lax.stop_gradient((y_s, wi_s, wg_s))
     base = _weighted(problem, base_i, base_g)  # removed observations weighted out
     scales = _scales(problem, solver, c)
     # the objective: sum rho(|r|^2) of the image and ground residuals (optimistix'
     # implicit derivative is that of the M-estimate)
     args = (base, scales, loss, c)
-    if solver.method == "dense":
-        y, result, steps = _dense(args, y_s, solver, verbose)
-        w_i, w_g = ones_i, ones_g
-    else:
+    optimiser = None
+    if solver.method != "dense":
         robust_ = None if loss == "l2" else (loss, c)
         reweighting = None
         if robust_ is not None:
@@ -327,12 +374,34 @@ def solve(
             robust=robust_,
             reweighting=reweighting,
         )
-        sol = optx.least_squares(
-            residuals, optimiser, y_s, args=args, max_steps=solver.max_steps, throw=False
-        )
-        y, result, steps = sol.value, RESULTS.promote(sol.result), sol.stats["num_steps"]
-        weights = sol.state.weights
-        w_i, w_g = (ones_i, ones_g) if weights is None else (weights.img, weights.gnd)
+    return Setup(optimiser, y_s, args, rem_i, rem_g, base_i, base_g)
+
+
+def finish(
+    problem: Problem,
+    solver: SolverConfig,
+    st: Setup,
+    y,
+    result: RESULTS,
+    steps: Int[Array, ""],
+    weights: Weights | None,
+) -> Solution:
+    """The :class:`Solution` at the unknowns ``y`` where the iterations of ``st`` ended (with
+    ``result`` after ``steps``; ``weights`` the reweighting's last, or ``None``): weights at the
+    solution, covariance, redundancy numbers, s0, and the result (not converged, undetermined)."""
+    s = problem.structure
+    loss, c = solver.loss, float(solver.loss_scale)
+    scales = st.args[1]
+    rem_i, rem_g, base_i, base_g = (
+        st.removed_image,
+        st.removed_ground,
+        st.base_image,
+        st.base_ground,
+    )
+    if weights is None:
+        w_i, w_g = jnp.ones_like(base_i), jnp.ones_like(base_g)
+    else:
+        w_i, w_g = weights.img, weights.gnd
     ok = result == RESULTS.successful
     plain_img, plain_gnd, _ = residuals(y, (problem, scales, "l2", c))
     if loss != "l2":
@@ -368,7 +437,8 @@ def solve(
     result = RESULTS.where(
         result == RESULTS.nonlinear_max_steps_reached, RESULTS.not_converged, result
     )
-    result = RESULTS.where(jnp.any(bad_params) | jnp.any(bad_points), RESULTS.undetermined, result)
+    undetermined = (jnp.any(bad_params) | jnp.any(bad_points)) & (result != RESULTS.nonfinite)
+    result = RESULTS.where(undetermined, RESULTS.undetermined, result)
     out = Solution(
         theta=thetas(problem, y[0], scales),
         ground=problem.ground_points(y[1]),
@@ -389,8 +459,6 @@ def solve(
         redundancy=red,
         unknowns=y,
     )
-    if throw:
-        out = result.error_if(out, result != RESULTS.successful)
     return out
 
 
@@ -409,14 +477,10 @@ def _scales(problem: Problem, solver: SolverConfig, c: float):
 def _dense(args, y, solver: SolverConfig, verbose: bool):
     """optimistix' own Levenberg-Marquardt with a dense QR (``method="dense"``): least squares,
     then (a robust loss) the robust objective from there, no reweighting."""
-    optimiser = optx.LevenbergMarquardt(
-        rtol=solver.tol, atol=solver.tol, linear_solver=lx.QR(), verbose=verbose
-    )
+    lm = optx.LevenbergMarquardt(solver.tol, solver.tol, linear_solver=lx.QR(), verbose=verbose)
 
     def run(a, y):
-        sol = optx.least_squares(
-            residuals, optimiser, y, args=a, max_steps=solver.max_steps, throw=False
-        )
+        sol = optx.least_squares(residuals, lm, y, a, max_steps=solver.max_steps, throw=False)
         return sol.value, RESULTS.promote(sol.result), sol.stats["num_steps"]
 
     problem, scales, loss, c = args

@@ -120,7 +120,7 @@ def register(sub) -> None:
         metavar="M",
         help="sigma of the DEM tie heights (m, default 10)",
     )
-    parser.add_argument("--max-steps", type=int, default=50, help="solver steps (default 50)")
+    parser.add_argument("--max-steps", type=int, default=100, help="solver steps (default 100)")
     parser.add_argument("--json", action="store_true", help="print one JSON object")
     parser.add_argument("--out", metavar="DIR", help="write adjusted models and the report here")
     parser.add_argument(

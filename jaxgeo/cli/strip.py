@@ -138,7 +138,7 @@ def register(sub) -> None:
     )
     ties.add_argument("--method", choices=("lm", "gn"), default="lm", help="level-1 solver")
     ties.add_argument(
-        "--max-steps", type=int, default=50, metavar="N", help="level-1 solver steps (50)"
+        "--max-steps", type=int, default=100, metavar="N", help="level-1 solver steps (100)"
     )
     gross = parser.add_argument_group("gross errors (both levels, as jaxgeo adjust)")
     gross.add_argument(

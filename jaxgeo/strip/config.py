@@ -216,7 +216,7 @@ class RefitConfig(eqx.Module):
                               Setting("refit.h_range"))  # fmt: skip
 
 
-STRIP_SOLVER = SolverConfig(method="lm", loss="cauchy", max_steps=50, tol=1e-6)
+STRIP_SOLVER = SolverConfig(method="lm", loss="cauchy", max_steps=100, tol=1e-6)
 """The solver of the strip, :func:`jaxgeo.adjust`'s defaults: Cauchy loss at 3 a priori sigmas
 (IRLS) on the image measurements and GCP coordinates, then data snooping (Baarda's w-test,
 iterated) removing the flagged observations and re-solving (``remove_blunders=False``: flag

@@ -22,6 +22,7 @@ MODULES = (
     "errors",
     "export",
     "factor",
+    "lanes",
     "lm",
     "loss",
     "observations",

@@ -1,0 +1,56 @@
+"""The batch queue (``solve_batch``: lanes that take the next problem once theirs terminates)
+gives each problem what its own solve gives: same unknowns, result, steps and weights."""
+
+import equinox as eqx
+import jax.numpy as jnp
+import numpy as np
+import pytest
+
+from jaxgeo.bundle import RESULTS, SolverConfig, with_bias
+from jaxgeo.bundle.batch import solve_batch, with_xy_batch
+from jaxgeo.bundle.build import build
+from jaxgeo.bundle.solve import solve
+from tests.bundle.conftest import make_block
+
+
+@pytest.fixture(scope="module")
+def batch(ventoux_pair):
+    """Eleven noisy copies of a shift-bias pair: clean ones, some with a gross error (more
+    reweighting steps: stragglers), one with a non-finite measurement (fails at once)."""
+    small = make_block(*ventoux_pair, n=8, n_gcp=4, seed=5)
+    problem = build(with_bias(small.models, "shift"), small.obs, small.ground).problem
+    xy0 = np.concatenate([np.asarray(ob.xy) for ob in problem.images])
+    rng = np.random.default_rng(3)
+    xy = xy0 + rng.normal(0.0, 0.3, (11, *xy0.shape))
+    for k, size in ((2, 40.0), (5, 15.0), (6, 80.0), (9, 25.0)):
+        xy[k, 3 * k % xy0.shape[0]] += size
+    xy[7, 1, 0] = np.nan
+    return problem, xy
+
+
+@pytest.mark.parametrize("loss", ["cauchy", "l2"])
+def test_queue_gives_each_problem_its_own_solution(batch, loss):
+    problem, xy = batch
+    solver = SolverConfig(loss=loss)
+    # three lanes for eleven problems: lanes are refilled many times, out of order
+    got = solve_batch(with_xy_batch(problem, xy), solver, chunk=3)
+    one = eqx.filter_jit(lambda p: solve(p, solver))
+    steps = []
+    for k in range(xy.shape[0]):
+        want = one(problem.with_xy(jnp.asarray(xy[k])))
+        assert int(got.result._value[k]) == int(want.result._value), k
+        assert int(got.num_steps[k]) == int(want.num_steps), k
+        steps.append(int(want.num_steps))
+        if not bool(want.result == RESULTS.successful):
+            continue
+        np.testing.assert_allclose(got.theta[0][k], want.theta[0], rtol=1e-9, atol=1e-10)
+        np.testing.assert_allclose(got.ground[k], want.ground, rtol=1e-12, atol=1e-10)
+        np.testing.assert_allclose(got.weight_image[k], want.weight_image, atol=1e-9)
+        np.testing.assert_allclose(got.s0[k], want.s0, rtol=1e-9)
+    codes = np.asarray(got.result._value)
+    # the non-finite measurement is reported as such, by the single solve and the queue alike
+    # (it was "successful" with the parameters left at their start, or "undetermined")
+    assert codes[7] == RESULTS.nonfinite._value
+    assert np.sum(codes == RESULTS.successful._value) == 10
+    if loss == "cauchy":  # the gross errors make stragglers: the lanes do not finish together
+        assert len(set(steps)) > 2
