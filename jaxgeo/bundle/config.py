@@ -41,8 +41,8 @@ class SolverConfig(eqx.Module):
             clean observation is rarely beyond it).
         irls_iterations: reweighted solves at most after the least-squares start (>= 1).
         irls_tol: stop reweighting when no weight changes by more than this (> 0; default
-            1e-2). The reweighting only brings the solve near the M-estimate: a last solve of
-            the robust objective itself converges to it (to ``tol``) whatever this is.
+            0.05). The reweighting only brings the solve near the M-estimate: the last phase,
+            on the robust objective itself, converges to it (to ``tol``) whatever this is.
         tol: stop when the remaining Gauss-Newton step is below ``tol`` of its standard
             deviation (``"dense"``: optimistix' rtol = atol = ``tol``); >= 0.
         max_steps: solver steps at most, in all (>= 1; a robust loss' least-squares start and
@@ -61,7 +61,7 @@ class SolverConfig(eqx.Module):
     max_steps: int = eqx.field(static=True, default=100)
     blunder_k: float = eqx.field(static=True, default=BLUNDER_K)
     irls_iterations: int = eqx.field(static=True, default=20)
-    irls_tol: float = eqx.field(static=True, default=1e-2)
+    irls_tol: float = eqx.field(static=True, default=5e-2)
     remove_blunders: bool = eqx.field(static=True, default=True)
     snooping_rounds: int = eqx.field(static=True, default=30)
 
