@@ -174,3 +174,44 @@ def test_metres_per_unit_batches_and_numpy_twin(batch):
 def test_metres_per_unit_gradients():
     g = jnp.array([[7.2, 44.1, 1500.0], [-70.0, -33.5, 20.0]])
     check_grads(geodesy.metres_per_unit, (g,), order=2, modes=("fwd", "rev"), eps=1e-3)
+
+
+# ------------------------------------------------------------------------ ECEF near a point
+
+
+@settings(max_examples=10, deadline=None, derandomize=True)
+@given(seed=st.integers(0, 2**31 - 1))
+def test_ecef_near_a_point_equals_ecef_to_rounding(seed):
+    """The trigonometry-free ECEF of a point given by its offset from a reference equals
+    ``geodetic_to_ecef`` of the point to rounding up to ``OFFSET_MAX_RAD`` (and the series
+    alone, the sines and cosines, to 4e-16); 1e-12 relative at 1 rad."""
+    rng = np.random.default_rng(seed)
+    a0 = rng.uniform(-np.pi, np.pi, N_POINTS)
+    lim = geodesy.OFFSET_MAX_RAD
+    d = rng.uniform(-lim, lim, N_POINTS)
+    s, c = geodesy.sincos_near(np.sin(a0), np.cos(a0), d)
+    np.testing.assert_allclose(s, np.sin(a0 + d), rtol=0, atol=4e-16)
+    np.testing.assert_allclose(c, np.cos(a0 + d), rtol=0, atol=4e-16)
+    far = rng.uniform(-1.0, 1.0, N_POINTS)
+    s, _ = geodesy.sincos_near(np.sin(a0), np.cos(a0), far)
+    np.testing.assert_allclose(s, np.sin(a0 + far), rtol=0, atol=1e-12)
+    ref = _random_geodetic(rng, N_POINTS)
+    offset = rng.uniform(-lim, lim, (N_POINTS, 2))
+    point = ref + np.concatenate([np.rad2deg(offset), np.zeros((N_POINTS, 1))], axis=1)
+    point[:, 1] = np.clip(point[:, 1], -90.0, 90.0)
+    offset[:, 1] = np.deg2rad(point[:, 1] - ref[:, 1])
+    near = geodesy.geodetic_to_ecef_near(geodesy.lonlat_trig(ref), offset, point[:, 2])
+    # 2e-8 m: the offsets rounded to degrees in ``point`` (1e-14 deg ~ 1e-9 m) and ECEF's ulp
+    np.testing.assert_allclose(near, geodesy.geodetic_to_ecef(point), rtol=0, atol=2e-8)
+
+
+def test_ecef_near_a_point_gradients():
+    """First order (forward and reverse) against finite differences: second differences of
+    6e6 m coordinates are rounding noise at any step."""
+    trig0 = geodesy.lonlat_trig(jnp.array([[7.05, 43.7, 0.0], [-120.3, -42.9, 0.0]]))
+    offset = jnp.array([[1e-4, -3e-5], [0.15, -0.18]])
+    h = jnp.array([120.0, 1260.0])
+    check_grads(
+        geodesy.geodetic_to_ecef_near, (trig0, offset, h), order=1, modes=("fwd", "rev"),
+        eps=1e-4, atol=1e-5, rtol=1e-5,
+    )  # fmt: skip

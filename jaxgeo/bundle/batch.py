@@ -34,6 +34,7 @@ import optimistix as optx
 from .config import DEFAULT_SOLVER, SolverConfig
 from .errors import RESULTS
 from .factor import UNROLL_MAX
+from .ground import with_frames
 from .lanes import run_queue
 from .problem import Problem
 from .solve import Solution, finish, setup, solve
@@ -105,6 +106,13 @@ def _with_structure(p: Problem, structure) -> Problem:
 def _solve_stacked(stacked: Problem, solver: SolverConfig, chunk: int, mesh) -> Solution:
     structure = stacked.structure
     dyn, static = eqx.partition(_without_structure(stacked), eqx.is_array)
+    if solver.method != "dense":
+        # the ground residuals' frames once per problem, not at every step of a lane
+        def framed(d):
+            p = with_frames(_with_structure(eqx.combine(d, static), structure))
+            return _without_structure(p)
+
+        dyn, static = eqx.partition(eqx.filter_vmap(framed)(dyn), eqx.is_array)
 
     def problem(d):
         return _with_structure(eqx.combine(d, static), structure)

@@ -37,3 +37,16 @@ class GroundObs(eqx.Module):
     point: Int[Array, " c"]
     lonlath: Float[Array, "c 3"]
     weight: Float[Array, "c 3"]
+    frame: GroundFrame | None = None
+    """Precomputed trigonometry of the residuals (:func:`~.ground.with_frames`), or ``None``."""
+
+
+class GroundFrame(eqx.Module):
+    """What the ground residuals of :mod:`~.ground` need that does not change during a solve:
+    ``trig0`` (c, 4) ``(sin lon, cos lon, sin lat, cos lat)`` of each observed point's origin,
+    ``rotation`` (c, 3, 3) the ENU rotation at each measured ``lonlath``, ``ecef`` (c, 3) its
+    ECEF position (m)."""
+
+    trig0: Float[Array, "c 4"]
+    rotation: Float[Array, "c 3 3"]
+    ecef: Float[Array, "c 3"]

@@ -20,11 +20,11 @@ import numpy as np
 import optimistix as optx
 from jaxtyping import Array, Bool, Float, Int
 
-from .. import geodesy
 from .band import Band
 from .config import DEFAULT_SOLVER, SolverConfig
 from .covariance import cofactors, undetermined_unknowns
 from .errors import RESULTS
+from .ground import beyond_offset, enu_residuals, with_frames
 from .lm import Reweighting, StructuredGaussNewton, Weights
 from .loss import irls_weights, robust
 from .problem import Problem
@@ -110,11 +110,7 @@ def residuals(y, args):
                 per_obs, ground[ob.point], ob.xy, ob.weight
             )
         img.append(robust(r, loss, loss_scale))
-    gobs = problem.ground
-    gnd = jax.vmap(lambda g, o, w: geodesy.geodetic_to_enu(g, o) * w)(
-        ground[gobs.point], gobs.lonlath, gobs.weight
-    )
-    gnd = robust(gnd, loss, loss_scale)
+    gnd = robust(enu_residuals(problem, u, ground) * problem.ground.weight, loss, loss_scale)
     prior = []
     for grp, blocks, th, mean, wt in zip(
         problem.groups, stacked, theta, problem.prior_mean, problem.prior_weight, strict=True
@@ -351,6 +347,8 @@ def setup(
     ones_i, ones_g = jnp.ones(m), jnp.ones(n_g)
     y_s, wi_s, wg_s = (initial_unknowns(problem), ones_i, ones_g) if start is None else start
     y_s, wi_s, wg_s = jax.lax.stop_gradient((y_s, wi_s, wg_s))
+    if problem.ground.frame is None:  # once per solve, not at every evaluation
+        problem = with_frames(problem)
     base = _weighted(problem, base_i, base_g)  # removed observations weighted out
     scales = _scales(problem, solver, c)
     # the objective: sum rho(|r|^2) of the image and ground residuals (optimistix'
@@ -440,6 +438,8 @@ def finish(
     )
     undetermined = (jnp.any(bad_params) | jnp.any(bad_points)) & (result != RESULTS.nonfinite)
     result = RESULTS.where(undetermined, RESULTS.undetermined, result)
+    far = beyond_offset(problem, y[1]) & (result != RESULTS.nonfinite)
+    result = RESULTS.where(far, RESULTS.outside_domain, result)
     out = Solution(
         theta=thetas(problem, y[0], scales),
         ground=problem.ground_points(y[1]),

@@ -57,4 +57,6 @@ def test_batch_distributed_two_processes_equals_one():
         out = _last_json(stdout)
         assert out["processes"] == 2
         assert out["successful"] == 8 and out["results_equal"]
-        assert out["theta"] <= 1e-12
+        # each process runs its 4 problems on 4 lanes, one process its 8 on 8: as with the
+        # devices above, another vectorisation (rounding at 1e-16), solves within tol
+        assert out["theta"] <= 1e-9

@@ -22,6 +22,7 @@ MODULES = (
     "errors",
     "export",
     "factor",
+    "ground",
     "lanes",
     "lm",
     "loss",
