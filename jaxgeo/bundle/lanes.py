@@ -85,7 +85,7 @@ def run_queue(
         y, state, _ = solver.step(None, y, None, _OPTIONS, state, _TAGS)
         done, result = solver.terminate(None, y, None, _OPTIONS, state, _TAGS)
         code = jnp.where(_finite(y), result._value, optx.RESULTS.nonfinite._value)
-        return y, state, done, code
+        return y, state, done, code, solver.solution(y, state)
 
     first = jnp.arange(lanes)
     d0, y0, state0 = start(first)
@@ -111,12 +111,12 @@ def run_queue(
 
     def body(carry):
         index, active, d, y, state, steps, counter, out = carry
-        y, state, done, code = jax.vmap(lane_step)(d, y, state)
+        y, state, done, code, answer = jax.vmap(lane_step)(d, y, state)
         steps = steps + 1
         stop = done | (code != ok) | (steps >= max_steps)
         code = jnp.where(~done & (code == ok) & (steps >= max_steps), ran_out, code)
         finished = active & stop
-        out = _put(out, index, (y, code, steps, state.weights), finished)
+        out = _put(out, index, (answer, code, steps, state.weights), finished)
         active = active & ~finished
         args = (index, active, d, y, state, steps, counter)
         idle = jnp.sum(~active)

@@ -78,3 +78,20 @@ def test_reused_undamped_step_reaches_the_same_solution(small, monkeypatch, negl
         got, want = res.parameters(name), ref.parameters(name)
         for key, (value, sigma) in want.items():
             assert abs(got[key][0] - value) <= 1e-6 * sigma, (name, key)
+
+
+def test_extrapolated_last_step_gives_the_same_answer_earlier(small, monkeypatch):
+    """Once the decrement contracts fast enough (``lm.CONTRACTION``), the pending undamped
+    step is the answer without its evaluation: the same parameters as the solve that evaluates
+    it (robust default: its final phase converges quadratically), in fewer steps."""
+    fast = adjust(small.models, small.obs, small.ground, bias="affine")
+    monkeypatch.setattr(lm, "CONTRACTION", 0.0)  # never extrapolate
+    jax.clear_caches()  # the constant is read when the solve is traced
+    slow = adjust(small.models, small.obs, small.ground, bias="affine")
+    jax.clear_caches()
+    assert fast.converged and slow.converged
+    assert fast.num_steps < slow.num_steps
+    for name in small.models:
+        got, want = fast.parameters(name), slow.parameters(name)
+        for key, (value, sigma) in want.items():
+            assert abs(got[key][0] - value) <= 1e-6 * sigma, (name, key)
