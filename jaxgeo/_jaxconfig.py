@@ -1,4 +1,4 @@
-"""JAX set-up shared by the library and the CLI: float64 and the persistent compilation cache.
+"""JAX set-up shared by the library and the CLI: float64, vector width, the compilation cache.
 
 :func:`configure` runs when ``jaxgeo`` is imported, before any submodule imports jax. When jax is
 not yet imported it only sets environment variables (jax reads them when it starts, so
@@ -35,6 +35,12 @@ MIN_COMPILE_TIME_S = 0.0
 """Cache every program, however fast it compiled (jax's default: 1 s)."""
 MIN_ENTRY_BYTES = 0
 """Cache every program, however small (jax's default: 0; set explicitly)."""
+VECTOR_FLAG = "--xla_cpu_prefer_vector_width=512"
+"""XLA flag added to ``XLA_FLAGS`` unless the user's own set ``xla_cpu_prefer_vector_width``:
+XLA's CPU code uses 256-bit vectors by default even where the CPU has 512-bit ones (AVX-512); a
+1e6-point RPC projection takes 1.6 ms with it against 2.1 ms without (2-core AVX-512 CPU, same
+results to the bit). Ignored on CPUs without AVX-512 and on other backends; jax reads it when
+its CPU backend starts, so it has no effect in a process that used jax before importing jaxgeo."""
 
 
 def default_cache_dir() -> Path:
@@ -84,8 +90,17 @@ def _forget_inherited() -> None:
     os.environ.pop(MARK_ENV, None)
 
 
+def _vector_width() -> None:
+    """Add :data:`VECTOR_FLAG` to ``XLA_FLAGS`` unless the user's flags set the width."""
+    flags = os.environ.get("XLA_FLAGS", "")
+    if "xla_cpu_prefer_vector_width" not in flags:
+        os.environ["XLA_FLAGS"] = f"{flags} {VECTOR_FLAG}".strip()
+
+
 def configure() -> None:
-    """float64 on; the persistent compilation cache on (unless off or set by the user)."""
+    """float64 on; 512-bit vectors for XLA's CPU code; the persistent compilation cache on
+    (unless off or set by the user)."""
+    _vector_width()
     jax = sys.modules.get("jax")
     if jax is None:
         _forget_inherited()

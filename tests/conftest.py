@@ -18,7 +18,8 @@ import pathlib
 # tests/models/test_bias.py + tests/bundle/test_cartosat.py from 199 s to 148 s (-25 %) with the
 # same results to every tolerance asserted. XLA's legacy CPU emitters (no fusion emitters)
 # compile the adjustment's program 25 % faster again (the demo's robust solve: 3.7 s -> 2.7 s).
-# The library itself keeps XLA's defaults; a flag the caller already set in XLA_FLAGS wins.
+# The library itself only adds the vector width (jaxgeo._jaxconfig.VECTOR_FLAG); a flag the
+# caller already set in XLA_FLAGS wins.
 _SUITE_XLA_FLAGS = {
     "xla_cpu_multi_thread_eigen": "false",
     "xla_backend_optimization_level": "0",

@@ -12,7 +12,8 @@ PROBE = (
     "import json, jaxgeo, jax; jax.jit(lambda x: x + 1)(1.0).block_until_ready(); "
     "print(json.dumps({'dir': jax.config.jax_compilation_cache_dir, "
     "'x64': jax.config.jax_enable_x64, "
-    "'min_s': jax.config.jax_persistent_cache_min_compile_time_secs}))"
+    "'min_s': jax.config.jax_persistent_cache_min_compile_time_secs, "
+    "'xla_flags': __import__('os').environ.get('XLA_FLAGS')}))"
 )
 
 
@@ -33,6 +34,12 @@ def test_cache_on_by_default_in_the_user_cache_dir(tmp_path):
     assert out["dir"] == str(tmp_path / "xdg" / "jaxgeo" / "jax")
     assert out["x64"] and out["min_s"] == 0.0
     assert any((tmp_path / "xdg" / "jaxgeo" / "jax").glob("*-cache"))  # the program is cached
+
+
+def test_512_bit_vectors_unless_the_user_chose_a_width(tmp_path):
+    assert _probe(tmp_path, XLA_FLAGS="")["xla_flags"] == "--xla_cpu_prefer_vector_width=512"
+    mine = "--xla_cpu_prefer_vector_width=256 --xla_cpu_multi_thread_eigen=false"
+    assert _probe(tmp_path, XLA_FLAGS=mine)["xla_flags"] == mine
 
 
 def test_cache_dir_overridable_and_off(tmp_path):

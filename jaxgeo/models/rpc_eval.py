@@ -10,7 +10,8 @@ Called with concrete values (numpy arrays, lists, or jax arrays outside any tran
 no ``eqx.filter_jit``): small calls pay ~10 us instead of tracing every time, and numpy inputs
 are processed in chunks of ``CHUNK`` points (padded to a power of two, so that every size
 reuses a few compiled programs) written into one numpy output, which keeps the working set in
-cache and the output free of XLA's fresh-allocation page faults at 1e7 points.
+cache and the output free of XLA's fresh-allocation page faults at 1e7 points. A projection of
+a size used before runs whole instead, with no copy in or out (:func:`.host.call_exact`).
 """
 
 from __future__ import annotations
@@ -21,6 +22,8 @@ from typing import TYPE_CHECKING
 import jax
 import jax.numpy as jnp
 import numpy as np
+
+from .host import call_exact
 
 if TYPE_CHECKING:
     from .base import AbstractSensorModel
@@ -76,8 +79,7 @@ def project_lph(rpc, lon, lat, h):
     ] * y
 
 
-@functools.partial(jax.jit, static_argnums=0)
-def _project_kernel(treedef, leaves, ground):
+def _project_body(treedef, leaves, ground):
     rpc = jax.tree.unflatten(treedef, leaves)
     # one transposing copy in and one out: the polynomials then run over contiguous lon, lat, h
     # rows (a vectorised loop); over the strided columns of (n, 3), or writing an interleaved
@@ -85,6 +87,9 @@ def _project_kernel(treedef, leaves, ground):
     g = ground.reshape(-1, 3).T
     x, y = project_lph(rpc, g[0], g[1], g[2])
     return jnp.stack([x, y]).T.reshape(*ground.shape[:-1], 2)
+
+
+_project_kernel = jax.jit(_project_body, static_argnums=0)
 
 
 @functools.partial(jax.jit, static_argnums=0)
@@ -220,7 +225,9 @@ def project_concrete(rpc, ground) -> np.ndarray | jax.Array:
     if flat.shape[0] == 0:
         return np.zeros((*batch, 2))
     treedef, leaves = _flat(rpc)
-    out = chunked(lambda a: _project_kernel(treedef, leaves, a), (flat,), flat.shape[0], 2)
+    out = call_exact(_project_body, treedef, leaves, (flat,), flat.shape[0])
+    if out is None:
+        out = chunked(lambda a: _project_kernel(treedef, leaves, a), (flat,), flat.shape[0], 2)
     return out.reshape(*batch, 2)
 
 

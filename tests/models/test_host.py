@@ -1,0 +1,92 @@
+"""``jaxgeo.models.host``: numpy in and out of a compiled kernel without copies. The exact path
+must give the chunked path's numbers, never touch the input, and hand out arrays that behave as
+the user's own."""
+
+import gc
+
+import jax
+import jax.numpy as jnp
+import numpy as np
+import pytest
+
+from jaxgeo.models import host
+
+
+def _at_offset(values: np.ndarray, offset: int) -> np.ndarray:
+    """A copy of ``values`` whose first element lies ``offset`` elements past a 64-byte
+    boundary."""
+    buf = np.empty(values.size + 16)
+    start = (-(buf.ctypes.data % 64) // 8) % 8 + offset
+    out = buf[start : start + values.size].reshape(values.shape)
+    out[...] = values
+    return out
+
+
+@pytest.mark.parametrize("offset", range(8))
+def test_aligned_flat_views_the_array_from_a_64_byte_boundary(offset):
+    a = _at_offset(np.arange(30.0).reshape(10, 3), offset)
+    assert a.ctypes.data % 64 == offset * 8
+    flat, k = host.aligned_flat(a)
+    assert k == offset and flat.ctypes.data % 64 == 0
+    np.testing.assert_array_equal(flat[k:], a.ravel())
+    assert not flat.flags.writeable
+    # jaxlib uses it in place (no copy)
+    assert jax.device_put(flat).unsafe_buffer_pointer() == flat.ctypes.data
+
+
+def test_not_eligible_inputs_are_refused():
+    a = np.arange(30.0).reshape(10, 3)
+    for bad in (a.astype(np.float32), a[:, ::2], np.asfortranarray(a), a[:0]):
+        assert not host.eligible(bad)
+    with pytest.raises(ValueError, match="float64"):
+        host.aligned_flat(a.astype(np.float32))
+
+
+def test_writable_output_outlives_its_jax_array():
+    x = jax.jit(lambda v: v * 2.0)(jnp.arange(20000.0).reshape(10000, 2))
+    expected = np.asarray(x).copy()
+    out = host.writable(x)
+    del x
+    gc.collect()
+    jax.jit(lambda v: v + 1.0)(jnp.zeros((10000, 2))).block_until_ready()  # reuse freed memory
+    np.testing.assert_array_equal(out, expected)
+    out[0, 0] = -1.0  # the user's own array
+    assert out.flags.writeable and out[0, 0] == -1.0
+
+
+@pytest.mark.parametrize("offset", [0, 3, 6])
+def test_a_size_used_again_runs_whole_with_the_same_numbers(pleiades, monkeypatch, offset):
+    rpc, _ = pleiades
+    monkeypatch.setattr(host, "EXACT_MIN", 64)
+    monkeypatch.setattr(host, "_SEEN", host.SeenSizes())
+    calls = []
+    exact = host._exact_kernel
+    monkeypatch.setattr(host, "_exact_kernel", lambda *a: calls.append(1) or exact(*a))
+    go, gs = np.asarray(rpc.ground_offset), np.asarray(rpc.ground_scale)
+    rng = np.random.default_rng(offset)
+    ground = _at_offset(go + gs * rng.uniform(-0.9, 0.9, (301, 3)), offset)
+    before = ground.copy()
+    first = rpc.project(ground)  # a new size: the chunked path
+    assert not calls
+    second = rpc.project(ground)  # used again: whole, in place
+    assert calls == [1]
+    np.testing.assert_array_equal(second, first)
+    np.testing.assert_array_equal(ground, before)  # the input is untouched
+    traced = np.asarray(jax.jit(lambda r, g: r.project(g))(rpc, ground))
+    np.testing.assert_allclose(second, traced, rtol=0, atol=1e-9)
+    # each call hands out its own writable array
+    third = rpc.project(ground)
+    third[0] = np.nan
+    assert second.flags.writeable and np.all(np.isfinite(second))
+    # a batch shape, and a strided input (copied first) give the same numbers
+    np.testing.assert_array_equal(rpc.project(ground.reshape(7, 43, 3)).reshape(-1, 2), first)
+    strided = np.repeat(ground, 2, axis=0)[::2]
+    np.testing.assert_array_equal(rpc.project(strided), first)
+    np.testing.assert_array_equal(rpc.project(strided), first)
+
+
+def test_seen_sizes_forget_the_least_recently_used():
+    seen = host.SeenSizes(limit=2)
+    assert not seen.again("a") and seen.again("a")
+    assert not seen.again("b") and not seen.again("c")  # "a" forgotten
+    assert not seen.again("a") and seen.again("c")
