@@ -1,16 +1,17 @@
 """Many independent bias adjustments in one call (``jaxgeo.bundle.batch.solve_batch``) against a
 loop of compiled single solves, same run.
 
-    python benchmarks/batch.py [--problems 10000] [--loop 200] [--bias shift] [--chunk 512]
+    python benchmarks/batch.py [--problems 10000] [--loop 200] [--bias shift] [--chunk N]
         [--loss cauchy|huber|l2]
 
 The problem is one image of the embedded demo scene (``jaxgeo demo``: the fore RPC, its 9 GCP
 measurements, GCPs as ground control) with an image-space bias; every problem gets its own
 Gaussian measurement noise (0.5 px) on the GCPs. Prints one JSON object: ``problems``,
-``jaxgeo_s`` (the batch call after compilation, best of ``--repeats``), ``loop_s`` (a Python
-loop of ``solve_jit`` over ``--loop`` problems, scaled to ``problems``: ``loop_measured``
-says how many were timed), the compile time, the solver steps per problem (mean, max: a
-vmapped chunk runs as many as its slowest problem) and how many problems converged. ``--loss``
+``chunk_max`` (``--chunk``, default jaxgeo's ``default_chunk``: 1000 lanes of balanced chunks
+for 10 000 problems), ``jaxgeo_s`` (the batch call after compilation, best of ``--repeats``),
+``loop_s`` (a Python loop of ``solve_jit`` over ``--loop`` problems, scaled to ``problems``:
+``loop_measured`` says how many were timed), the compile time, the solver steps per problem
+(mean, max) and how many problems converged. ``--loss``
 (default jaxgeo's, Cauchy): a robust loss iterates (reweighted solves), least squares takes 3
 steps on these problems.
 """
@@ -27,7 +28,7 @@ import jax
 import numpy as np
 
 import jaxgeo
-from jaxgeo.bundle.batch import solve_batch, with_xy_batch
+from jaxgeo.bundle.batch import default_chunk, solve_batch, with_xy_batch
 from jaxgeo.bundle.build import build
 from jaxgeo.bundle.config import LOSSES, SolverConfig
 from jaxgeo.bundle.errors import RESULTS
@@ -60,7 +61,7 @@ def main() -> None:
     parser.add_argument("--problems", type=int, default=10_000)
     parser.add_argument("--loop", type=int, default=200)
     parser.add_argument("--bias", default="shift")
-    parser.add_argument("--chunk", type=int, default=512)
+    parser.add_argument("--chunk", type=int, default=None)
     parser.add_argument("--repeats", type=int, default=3)
     parser.add_argument("--loss", choices=LOSSES, default=SolverConfig().loss)
     args = parser.parse_args()
@@ -102,7 +103,7 @@ def main() -> None:
                 "loop_measured": n_loop,
                 "ratio": loop_s / best,
                 "compile_s": compile_s,
-                "chunk": args.chunk,
+                "chunk_max": args.chunk or default_chunk(stacked),
                 "bias": args.bias,
                 "loss": args.loss,
                 "steps_mean": float(np.mean(np.asarray(sol.num_steps))),

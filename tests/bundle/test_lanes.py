@@ -7,6 +7,7 @@ import numpy as np
 import pytest
 
 from jaxgeo.bundle import RESULTS, SolverConfig, with_bias
+from jaxgeo.bundle import batch as batch_module
 from jaxgeo.bundle.batch import solve_batch, with_xy_batch
 from jaxgeo.bundle.build import build
 from jaxgeo.bundle.solve import solve
@@ -54,3 +55,22 @@ def test_queue_gives_each_problem_its_own_solution(batch, loss):
     assert np.sum(codes == RESULTS.successful._value) == 10
     if loss == "cauchy":  # the gross errors make stragglers: the lanes do not finish together
         assert len(set(steps)) > 2
+
+
+def test_chunks_are_balanced_and_capped_by_problem_size(batch, monkeypatch):
+    assert batch_module.balanced_chunk(10_000, 1, 1024) == 1000
+    assert batch_module.balanced_chunk(1500, 1, 1024) == 750
+    assert batch_module.balanced_chunk(11, 1, 3) == 3
+    assert batch_module.balanced_chunk(4, 4, 1024) == 1
+    for n in (1, 7, 1025, 4097, 10_001):
+        for devices in (1, 4):
+            for cap in (1, 5, 512, 1024):
+                c = batch_module.balanced_chunk(n, devices, cap)
+                chunks = -(-n // (c * devices))
+                assert 1 <= c <= cap
+                assert chunks * c * devices - n < chunks * devices  # < one padded per chunk
+    problem, xy = batch
+    stacked = with_xy_batch(problem, xy)
+    assert batch_module.default_chunk(stacked) == batch_module.DEFAULT_CHUNK
+    monkeypatch.setattr(batch_module, "LANE_ELEMENTS", 1000)  # large problems: fewer lanes
+    assert 1 <= batch_module.default_chunk(stacked) < 1000 // 100
