@@ -13,9 +13,9 @@ per 4 KiB). :func:`call_exact` avoids both for float64, C-contiguous inputs:
   (:func:`writable`), which the returned array alone references.
 
 The program is compiled for the exact shapes and offsets, so a size gets one only once it is
-used a second time (:class:`SeenSizes`): a one-off call of a new size keeps the bucketed,
-chunked path of :mod:`.rpc_eval` (a few programs for all sizes), a repeated size
-(tiles of one raster, a loop over epochs) runs whole, in one call.
+used a second time (:data:`SEEN_MAX`, :data:`PROGRAMS_MAX`): a one-off call of a new size
+keeps the bucketed, chunked path of :mod:`.rpc_eval` (a few programs for all sizes), a
+repeated size (tiles of one raster, a loop over epochs) runs whole, in one call.
 
 Measured (2-core AVX-512 CPU, 1e6 points, the Pleiades RPC): ``rpc.project(numpy)`` 5.5 ms
 chunked, 1.6 ms here; the first use of a size compiles for ~0.13 s.
@@ -37,7 +37,9 @@ ALIGN = 64
 EXACT_MIN = 1 << 18
 """Points: smaller calls stay on the chunked path (their copies cost little)."""
 SEEN_MAX = 64
-"""Sizes remembered by :class:`SeenSizes` (least recently used forgotten)."""
+"""Call keys remembered to tell a size's second use (least recently used forgotten)."""
+PROGRAMS_MAX = 8
+"""Size-specific programs kept (least recently used dropped: bounded memory)."""
 
 
 class _Memory:
@@ -81,26 +83,34 @@ def writable(x: jax.Array) -> np.ndarray:
     return np.asarray(_Memory(x.unsafe_buffer_pointer(), tuple(x.shape), False, x))
 
 
-class SeenSizes:
-    """Remembers the last :data:`SEEN_MAX` call keys; :meth:`again` is true from a key's
-    second use on."""
+class Recent:
+    """A dictionary of the last ``limit`` keys used (least recently used forgotten)."""
 
-    def __init__(self, limit: int = SEEN_MAX):
+    def __init__(self, limit: int):
         self.limit = limit
-        self._keys: collections.OrderedDict = collections.OrderedDict()
+        self._items: collections.OrderedDict = collections.OrderedDict()
         self._lock = threading.Lock()
 
-    def again(self, key) -> bool:
+    def get(self, key):
         with self._lock:
-            seen = key in self._keys
-            self._keys[key] = None
-            self._keys.move_to_end(key)
-            while len(self._keys) > self.limit:
-                self._keys.popitem(last=False)
-            return seen
+            if key not in self._items:
+                return None
+            self._items.move_to_end(key)
+            return self._items[key]
+
+    def put(self, key, value) -> None:
+        with self._lock:
+            self._items[key] = value
+            self._items.move_to_end(key)
+            while len(self._items) > self.limit:
+                self._items.popitem(last=False)
+
+    def __len__(self) -> int:
+        return len(self._items)
 
 
-_SEEN = SeenSizes()
+_SEEN = Recent(SEEN_MAX)
+_PROGRAMS = Recent(PROGRAMS_MAX)
 
 
 @functools.partial(jax.jit, static_argnums=(0, 1, 4))
@@ -115,12 +125,19 @@ def call_exact(
     """``body(treedef, leaves, *arrays)`` compiled for these exact shapes, with the inputs used in
     place and the output returned without a copy; ``None`` (the caller takes its chunked path)
     when the backend is not the CPU, ``n`` is below :data:`EXACT_MIN`, an input is not
-    :func:`eligible`, or this call's key (shapes, offsets, kernel) is new."""
+    :func:`eligible`, or this call's key (kernel, shapes, offsets) is new. The last
+    :data:`PROGRAMS_MAX` programs are kept (compiled ahead of time, outside jit's cache)."""
     if n < EXACT_MIN or jax.default_backend() != "cpu" or not all(map(eligible, arrays)):
         return None
     views = [aligned_flat(a) for a in arrays]
+    flats = tuple(v for v, _ in views)
     layout = tuple((offset, a.shape) for (_, offset), a in zip(views, arrays, strict=True))
-    if not _SEEN.again((body, treedef, layout)):
-        return None
-    out = _exact_kernel(body, treedef, leaves, tuple(v for v, _ in views), layout)
-    return writable(out)
+    key = (body, treedef, layout, tuple((x.shape, x.dtype) for x in leaves))
+    program = _PROGRAMS.get(key)
+    if program is None:
+        if _SEEN.get(key) is None:
+            _SEEN.put(key, True)
+            return None
+        program = _exact_kernel.lower(body, treedef, leaves, flats, layout).compile()
+        _PROGRAMS.put(key, program)
+    return writable(program(leaves, flats))

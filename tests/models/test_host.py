@@ -58,18 +58,16 @@ def test_writable_output_outlives_its_jax_array():
 def test_a_size_used_again_runs_whole_with_the_same_numbers(pleiades, monkeypatch, offset):
     rpc, _ = pleiades
     monkeypatch.setattr(host, "EXACT_MIN", 64)
-    monkeypatch.setattr(host, "_SEEN", host.SeenSizes())
-    calls = []
-    exact = host._exact_kernel
-    monkeypatch.setattr(host, "_exact_kernel", lambda *a: calls.append(1) or exact(*a))
+    monkeypatch.setattr(host, "_SEEN", host.Recent(host.SEEN_MAX))
+    monkeypatch.setattr(host, "_PROGRAMS", host.Recent(host.PROGRAMS_MAX))
     go, gs = np.asarray(rpc.ground_offset), np.asarray(rpc.ground_scale)
     rng = np.random.default_rng(offset)
     ground = _at_offset(go + gs * rng.uniform(-0.9, 0.9, (301, 3)), offset)
     before = ground.copy()
     first = rpc.project(ground)  # a new size: the chunked path
-    assert not calls
+    assert len(host._PROGRAMS) == 0
     second = rpc.project(ground)  # used again: whole, in place
-    assert calls == [1]
+    assert len(host._PROGRAMS) == 1
     np.testing.assert_array_equal(second, first)
     np.testing.assert_array_equal(ground, before)  # the input is untouched
     traced = np.asarray(jax.jit(lambda r, g: r.project(g))(rpc, ground))
@@ -85,8 +83,11 @@ def test_a_size_used_again_runs_whole_with_the_same_numbers(pleiades, monkeypatc
     np.testing.assert_array_equal(rpc.project(strided), first)
 
 
-def test_seen_sizes_forget_the_least_recently_used():
-    seen = host.SeenSizes(limit=2)
-    assert not seen.again("a") and seen.again("a")
-    assert not seen.again("b") and not seen.again("c")  # "a" forgotten
-    assert not seen.again("a") and seen.again("c")
+def test_recent_keeps_the_last_used_keys():
+    recent = host.Recent(limit=2)
+    recent.put("a", 1)
+    recent.put("b", 2)
+    assert recent.get("a") == 1  # "a" used: "b" is now the oldest
+    recent.put("c", 3)
+    assert recent.get("b") is None and recent.get("a") == 1 and recent.get("c") == 3
+    assert len(recent) == 2
