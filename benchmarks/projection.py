@@ -1,7 +1,7 @@
 """RPC projection speed: ``rpc.project(numpy array)`` as README writes it, against numpy, GDAL's
 RPC transformer and the previous monomial-form kernel, same run.
 
-    python benchmarks/projection.py [--sizes 1e2 1e4 1e6 1e7] [--repeats 3]
+    python benchmarks/projection.py [--sizes 1e2 1e4 1e6 1e7] [--repeats 20]
 
 Prints one JSON object: for each size, points/s of each implementation (best of ``repeats``
 calls after a warm-up, GDAL ``repeats - 2``; more calls for small sizes, the same number for
@@ -10,10 +10,10 @@ every implementation: :func:`repeats_for`), the ratios, the fraction of the comp
 issue) and the max disagreement in px. ``jaxgeo`` is the plain call ``rpc.project(ground)`` with
 numpy in and out (no jit written by the user), repeated on one array: from its second use a size
 runs whole without copies (``jaxgeo.models.host``; the first calls after compilation still pay
-page faults as the allocator grows, hence 10 repeats); ``jaxgeo_one_off`` calls sizes used once
-each (``n - 1``, ``n - 2``...: the chunked path); ``monomial_jit`` the former formulation (20
-monomials, ``eqx.filter_jit``, jax array in). The RPC is the real Pleiades scene of
-../shared/data/real (read by GDAL itself).
+page faults for ~8 calls while the allocator settles, hence 20 repeats); ``jaxgeo_one_off``
+calls sizes used once each (``n - 1``, ``n - 2``...: the chunked path); ``monomial_jit`` the
+former formulation (20 monomials, ``eqx.filter_jit``, jax array in). The RPC is the real
+Pleiades scene of ../shared/data/real (read by GDAL itself).
 """
 
 from __future__ import annotations
@@ -97,7 +97,7 @@ def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--sizes", type=float, nargs="+", default=[1e2, 1e4, 1e6, 1e7])
     parser.add_argument("--bound", type=float, default=850e6)
-    parser.add_argument("--repeats", type=int, default=10)
+    parser.add_argument("--repeats", type=int, default=20)
     parser.add_argument("--tif", type=pathlib.Path, default=TIF)
     args = parser.parse_args()
 
