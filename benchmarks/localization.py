@@ -1,4 +1,5 @@
-"""RPC localisation speed: ``rpc.localize(xy, h)`` as README writes it, against GDAL, same run.
+"""RPC localisation speed: ``rpc.localize(xy, h)`` as README writes it, against GDAL, shareloc and
+rpcm (when installed: ``rpc_peers.py``), same run.
 
     python benchmarks/localization.py [--sizes 1e4 1e6] [--repeats 3]
 
@@ -7,8 +8,8 @@ Timing: best of ``repeats`` calls after a warm-up (GDAL ``repeats - 2``), more f
 jaxgeo (numpy in and out, the shared guarded Newton, a convergence flag per point) and of GDAL's
 RPC transformer (rasterio ``RPCTransformer.xy``, GDAL's own iterative inverse), their ratio, the
 fraction of points jaxgeo flags as converged, the max re-projection error of each (px) and the
-max disagreement in metres-equivalent degrees. shareloc and rpcm are not installed here
-(shareloc builds a C++ extension, rpcm's srtm4 dependency does not build): they are left out,
+max disagreement in degrees; the same for shareloc (``direct_loc_h``) and rpcm
+(``localization``) with GDAL's number of calls. A peer that is not installed is named at the top,
 not estimated.
 """
 
@@ -24,6 +25,7 @@ import jax
 import numpy as np
 import rasterio
 from rasterio.transform import RPCTransformer
+from rpc_peers import load_rpcm, load_shareloc, rpcm_localize, shareloc_localize, version
 
 import jaxgeo
 from jaxgeo.io import from_rasterio_rpc
@@ -70,6 +72,10 @@ def main() -> None:
     with rasterio.open(args.tif) as src:
         rpcs = src.rpcs
     rpc = from_rasterio_rpc(rpcs, str(args.tif))
+    peers = {
+        "shareloc": (load_shareloc(args.tif), shareloc_localize),
+        "rpcm": (load_rpcm(args.tif), rpcm_localize),
+    }
     rng = np.random.default_rng(0)
     results = []
     for size in args.sizes:
@@ -83,6 +89,17 @@ def main() -> None:
         t_jax, g_jax = best_time(lambda xy=xy, h=h: rpc.localize(xy, h), reps)
         reps = repeats_for(n, max(1, args.repeats - 2))
         t_gdal, g_gdal = best_time(lambda xy=xy, h=h: gdal_localize(rpcs, xy, h), reps)
+        row = {}
+        for name, (model, fn) in peers.items():
+            if isinstance(model, str):  # not installed: reported at the top, not estimated
+                continue
+            t, g = best_time(lambda xy=xy, h=h, m=model, f=fn: f(m, xy, h), reps)
+            row[f"{name}_points_per_s"] = n / t
+            row[f"ratio_vs_{name}"] = t / t_jax
+            row[f"max_reprojection_px_{name}"] = float(
+                np.nanmax(np.abs(np.asarray(rpc.project(g)) - xy))
+            )
+            row[f"max_diff_vs_{name}_deg"] = float(np.nanmax(np.abs(g_jax[:, :2] - g[:, :2])))
         ok = np.all(np.isfinite(g_jax), axis=-1)
         err_jax = np.abs(np.asarray(rpc.project(g_jax[ok])) - xy[ok]).max()
         err_gdal = np.nanmax(np.abs(np.asarray(rpc.project(g_gdal)) - xy))
@@ -97,6 +114,7 @@ def main() -> None:
                 "max_reprojection_px_gdal": float(err_gdal),
                 "max_diff_vs_gdal_deg": float(np.nanmax(np.abs(g_jax[:, :2] - g_gdal[:, :2]))),
             }
+            | row
         )
     print(
         json.dumps(
@@ -107,7 +125,10 @@ def main() -> None:
                 "cpu": platform.processor() or platform.machine(),
                 "jaxgeo": jaxgeo.__version__,
                 "gdal": rasterio.__gdal_version__,
-                "shareloc": "not installed (C++ extension build); rpcm: srtm4 does not build",
+                "shareloc": peers["shareloc"][0]
+                if isinstance(peers["shareloc"][0], str)
+                else version("shareloc"),
+                "rpcm": peers["rpcm"][0] if isinstance(peers["rpcm"][0], str) else version("rpcm"),
                 "results": results,
             },
             indent=1,

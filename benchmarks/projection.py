@@ -1,5 +1,6 @@
 """RPC projection speed: ``rpc.project(numpy array)`` as README writes it, against numpy, GDAL's
-RPC transformer and the previous monomial-form kernel, same run.
+RPC transformer, shareloc, rpcm (when installed: ``rpc_peers.py``) and the previous
+monomial-form kernel, same run.
 
     python benchmarks/projection.py [--sizes 1e2 1e4 1e6 1e7] [--repeats 20]
 
@@ -31,6 +32,7 @@ import jax.numpy as jnp
 import numpy as np
 import rasterio
 from rasterio.transform import RPCTransformer
+from rpc_peers import load_rpcm, load_shareloc, rpcm_project, shareloc_project, version
 
 import jaxgeo
 from jaxgeo.io import from_rasterio_rpc
@@ -106,6 +108,10 @@ def main() -> None:
     rpc = from_rasterio_rpc(rpcs, str(args.tif))
     vendor = {k: np.asarray(v) for k, v in rpc.to_vendor().items()}
     old = eqx.filter_jit(_monomial_project)
+    peers = {
+        "shareloc": (load_shareloc(args.tif), shareloc_project),
+        "rpcm": (load_rpcm(args.tif), rpcm_project),
+    }
 
     results = []
     rng = np.random.default_rng(0)
@@ -125,6 +131,14 @@ def main() -> None:
         t_np, p_np = best_time(lambda g=ground: numpy_project(vendor, g), reps)
         reps = repeats_for(n, max(1, args.repeats - 2))
         t_gdal, p_gdal = best_time(lambda g=ground: gdal_project(rpcs, g), reps)
+        row = {}
+        for name, (model, fn) in peers.items():
+            if isinstance(model, str):  # not installed: reported at the top, not estimated
+                continue
+            t, p = best_time(lambda g=ground, m=model, f=fn: f(m, g), reps)
+            row[f"{name}_points_per_s"] = n / t
+            row[f"ratio_vs_{name}"] = t / t_jax
+            row[f"max_diff_vs_{name}_px"] = float(np.abs(p_jax - p).max())
         results.append(
             {
                 "points": n,
@@ -140,6 +154,7 @@ def main() -> None:
                 "max_diff_vs_gdal_px": float(np.abs(p_jax - p_gdal).max()),
                 "max_diff_vs_numpy_px": float(np.abs(p_jax - p_np).max()),
             }
+            | row
         )
     print(
         json.dumps(
@@ -150,6 +165,10 @@ def main() -> None:
                 "cpu": platform.processor() or platform.machine(),
                 "jaxgeo": jaxgeo.__version__,
                 "gdal": rasterio.__gdal_version__,
+                "shareloc": peers["shareloc"][0]
+                if isinstance(peers["shareloc"][0], str)
+                else version("shareloc"),
+                "rpcm": peers["rpcm"][0] if isinstance(peers["rpcm"][0], str) else version("rpcm"),
                 "results": results,
             },
             indent=1,

@@ -23,7 +23,7 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
-from .host import call_exact
+from .host import call_exact, writable
 
 if TYPE_CHECKING:
     from .base import AbstractSensorModel
@@ -36,6 +36,8 @@ NEWTON_STEPS = 3
 """Newton steps of the numpy-path localisation before its Jacobian is frozen (chord steps)."""
 IN_FLIGHT = 4
 """Chunks dispatched (asynchronously) ahead of the one being copied out."""
+WRITABLE_MIN = 1024
+"""Points from which a one-chunk call hands over XLA's output instead of copying it."""
 
 
 def rational(c, lon, lat, h):
@@ -195,6 +197,9 @@ def chunked(kernel, args_np: tuple[np.ndarray, ...], n: int, out_width: int) -> 
     ``(n, width)``. Up to ``IN_FLIGHT`` chunks are dispatched before the first is collected,
     so that XLA computes one while the host copies another."""
     size = min(_bucket(n), CHUNK)
+    if WRITABLE_MIN <= n <= size and jax.default_backend() == "cpu":
+        # one chunk: its output without a copy (10 % faster at 1e4 points, slower below 1e3)
+        return writable(kernel(*(_padded(a, size) for a in args_np)))[:n]
     out = np.empty((n, out_width))
     pending: list[tuple[int, int, jax.Array]] = []
 
