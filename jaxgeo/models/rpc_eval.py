@@ -28,8 +28,10 @@ from .host import call_exact, writable
 if TYPE_CHECKING:
     from .base import AbstractSensorModel
 
-CHUNK = 1 << 16
-"""Points per compiled call of the numpy paths (larger inputs loop over chunks)."""
+CHUNK = 1 << 17
+"""Points per compiled call of the numpy paths (larger inputs loop over chunks): a projection
+of 1e6 points used once takes 3.5 ms in chunks of 2^17 against 3.8 ms in 2^16 (1e7: 63 / 67
+ms; localisation the same within 3 %)."""
 MIN_BUCKET = 16
 """Smallest padded size of the numpy paths."""
 NEWTON_STEPS = 3
