@@ -174,7 +174,7 @@ def balanced_chunk(n: int, devices: int, chunk: int) -> int:
     chunks as that needs, of balanced sizes (the least padding: 10 000 problems in chunks of
     at most 1024 are 10 of 1000, not 10 of 1024 with 240 padded)."""
     chunk = max(1, min(int(chunk), n // devices))
-    per_device = -(-n // devices)
+    per_device = max(1, -(-n // devices))
     return -(-per_device // -(-per_device // chunk))
 
 

@@ -62,6 +62,8 @@ def test_chunks_are_balanced_and_capped_by_problem_size(batch, monkeypatch):
     assert batch_module.balanced_chunk(1500, 1, 1024) == 750
     assert batch_module.balanced_chunk(11, 1, 3) == 3
     assert batch_module.balanced_chunk(4, 4, 1024) == 1
+    assert batch_module.balanced_chunk(0, 1, 1024) == 1  # no problems: no division by zero
+    assert batch_module.balanced_chunk(10, 1, 0) == 1
     for n in (1, 7, 1025, 4097, 10_001):
         for devices in (1, 4):
             for cap in (1, 5, 512, 1024):
