@@ -24,8 +24,8 @@ import time
 import jax
 import numpy as np
 import rasterio
+import rpc_peers
 from rasterio.transform import RPCTransformer
-from rpc_peers import load_rpcm, load_shareloc, rpcm_localize, shareloc_localize, version
 
 import jaxgeo
 from jaxgeo.io import from_rasterio_rpc
@@ -72,10 +72,7 @@ def main() -> None:
     with rasterio.open(args.tif) as src:
         rpcs = src.rpcs
     rpc = from_rasterio_rpc(rpcs, str(args.tif))
-    peers = {
-        "shareloc": (load_shareloc(args.tif), shareloc_localize),
-        "rpcm": (load_rpcm(args.tif), rpcm_localize),
-    }
+    peers = rpc_peers.load(args.tif, "localize")
     rng = np.random.default_rng(0)
     results = []
     for size in args.sizes:
@@ -125,10 +122,7 @@ def main() -> None:
                 "cpu": platform.processor() or platform.machine(),
                 "jaxgeo": jaxgeo.__version__,
                 "gdal": rasterio.__gdal_version__,
-                "shareloc": peers["shareloc"][0]
-                if isinstance(peers["shareloc"][0], str)
-                else version("shareloc"),
-                "rpcm": peers["rpcm"][0] if isinstance(peers["rpcm"][0], str) else version("rpcm"),
+                **rpc_peers.versions(peers),
                 "results": results,
             },
             indent=1,

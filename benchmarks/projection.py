@@ -31,8 +31,8 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 import rasterio
+import rpc_peers
 from rasterio.transform import RPCTransformer
-from rpc_peers import load_rpcm, load_shareloc, rpcm_project, shareloc_project, version
 
 import jaxgeo
 from jaxgeo.io import from_rasterio_rpc
@@ -108,10 +108,7 @@ def main() -> None:
     rpc = from_rasterio_rpc(rpcs, str(args.tif))
     vendor = {k: np.asarray(v) for k, v in rpc.to_vendor().items()}
     old = eqx.filter_jit(_monomial_project)
-    peers = {
-        "shareloc": (load_shareloc(args.tif), shareloc_project),
-        "rpcm": (load_rpcm(args.tif), rpcm_project),
-    }
+    peers = rpc_peers.load(args.tif, "project")
 
     results = []
     rng = np.random.default_rng(0)
@@ -165,10 +162,7 @@ def main() -> None:
                 "cpu": platform.processor() or platform.machine(),
                 "jaxgeo": jaxgeo.__version__,
                 "gdal": rasterio.__gdal_version__,
-                "shareloc": peers["shareloc"][0]
-                if isinstance(peers["shareloc"][0], str)
-                else version("shareloc"),
-                "rpcm": peers["rpcm"][0] if isinstance(peers["rpcm"][0], str) else version("rpcm"),
+                **rpc_peers.versions(peers),
                 "results": results,
             },
             indent=1,

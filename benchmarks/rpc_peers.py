@@ -42,11 +42,25 @@ def load_rpcm(tif: str):
     return rpcm.rpc_from_geotiff(str(tif))
 
 
-def version(name: str) -> str:
-    try:
-        return importlib.metadata.version(name)
-    except importlib.metadata.PackageNotFoundError:
-        return "not installed"
+def load(tif: str, kind: str) -> dict:
+    """``{peer: (model or the reason it is unavailable, its kind function)}``, ``kind``
+    ``"project"`` or ``"localize"``."""
+    fns = {
+        "project": {"shareloc": shareloc_project, "rpcm": rpcm_project},
+        "localize": {"shareloc": shareloc_localize, "rpcm": rpcm_localize},
+    }[kind]
+    return {
+        "shareloc": (load_shareloc(tif), fns["shareloc"]),
+        "rpcm": (load_rpcm(tif), fns["rpcm"]),
+    }
+
+
+def versions(peers: dict) -> dict[str, str]:
+    """Each peer's installed version, or the reason it is unavailable."""
+    return {
+        name: model if isinstance(model, str) else importlib.metadata.version(name)
+        for name, (model, _) in peers.items()
+    }
 
 
 def shareloc_project(model, ground: np.ndarray) -> np.ndarray:
