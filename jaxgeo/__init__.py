@@ -19,20 +19,21 @@ _configure_jax()
 __version__ = importlib.metadata.version("jaxgeo")
 
 _EXPORTS = {
-    "jaxgeo.bundle": ("AccuracyReport", "AdjustResult", "SolverConfig", "adjust"),
+    "jaxgeo.bundle": ("AccuracyReport", "AdjustResult", "adjust"),
+    "jaxgeo.lsq": ("SolverConfig",),
     "jaxgeo.intersect": ("IntersectResult",),
     "jaxgeo.io": ("read_metadata", "read_rpc", "write_geotiff_rpc", "write_rpb",
                   "write_rpc_text"),
-    "jaxgeo.models": ("RPC", "AbstractSensorModel", "AbstractMultiImageModel", "Affine",
+    "jaxgeo.models": ("RPC", "AbstractSensorModel", "AbstractMultiImageModel", "AffineBias",
                       "Affine3D", "Biased", "EphemerisModel", "GenericPushbroom", "SceneMetadata",
-                      "KeplerSequence", "Shift", "ShiftDrift", "Spline", "fit_rpc"),
+                      "KeplerSequence", "ShiftBias", "ShiftDriftBias", "Spline", "fit_rpc"),
 }  # fmt: skip
 _WHERE = {name: module for module, names in _EXPORTS.items() for name in names}
 # ``jaxgeo.intersect`` is the intersection module (``jaxgeo.intersect.intersect`` the function):
 # no function shadows a module of the package
 _SUBMODULES = (
-    "geodesy", "rotations", "errors", "models", "intersect", "io", "bundle", "strip", "simulate",
-    "cli",
+    "geodesy", "rotations", "errors", "models", "lsq", "intersect", "io", "bundle", "strip",
+    "ortho", "stereo", "simulate", "cli",
 )  # fmt: skip
 
 

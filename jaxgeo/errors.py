@@ -9,3 +9,10 @@ from __future__ import annotations
 
 class JaxgeoWarning(UserWarning):
     """A result was produced, but something about it needs the user's attention."""
+
+
+class JaxgeoError(Exception):
+    """Base of jaxgeo's own errors: an input or a computation jaxgeo refuses, with a message
+    naming the file, line, image, point or setting at fault. Each subclass also derives from
+    the builtin it refines (``ValueError`` for bad input), so ``except ValueError`` still
+    catches it."""

@@ -2,7 +2,7 @@
 
 A ground point seen in ``N >= 2`` images is the weighted least-squares solution of
 ``project_i(ground) = image_i`` (001_5627e94f1608fac0.txt, sections 5.3 and 5.6), found as the
-root of the gradient (:func:`~jaxgeo.models.newton.newton_root`, Gauss-Newton steps) in local
+root of the gradient (:func:`~jaxgeo.models.newton_root`, Gauss-Newton steps) in local
 east/north/up metres, vmapped over points.
 
 Initial values follow method III of section 5.5: the first-order (linear) terms of every model,
@@ -27,8 +27,7 @@ from jaxtyping import Array, ArrayLike, Bool, Float, Int
 
 from . import _exported
 from .geodesy import metres_per_unit
-from .models.base import AbstractSensorModel
-from .models.newton import newton_root
+from .models import AbstractSensorModel, newton_root
 
 INTERSECT_ATOL_M = 1e-9
 INTERSECT_MAX_STEPS = 20

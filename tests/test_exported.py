@@ -14,7 +14,7 @@ import numpy as np
 import pytest
 
 from jaxgeo import _exported
-from jaxgeo.bundle.errors import RESULTS
+from jaxgeo.lsq import RESULTS
 
 REPO = pathlib.Path(__file__).resolve().parents[1]
 TRACES = []

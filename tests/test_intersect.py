@@ -6,7 +6,7 @@ import numpy as np
 import pytest
 from jax.test_util import check_grads
 
-from jaxgeo import Biased, Shift, geodesy
+from jaxgeo import Biased, ShiftBias, geodesy
 from jaxgeo.intersect import intersect, intersect_linear
 from jaxgeo.io import read_rpc
 from tests.conftest import cube_points
@@ -62,7 +62,7 @@ def test_covariance_matches_the_scatter_of_noisy_intersections(pair):
 
 def test_missing_rays_and_three_images(pair):
     left, right = pair
-    third = Biased(left, Shift([3.0, -2.0]))  # a third view: the left geometry, shifted
+    third = Biased(left, ShiftBias([3.0, -2.0]))  # a third view: the left geometry, shifted
     models = (left, right, third)
     truth = cube_points(left, 5, seed=2, fraction=0.5)
     xy = _project(models, truth)

@@ -1,34 +1,33 @@
-"""Bundle block adjustment: observations -> problem -> build -> Schur LM solve -> covariance ->
-result and report -> export.
+"""Bundle block adjustment, the host-side workflow: tables in, :class:`AdjustResult` out.
 
-``jaxgeo.adjust`` (tables in, :class:`AdjustResult` out; :mod:`.adjustment`) is the one-call
-entry point. The stages, each a module: :mod:`.observations` and :mod:`.problem` (the arrays),
-:mod:`.build` (checks, grouping, initial points, priors), :mod:`.solve` (the pure, jittable,
-vmappable solve; :mod:`.lm` its solver, :mod:`.schur` the steps' linear algebra, :mod:`.batch`
-and :mod:`.lanes` many problems in one call, :mod:`.covariance` the cofactors and singularity
-test, :mod:`.diagnose` the host-side naming of undetermined unknowns), :mod:`.result`,
-:mod:`.report`, :mod:`.export`; :mod:`.config` the solver settings, :mod:`.errors` the errors
-and :class:`RESULTS`. The functions ``build`` and ``solve`` live in their modules
-(``jaxgeo.bundle.build.build``, ``jaxgeo.bundle.solve.solve``), never in this namespace, so
-that ``import jaxgeo.bundle.solve`` is always the module.
+``jaxgeo.adjust`` (:func:`adjust`) is the one-call entry point. The stages, in the order the
+data passes them: :func:`prepare` (pre-flight checks naming the image or point at fault, model
+groups, initial ground points, priors -> a :class:`Prepared` holding a :class:`jaxgeo.lsq.Problem`),
+:func:`jaxgeo.lsq.solve` (the engine: pure arrays), :func:`snoop` (gross errors: robust loss,
+w-test, removal), :func:`make_result` (names, statistics, the undetermined unknowns named),
+:func:`accuracy` / :func:`format_reports` (the papers' accuracy reports) and the writers of
+adjusted models (:func:`check_out_dir`, refitted RPCs beside the inputs, never over them).
 """
 
-from .adjustment import BIAS_CHOICES as BIAS_CHOICES
-from .adjustment import adjust as adjust
-from .adjustment import with_bias as with_bias
-from .build import Setup as Setup
-from .config import SolverConfig as SolverConfig
-from .errors import RESULTS as RESULTS
-from .errors import AdjustmentError as AdjustmentError
-from .errors import NotConvergedWarning as NotConvergedWarning
-from .errors import PoorFitWarning as PoorFitWarning
-from .errors import SingularNormalEquations as SingularNormalEquations
-from .errors import TooFewControlPoints as TooFewControlPoints
-from .problem import Problem as Problem
-from .report import AccuracyReport as AccuracyReport
-from .report import accuracy as accuracy
-from .report import direct_georeferencing as direct_georeferencing
-from .report import format_reports as format_reports
-from .result import AdjustResult as AdjustResult
-from .result import finish as finish
-from .solve import Solution as Solution
+from ._adjustment import BIAS_CHOICES as BIAS_CHOICES
+from ._adjustment import adjust as adjust
+from ._adjustment import adjust_files as adjust_files
+from ._adjustment import with_bias as with_bias
+from ._errors import AdjustmentError as AdjustmentError
+from ._errors import NotConvergedWarning as NotConvergedWarning
+from ._errors import PoorFitWarning as PoorFitWarning
+from ._errors import SingularNormalEquations as SingularNormalEquations
+from ._errors import TooFewControlPoints as TooFewControlPoints
+from ._export import check_out_dir as check_out_dir
+from ._prepare import Prepared as Prepared
+from ._prepare import prepare as prepare
+from ._report import AccuracyReport as AccuracyReport
+from ._report import accuracy as accuracy
+from ._report import direct_georeferencing as direct_georeferencing
+from ._report import enu_errors as enu_errors
+from ._report import format_reports as format_reports
+from ._result import AdjustResult as AdjustResult
+from ._result import make_result as make_result
+from ._snooping import MAX_REMOVED_FRACTION as MAX_REMOVED_FRACTION
+from ._snooping import ROBUST_FRACTION as ROBUST_FRACTION
+from ._snooping import snoop as snoop

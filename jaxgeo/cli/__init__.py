@@ -12,6 +12,8 @@ import argparse
 import importlib
 import sys
 
+from ..errors import JaxgeoError
+
 COMMANDS = {
     "demo": "direct georeferencing vs bias-corrected adjustment on the embedded scene",
     "simulate": "write a simulated Cartosat-1 stereo pair or Carto-2S strip",
@@ -24,7 +26,7 @@ COMMANDS = {
 """Sub-commands (module ``jaxgeo.cli.<name>``) and their one-line help."""
 
 
-class CommandError(Exception):
+class CommandError(JaxgeoError):
     """An error the user can fix; printed without a traceback, exit status 2."""
 
 
@@ -53,9 +55,9 @@ def build_parser(command: str | None = None) -> argparse.ArgumentParser:
             sub.add_parser(name, help=line)
             continue
         try:
-            module = importlib.import_module(f"jaxgeo.cli.{name}")
+            module = importlib.import_module(f"jaxgeo.cli._{name}")
         except ModuleNotFoundError as err:
-            if err.name == f"jaxgeo.cli.{name}":
+            if err.name == f"jaxgeo.cli._{name}":
                 continue  # sub-command not part of this build
             raise
         module.register(sub)

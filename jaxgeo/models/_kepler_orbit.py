@@ -24,8 +24,8 @@ from jaxtyping import Array, ArrayLike, Float
 
 from .. import geodesy
 from ..rotations import orbit_frame, rot_x, rot_y, rot_z
-from .metadata import SceneMetadata
-from .newton import newton_root
+from ._metadata import SceneMetadata
+from ._newton import newton_root
 
 GM_M3_S2 = geodesy.GM_EARTH_M3_S2
 OMEGA_RAD_S = geodesy.OMEGA_EARTH_RAD_S
@@ -59,7 +59,7 @@ def _kepler_equation(chi, args):
 
 def _universal_anomaly(r0n, vr0_mu, alpha, mu_dt):
     """Root ``chi`` of the universal Kepler equation, ``_KEPLER_ITERATIONS`` Newton steps from
-    ``alpha sqrt(mu) dt`` (:func:`~jaxgeo.models.newton.newton_root`: implicit derivatives of
+    ``alpha sqrt(mu) dt`` (:func:`~jaxgeo.models.newton_root`: implicit derivatives of
     every order)."""
     args = (r0n, vr0_mu, alpha, mu_dt)
     return newton_root(_kepler_equation, alpha * mu_dt, args, max_steps=_KEPLER_ITERATIONS).value
@@ -163,7 +163,9 @@ def inertial_to_ecef(vector: Float[ArrayLike, "*batch 3"], tau_s) -> Float[Array
     return _spin(jnp.asarray(vector, dtype=float), -OMEGA_RAD_S * jnp.asarray(tau_s))
 
 
-def mounting(along_track_angle_deg: float, across_track_angle_deg: float) -> Float[Array, "3 3"]:
+def kepler_mounting(
+    along_track_angle_deg: float, across_track_angle_deg: float
+) -> Float[Array, "3 3"]:
     """Camera-to-platform rotation ``R_M = R_y(-alpha) R_x(-beta)``."""
     a, b = np.deg2rad(along_track_angle_deg), np.deg2rad(across_track_angle_deg)
     return rot_y(-a) @ rot_x(-b)
@@ -224,7 +226,7 @@ def _circular_state_over(scene, cam, delta_m, iterations):
     centre, track = _ground_track(scene)
     radius = np.linalg.norm(centre) + scene.flying_height_m + delta_m
     speed = np.sqrt(GM_M3_S2 / radius)
-    mount = np.asarray(mounting(cam.along_track_angle_deg, cam.across_track_angle_deg))
+    mount = np.asarray(kepler_mounting(cam.along_track_angle_deg, cam.across_track_angle_deg))
     omega = np.array([0.0, 0.0, OMEGA_RAD_S])
     sat = centre * radius / np.linalg.norm(centre)
     for _ in range(iterations):

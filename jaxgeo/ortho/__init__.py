@@ -4,6 +4,6 @@ from jaxgeo.ortho import orthorectify
 report = orthorectify("scene.tif", model, read_dem("dem.tif", geoid="egm96"), "ortho.tif")
 """
 
-from .grid import OutputGrid as OutputGrid
-from .pipeline import OrthoReport as OrthoReport
-from .pipeline import orthorectify as orthorectify
+from ._grid import OutputGrid as OutputGrid
+from ._pipeline import OrthoReport as OrthoReport
+from ._pipeline import orthorectify as orthorectify

@@ -6,15 +6,18 @@ of it, ground points and image measurements; ``.save(dir)`` writes them with jax
 (RPC text, GROUND/OBS CSV tables, a ``truth.json``), ready for ``jaxgeo adjust``.
 """
 
-from .carto2s import StripScene as StripScene
-from .carto2s import carto2s_strip as carto2s_strip
-from .cartosat1 import StereoScene as StereoScene
-from .cartosat1 import cartosat1_stereo as cartosat1_stereo
-from .demo import DEMO_SEED as DEMO_SEED
-from .demo import demo_dir as demo_dir
-from .demo import demo_scene as demo_scene
-from .demo import write_demo as write_demo
-from .orbit import CircularOrbit as CircularOrbit
-from .orbit import ephemeris_from_orbit as ephemeris_from_orbit
-from .scene import VendorErrors as VendorErrors
-from .terrain import Terrain as Terrain
+from ._carto2s import StripScene as StripScene
+from ._carto2s import carto2s_strip as carto2s_strip
+from ._carto2s import strip_output_files as strip_output_files
+from ._cartosat1 import StereoScene as StereoScene
+from ._cartosat1 import cartosat1_stereo as cartosat1_stereo
+from ._cartosat1 import stereo_output_files as stereo_output_files
+from ._demo import DEMO_SEED as DEMO_SEED
+from ._demo import demo_dir as demo_dir
+from ._demo import demo_scene as demo_scene
+from ._demo import write_demo as write_demo
+from ._orbit import CircularOrbit as CircularOrbit
+from ._orbit import ephemeris_from_orbit as ephemeris_from_orbit
+from ._scene import VendorErrors as VendorErrors
+from ._scene import check_writable as check_writable
+from ._terrain import Terrain as Terrain

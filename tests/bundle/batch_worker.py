@@ -28,9 +28,9 @@ LOSS = "l2"
 
 
 def problems():
-    from jaxgeo.bundle.build import build
+    from jaxgeo.bundle._prepare import prepare
     from jaxgeo.io import read_ground, read_observations, read_rpc
-    from jaxgeo.models import Biased, Shift
+    from jaxgeo.models import Biased, ShiftBias
     from jaxgeo.simulate import demo_dir
 
     folder = demo_dir()
@@ -45,7 +45,9 @@ def problems():
         xy=obs.xy[keep],
         sigma_px=obs.sigma_px[keep],
     )
-    base = build({"fore": Biased(read_rpc(folder / "fore.txt"), Shift())}, obs, ground).problem
+    base = prepare(
+        {"fore": Biased(read_rpc(folder / "fore.txt"), ShiftBias())}, obs, ground
+    ).problem
     xy0 = np.concatenate([np.asarray(ob.xy) for ob in base.images])
     rng = np.random.default_rng(7)
     return [base.with_xy(xy0 + rng.normal(0.0, 0.5, xy0.shape)) for _ in range(N_PROBLEMS)]
@@ -69,8 +71,8 @@ def main():
             num_processes=2,
             process_id=int(sys.argv[2]),
         )
-    from jaxgeo.bundle import SolverConfig
-    from jaxgeo.bundle.batch import solve_batch, solve_batch_distributed
+    from jaxgeo.lsq import SolverConfig, solve_batch
+    from jaxgeo.lsq._batch import solve_batch_distributed
 
     probs, solver = problems(), SolverConfig(loss=LOSS)
     if MODE == "shard":

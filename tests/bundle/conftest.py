@@ -5,16 +5,15 @@ import dataclasses
 import numpy as np
 import pytest
 
-from jaxgeo import Affine, Biased
+from jaxgeo import AffineBias, Biased
 from jaxgeo.geodesy import metres_per_unit
-from jaxgeo.io import read_rpc
-from jaxgeo.io.tables import GroundPoints, Observations
+from jaxgeo.io import GroundPoints, Observations, read_rpc
 
 NOISE_PX = 0.3
 GCP_SIGMA_M = 0.1  # GPS points on 0.5 m pixels: 0.2 px
 TRUE_BIAS = {
-    "left": Affine([12.0, -7.0], [[2e-5, -1e-5], [3e-5, 1e-5]]),
-    "right": Affine([-5.0, 9.0], [[-1e-5, 2e-5], [1e-5, -2e-5]]),
+    "left": AffineBias([12.0, -7.0], [[2e-5, -1e-5], [3e-5, 1e-5]]),
+    "right": AffineBias([-5.0, 9.0], [[-1e-5, 2e-5], [1e-5, -2e-5]]),
 }
 
 

@@ -4,7 +4,7 @@ import jax.numpy as jnp
 import numpy as np
 import pytest
 
-from jaxgeo.bundle import band
+from jaxgeo.lsq import _band as band
 
 
 def _banded_spd(n_blocks, width, k, rng, singular=False):
@@ -34,14 +34,14 @@ def test_factor_solve_and_selected_inverse_equal_dense(n_blocks, k, per_super):
     a, pairs, vals = _banded_spd(n_blocks, width, k, rng)
     # diagonal blocks given apart from the pairs, as the solve gives U and the point terms
     diag = np.zeros((n_blocks, width, width))
-    s = band.assemble(
+    s = band.assemble_band(
         jnp.asarray(diag), jnp.asarray(pairs), jnp.asarray(vals), per_super, a.shape[0]
     )
     np.testing.assert_array_equal(np.asarray(s.todense()), a)
     np.testing.assert_array_equal(np.asarray(s.diagonal()), np.diag(a))
-    f = band.cholesky(s)
+    f = band.band_cholesky(s)
     b = rng.normal(size=(a.shape[0], 3))
-    x = np.asarray(band.solve(f, jnp.asarray(b)))
+    x = np.asarray(band.band_solve(f, jnp.asarray(b)))
     np.testing.assert_allclose(x, np.linalg.solve(a, b), rtol=0, atol=1e-12)
     inv = np.linalg.inv(a)
     sel = band.selected_inverse(f)
@@ -63,8 +63,10 @@ def test_factor_solve_and_selected_inverse_equal_dense(n_blocks, k, per_super):
 def test_singular_system_gives_nan_as_dense_cholesky():
     rng = np.random.default_rng(0)
     a, pairs, vals = _banded_spd(12, 6, 1, rng, singular=True)
-    s = band.assemble(jnp.zeros((12, 6, 6)), jnp.asarray(pairs), jnp.asarray(vals), 2, a.shape[0])
-    f = band.cholesky(s)
+    s = band.assemble_band(
+        jnp.zeros((12, 6, 6)), jnp.asarray(pairs), jnp.asarray(vals), 2, a.shape[0]
+    )
+    f = band.band_cholesky(s)
     assert not np.all(np.isfinite(np.asarray(f.c)))
     assert not np.all(np.isfinite(np.asarray(band.selected_inverse(f).diagonal())))
 

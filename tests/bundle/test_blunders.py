@@ -12,9 +12,10 @@ import dataclasses
 import numpy as np
 import pytest
 
-from jaxgeo.bundle import SolverConfig, adjust
-from jaxgeo.bundle.report import enu_errors
+from jaxgeo.bundle import adjust
+from jaxgeo.bundle._report import enu_errors
 from jaxgeo.geodesy import metres_per_unit
+from jaxgeo.lsq import SolverConfig
 
 SEEDS = range(6)
 

@@ -11,8 +11,7 @@ import numpy as np
 import pytest
 
 from jaxgeo.bundle import adjust, direct_georeferencing
-from jaxgeo.io import read_rpc
-from jaxgeo.io.tables import read_ground, read_observations
+from jaxgeo.io import read_ground, read_observations, read_rpc
 from jaxgeo.simulate import demo_dir
 
 GSD_M = 2.5

@@ -1,21 +1,22 @@
 """Every way an adjustment can be wrong raises (or warns) with the image/point/parameter named."""
 
 import dataclasses
+import warnings
 
 import numpy as np
 import pytest
 
-from jaxgeo import Biased, Shift
+from jaxgeo import Biased, ShiftBias
 from jaxgeo.bundle import (
     AdjustmentError,
     NotConvergedWarning,
     SingularNormalEquations,
-    SolverConfig,
     TooFewControlPoints,
     adjust,
 )
-from jaxgeo.io.tables import GroundPoints, Observations
-from jaxgeo.models.affine3d import Affine3D
+from jaxgeo.io import GroundPoints, Observations
+from jaxgeo.lsq import RESULTS, SolverConfig
+from jaxgeo.models import Affine3D
 from tests.bundle.conftest import make_block
 
 
@@ -42,11 +43,11 @@ def _add_obs(obs, pid, image, xy):
 def test_too_few_gcps_for_the_bias(small):
     # the per-image count rule is opt-in (check=True): by default ties may control an image,
     # and what stays open is reported as undetermined (next assertion)
-    with pytest.raises(TooFewControlPoints, match=r"image 'left': the Affine bias .* at least 3"):
+    with pytest.raises(TooFewControlPoints, match=r"image 'left': the AffineBias .* at least 3"):
         adjust(small.models, small.obs, _gcps(small, 2), bias="affine", check=True)
-    with pytest.raises(TooFewControlPoints, match=r"ShiftDrift bias .* at least 2 .* got 1"):
+    with pytest.raises(TooFewControlPoints, match=r"ShiftDriftBias .* at least 2 .* got 1"):
         adjust(small.models, small.obs, _gcps(small, 1), bias="shift-drift", check=True)
-    with pytest.raises(TooFewControlPoints, match=r"Shift bias .* at least 1 .* got 0"):
+    with pytest.raises(TooFewControlPoints, match=r"ShiftBias .* at least 1 .* got 0"):
         adjust(small.models, small.obs, _gcps(small, 0), bias="shift", check=True)
     with pytest.raises(SingularNormalEquations, match=r"bias\.shift_px"):
         adjust(small.models, small.obs, _gcps(small, 0), bias="shift")
@@ -86,7 +87,7 @@ def test_unknown_image_point_seen_once_and_nans(small):
 
 
 def test_shared_parameters_must_be_one_model(small):
-    bias = Shift([1.0, 2.0])
+    bias = ShiftBias([1.0, 2.0])
     models = {name: Biased(m, bias) for name, m in small.models.items()}
     with pytest.raises(AdjustmentError, match=r"'left' and 'right' share adjustable parameters"):
         adjust(models, small.obs, small.ground)
@@ -98,6 +99,21 @@ def test_singular_normal_equations_name_the_parameters(small):
     with pytest.raises(SingularNormalEquations, match=r"left\.bias\.shift_px") as err:
         adjust(small.models, small.obs, no_control, bias="shift", check=False)
     assert set(err.value.parameters) >= {"left.bias.shift_px[0]", "right.bias.shift_px[0]"}
+
+
+def test_throw_false_returns_the_failure_as_data(small):
+    # optimistix' convention: throw=False neither raises nor warns; the result says what failed
+    no_control = GroundPoints((), np.zeros((0, 3)), (), np.zeros((0, 3)))
+    res = adjust(small.models, small.obs, no_control, bias="shift", throw=False)
+    assert not res.converged and bool(res.result == RESULTS.undetermined)
+    assert "left.bias.shift_px" in res.message and "not determined" in res.message
+    solver = SolverConfig(loss="l2", max_steps=2)
+    with warnings.catch_warnings():
+        warnings.simplefilter("error", NotConvergedWarning)  # no warning with throw=False
+        res = adjust(
+            small.models, small.obs, small.ground, bias="shift", solver=solver, throw=False
+        )
+    assert not res.converged and "maximum number of steps" in res.message
 
 
 def test_no_convergence_warns_and_returns_the_last_state(small):

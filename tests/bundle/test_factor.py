@@ -3,7 +3,7 @@
 import jax
 import numpy as np
 
-from jaxgeo.bundle.factor import cho_solve, cholesky, inv3_spd
+from jaxgeo.lsq._factor import cho_solve, cholesky, inv3_spd
 
 
 def _spd(rng, n, batch=()):

@@ -8,17 +8,17 @@ import numpy as np
 import pytest
 
 from jaxgeo import geodesy
-from jaxgeo.bundle import RESULTS, SolverConfig, with_bias
-from jaxgeo.bundle import ground as bundle_ground
-from jaxgeo.bundle.build import build
-from jaxgeo.bundle.solve import solve
+from jaxgeo.bundle import with_bias
+from jaxgeo.bundle._prepare import prepare
+from jaxgeo.lsq import RESULTS, SolverConfig, solve
+from jaxgeo.lsq import _ground as bundle_ground
 from tests.bundle.conftest import make_block
 
 
 @pytest.fixture(scope="module")
 def problem(ventoux_pair):
     small = make_block(*ventoux_pair, n=8, n_gcp=4, seed=5)
-    return build(with_bias(small.models, "shift"), small.obs, small.ground).problem
+    return prepare(with_bias(small.models, "shift"), small.obs, small.ground).problem
 
 
 def test_enu_residuals_equal_the_geodetic_formula(problem):

@@ -6,11 +6,11 @@ import jax.numpy as jnp
 import numpy as np
 import pytest
 
-from jaxgeo.bundle import RESULTS, SolverConfig, with_bias
-from jaxgeo.bundle import batch as batch_module
-from jaxgeo.bundle.batch import solve_batch, with_xy_batch
-from jaxgeo.bundle.build import build
-from jaxgeo.bundle.solve import solve
+from jaxgeo.bundle import with_bias
+from jaxgeo.bundle._prepare import prepare
+from jaxgeo.lsq import RESULTS, SolverConfig, solve, solve_batch
+from jaxgeo.lsq import _batch as batch_module
+from jaxgeo.lsq._batch import with_xy_batch
 from tests.bundle.conftest import make_block
 
 
@@ -19,7 +19,7 @@ def batch(ventoux_pair):
     """Eleven noisy copies of a shift-bias pair: clean ones, some with a gross error (more
     reweighting steps: stragglers), one with a non-finite measurement (fails at once)."""
     small = make_block(*ventoux_pair, n=8, n_gcp=4, seed=5)
-    problem = build(with_bias(small.models, "shift"), small.obs, small.ground).problem
+    problem = prepare(with_bias(small.models, "shift"), small.obs, small.ground).problem
     xy0 = np.concatenate([np.asarray(ob.xy) for ob in problem.images])
     rng = np.random.default_rng(3)
     xy = xy0 + rng.normal(0.0, 0.3, (11, *xy0.shape))

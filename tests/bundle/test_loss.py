@@ -6,13 +6,8 @@ import jax.numpy as jnp
 import numpy as np
 import pytest
 
-from jaxgeo.bundle.loss import (
-    CURVATURE_FLOOR,
-    curvature_ratio,
-    irls_weights,
-    newton_corrected,
-    robust,
-)
+from jaxgeo.lsq import irls_weights
+from jaxgeo.lsq._loss import CURVATURE_FLOOR, curvature_ratio, newton_corrected, robust
 
 C = 3.0
 

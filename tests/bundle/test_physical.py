@@ -6,10 +6,10 @@ import jax
 import numpy as np
 import pytest
 
-from jaxgeo.bundle import AdjustmentError, SolverConfig, adjust
-from jaxgeo.io.metadata import read_metadata
-from jaxgeo.io.tables import GroundPoints, Observations
-from jaxgeo.models.kepler import KeplerSequence
+from jaxgeo.bundle import AdjustmentError, adjust
+from jaxgeo.io import GroundPoints, Observations, read_metadata
+from jaxgeo.lsq import SolverConfig
+from jaxgeo.models import KeplerSequence
 from tests.conftest import REPO
 
 N = 16

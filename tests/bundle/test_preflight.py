@@ -8,7 +8,7 @@ import numpy as np
 import pytest
 
 from jaxgeo.bundle import AdjustmentError, PoorFitWarning, adjust
-from jaxgeo.io.tables import GroundPoints, Observations
+from jaxgeo.io import GroundPoints, Observations
 
 
 def _moved(ground, pid, d_lonlath):

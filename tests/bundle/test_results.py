@@ -6,10 +6,9 @@ import jax.numpy as jnp
 import numpy as np
 import pytest
 
-from jaxgeo.bundle import RESULTS, SolverConfig, with_bias
-from jaxgeo.bundle.build import build
-from jaxgeo.bundle.errors import describe
-from jaxgeo.bundle.solve import solve
+from jaxgeo.bundle import with_bias
+from jaxgeo.bundle._prepare import prepare
+from jaxgeo.lsq import RESULTS, SolverConfig, describe, solve
 from tests.bundle.conftest import make_block
 
 
@@ -18,7 +17,7 @@ def problems(ventoux_pair):
     """A shift-bias pair with GCPs, and the same problem with the GCP weights zeroed: a common
     shift of both images is then not determined (same structure, so the two stack)."""
     small = make_block(*ventoux_pair, n=8, n_gcp=4, seed=5)
-    good = build(with_bias(small.models, "shift"), small.obs, small.ground).problem
+    good = prepare(with_bias(small.models, "shift"), small.obs, small.ground).problem
     bad = eqx.tree_at(lambda p: p.ground.weight, good, jnp.zeros_like(good.ground.weight))
     return good, bad
 

@@ -5,8 +5,8 @@ import dataclasses
 import numpy as np
 import pytest
 
-from jaxgeo.bundle import SolverConfig, adjust
-from jaxgeo.bundle.errors import PoorFitWarning
+from jaxgeo.bundle import PoorFitWarning, adjust
+from jaxgeo.lsq import SolverConfig
 from tests.bundle.conftest import TRUE_BIAS
 
 

@@ -12,7 +12,9 @@ import warnings
 import jax
 import pytest
 
-from jaxgeo.bundle import NotConvergedWarning, SolverConfig, adjust, lm
+from jaxgeo.bundle import NotConvergedWarning, adjust
+from jaxgeo.lsq import SolverConfig
+from jaxgeo.lsq import _lm as lm
 from tests.bundle.conftest import make_block
 
 

@@ -10,9 +10,9 @@ tie points (parallax), so it stays open unless a prior (or a GCP in the image) f
 import numpy as np
 import pytest
 
-from jaxgeo.bundle import SingularNormalEquations, TooFewControlPoints, adjust
-from jaxgeo.bundle.adjustment import bias_prior_sigma, with_bias
-from jaxgeo.io.tables import Observations
+from jaxgeo.bundle import SingularNormalEquations, TooFewControlPoints, adjust, with_bias
+from jaxgeo.bundle._adjustment import bias_prior_sigma
+from jaxgeo.io import Observations
 
 
 def _without_right_gcps(block, keep=()):

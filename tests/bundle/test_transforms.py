@@ -7,9 +7,10 @@ import numpy as np
 import pytest
 from jax.test_util import check_grads
 
-from jaxgeo.bundle import RESULTS, SolverConfig, with_bias
-from jaxgeo.bundle.build import build
-from jaxgeo.bundle.solve import solve, solve_jit
+from jaxgeo.bundle import with_bias
+from jaxgeo.bundle._prepare import prepare
+from jaxgeo.lsq import RESULTS, SolverConfig, solve
+from jaxgeo.lsq._solve import solve_jit
 from tests.bundle.conftest import NOISE_PX, make_block
 
 
@@ -21,7 +22,7 @@ def block(ventoux_pair):
 
 @pytest.fixture(scope="module")
 def problem(block):
-    return build(with_bias(block.models, "shift-drift"), block.obs, block.ground).problem
+    return prepare(with_bias(block.models, "shift-drift"), block.obs, block.ground).problem
 
 
 def _xy(problem):

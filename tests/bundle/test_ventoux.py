@@ -8,10 +8,11 @@ bring the check points to the noise level, and agree with a dense solver.
 import numpy as np
 import pytest
 
-from jaxgeo.bundle import RESULTS, SolverConfig, adjust, direct_georeferencing, with_bias
-from jaxgeo.bundle.build import build
-from jaxgeo.bundle.report import project
-from jaxgeo.bundle.solve import solve, solve_jit
+from jaxgeo.bundle import adjust, direct_georeferencing, with_bias
+from jaxgeo.bundle._prepare import prepare
+from jaxgeo.bundle._report import project
+from jaxgeo.lsq import RESULTS, SolverConfig, solve
+from jaxgeo.lsq._solve import solve_jit
 from tests.bundle.conftest import NOISE_PX, TRUE_BIAS
 
 
@@ -66,7 +67,7 @@ def test_check_points_fall_to_the_noise_level(block, result):
 
 
 def test_schur_solver_equals_dense_levenberg_marquardt(block, result):
-    setup = build(with_bias(block.models, "affine"), block.obs, block.ground)
+    setup = prepare(with_bias(block.models, "affine"), block.obs, block.ground)
     problem = setup.problem
     # the solvers compared on least squares (IRLS would add its own 1e-3 weight tolerance)
     a = solve_jit(problem, SolverConfig(loss="l2"))

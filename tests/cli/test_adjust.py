@@ -114,8 +114,7 @@ def test_adjust_writes_rpcs_gdal_finds(scene, tmp_path, capsys):
     it; ``--write-into`` puts it into the copy's tags; the inputs stay as they were."""
     import rasterio
 
-    from jaxgeo.io import write_geotiff_rpc
-    from jaxgeo.io.rpc_gdal import from_rasterio_rpc
+    from jaxgeo.io import from_rasterio_rpc, write_geotiff_rpc
 
     for name in ("fore", "aft"):
         write_geotiff_rpc(read_rpc(scene / f"{name}.txt"), scene / f"{name}.tif", shape=(64, 64))

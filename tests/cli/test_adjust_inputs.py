@@ -62,12 +62,12 @@ def test_out_over_an_input_refused_before_computing(scene, capsys):
 def test_existing_output_refused_before_computing(scene, tmp_path, capsys, monkeypatch, extra,
                                                   existing):  # fmt: skip
     # the pre-check checks exactly the files the writer writes (not old names)
-    import jaxgeo.bundle.adjustment as adjustment
+    import jaxgeo.bundle
 
     def never(*args, **kwargs):
         raise AssertionError("computed before --out was checked")
 
-    monkeypatch.setattr(adjustment, "adjust_files", never)
+    monkeypatch.setattr(jaxgeo.bundle, "adjust_files", never)
     out = tmp_path / "o"
     out.mkdir()
     (out / existing).write_text("keep me")
@@ -79,7 +79,7 @@ def test_existing_output_refused_before_computing(scene, tmp_path, capsys, monke
 
 
 def test_failed_write_keeps_the_report(scene, tmp_path, capsys, monkeypatch):
-    import jaxgeo.bundle.adjustment as adjustment
+    import jaxgeo.bundle._adjustment as adjustment
 
     def fail(*args, **kwargs):
         raise PermissionError("disk says no")

@@ -9,7 +9,7 @@ import numpy as np
 import pytest
 
 from jaxgeo.cli import main
-from jaxgeo.simulate.tiepair import tie_pair
+from jaxgeo.simulate._tiepair import tie_pair
 
 
 @pytest.fixture(scope="module")
@@ -63,7 +63,7 @@ def test_tie_heights_from_a_dem_raster(pair, tmp_path, capsys):
     import rasterio
 
     from jaxgeo.io import read_rpc
-    from jaxgeo.simulate.tiepair import terrain_height
+    from jaxgeo.simulate._tiepair import terrain_height
 
     p, files = pair
     rpc = read_rpc(files["fore"])

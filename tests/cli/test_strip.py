@@ -13,7 +13,7 @@ from affine import Affine as GeoTransform
 
 from jaxgeo.cli import main
 from jaxgeo.io import read_ground, read_observations, read_rpc, write_observations
-from jaxgeo.models import Affine, Biased
+from jaxgeo.models import AffineBias, Biased
 from jaxgeo.simulate import carto2s_strip
 from jaxgeo.strip import UniversalCorrection, UniversallyCorrected
 
@@ -86,7 +86,7 @@ def test_updated_rpcs_reproduce_final_models(strip_dir, adjusted):
     n_checked = 0
     for name in NAMES:
         b = data["models"][name]["bias"]
-        bias = Affine(
+        bias = AffineBias(
             [b[".bias.shift_px[0]"], b[".bias.shift_px[1]"]],
             [[b[f".bias.matrix[{i},{j}]"] for j in (0, 1)] for i in (0, 1)],
         )
@@ -220,7 +220,7 @@ def test_gross_error_named_and_removed(strip_dir, adjusted, tmp_path, capsys):
     only with --keep-blunders; the clean run flags nothing. The options mirror jaxgeo adjust."""
     assert "gross errors: none flagged" in adjusted[1]
     from jaxgeo.cli import build_parser
-    from jaxgeo.cli.strip import strip_config
+    from jaxgeo.cli._strip import strip_config
 
     args = build_parser("strip").parse_args(
         ["strip", str(strip_dir), "--loss", "huber", "--loss-scale", "2", "--keep-blunders"]

@@ -22,6 +22,7 @@ from hypothesis import strategies as st
 from jaxgeo.errors import JaxgeoWarning
 from jaxgeo.io import (
     GroundPoints,
+    MetadataError,
     Observations,
     RPCFormatError,
     TableError,
@@ -30,11 +31,11 @@ from jaxgeo.io import (
     read_metadata,
     read_observations,
     read_rpc,
+    write_ground,
+    write_observations,
     write_rpb,
 )
-from jaxgeo.io.metadata import MetadataError
-from jaxgeo.io.tables import write_ground, write_observations
-from jaxgeo.models.rpc import check_rpc
+from jaxgeo.models import check_rpc
 
 REAL = pathlib.Path(__file__).parents[1] / "data" / "real"
 DATA = pathlib.Path(__file__).parent / "data"

@@ -6,7 +6,7 @@ import pathlib
 import numpy as np
 import pytest
 
-from jaxgeo.io.metadata import SceneMetadata, read_metadata, write_metadata_json
+from jaxgeo.io import SceneMetadata, read_metadata, write_metadata_json
 
 DATA = pathlib.Path(__file__).parent / "data"
 TEXT = DATA / "cartosat1_stereo_meta.txt"

@@ -11,12 +11,10 @@ import pytest
 import rasterio
 from rasterio.transform import RPCTransformer
 
-from jaxgeo.bundle.export import adjusted_rpc
-from jaxgeo.io import read_rpc
-from jaxgeo.io.rpc_geom_dimap import fit_direct_model, format_dimap_rpc, format_ossim_geom
-from jaxgeo.io.rpc_place import image_stem, plan_rpc_outputs, write_rpc_outputs
-from jaxgeo.models import Affine, Biased, ShiftDrift
-from jaxgeo.models.rpc import monomials
+from jaxgeo.bundle._export import adjusted_rpc
+from jaxgeo.io import image_stem, plan_rpc_outputs, read_rpc, write_rpc_outputs
+from jaxgeo.io._rpc_geom_dimap import fit_direct_model, format_dimap_rpc, format_ossim_geom
+from jaxgeo.models import AffineBias, Biased, ShiftDriftBias, monomials
 
 REAL = pathlib.Path(__file__).parents[1] / "data" / "real"
 STEM = "PHR1B_P_201709281038393_SEN_PRG_FC_178609-001"
@@ -86,7 +84,7 @@ def test_dimap_direct_model_matches_the_vendors(rpc):
 
 @pytest.fixture(scope="module")
 def affine_refit(rpc):
-    model = Biased(rpc, Affine((2.5, -1.75), ((3e-5, -1e-5), (2e-5, 4e-5))))
+    model = Biased(rpc, AffineBias((2.5, -1.75), ((3e-5, -1e-5), (2e-5, 4e-5))))
     return model, adjusted_rpc(model, None)  # domain: the wrapped RPC's validity cube
 
 
@@ -108,7 +106,7 @@ def test_refit_rpc_beside_a_copy_read_by_gdal(affine_refit, cube, tmp_path, fmt)
 
 
 def test_exact_fold_into_geotiff_tags(rpc, cube, tmp_path):
-    model = Biased(rpc, ShiftDrift((1.5, -0.5), (0.0, 0.0)))
+    model = Biased(rpc, ShiftDriftBias((1.5, -0.5), (0.0, 0.0)))
     folded, err, how = adjusted_rpc(model, None)
     assert how == "exact" and err == 0.0
     plan = plan_rpc_outputs("left", IMAGE, tmp_path, write_into=True)

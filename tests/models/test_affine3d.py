@@ -7,9 +7,8 @@ import pytest
 from jax.test_util import check_grads
 
 from jaxgeo import geodesy
-from jaxgeo.models.affine3d import SPACES, Affine3D, to_object
-from jaxgeo.models.kepler import KeplerSequence
-from jaxgeo.models.metadata import SceneMetadata
+from jaxgeo.models import Affine3D, KeplerSequence, SceneMetadata
+from jaxgeo.models._affine3d import SPACES, to_object
 
 CENTRE = np.array([147.3, -42.9, 300.0])  # Hobart (000_), UTM zone 55 south
 

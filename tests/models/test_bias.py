@@ -7,14 +7,14 @@ import numpy as np
 import pytest
 from jax.test_util import check_grads
 
-from jaxgeo import Affine, Biased, Shift, ShiftDrift
-from jaxgeo.models.bias import BIAS_KINDS
+from jaxgeo import AffineBias, Biased, ShiftBias, ShiftDriftBias
+from jaxgeo.models import BIAS_KINDS
 from tests.conftest import cube_points
 
 BIASES = {
-    "shift": Shift([3.2, -33.0]),
-    "shift-drift": ShiftDrift([3.2, -33.0], [2e-4, -1.5e-4]),
-    "affine": Affine([3.2, -33.0], [[1e-4, 2e-4], [-3e-5, -1.5e-4]]),
+    "shift": ShiftBias([3.2, -33.0]),
+    "shift-drift": ShiftDriftBias([3.2, -33.0], [2e-4, -1.5e-4]),
+    "affine": AffineBias([3.2, -33.0], [[1e-4, 2e-4], [-3e-5, -1.5e-4]]),
 }
 
 
@@ -37,13 +37,13 @@ def test_equation_2_holds(pleiades, kind):
 
 
 def test_parameterisations_nest():
-    assert (Shift().n_params, ShiftDrift().n_params, Affine().n_params) == (2, 4, 6)
-    _, m = ShiftDrift([0, 0], [1e-4, 2e-4]).coefficients()
+    assert (ShiftBias().n_params, ShiftDriftBias().n_params, AffineBias().n_params) == (2, 4, 6)
+    _, m = ShiftDriftBias([0, 0], [1e-4, 2e-4]).coefficients()
     # drift is in line: only the y column of the matrix is non-zero
     np.testing.assert_array_equal(np.asarray(m), [[0, 1e-4], [0, 2e-4]])
     xy = jnp.array([[10.0, 20.0], [3000.0, -4.0]])
     np.testing.assert_allclose(
-        Shift([1.0, 2.0]).to_model(xy), Affine([1.0, 2.0]).to_model(xy), rtol=0, atol=0
+        ShiftBias([1.0, 2.0]).to_model(xy), AffineBias([1.0, 2.0]).to_model(xy), rtol=0, atol=0
     )
 
 
@@ -51,7 +51,7 @@ def test_003_form_is_the_same_family(pleiades):
     rpc, _ = pleiades
     a = np.array([2.0, 1e-4, -2e-4])  # S = x_m + a0 + a1 S + a2 P
     b = np.array([-5.0, 3e-5, 1e-4])
-    model = Biased(rpc, Affine.from_image_affine(a, b))
+    model = Biased(rpc, AffineBias.from_image_affine(a, b))
     g = cube_points(rpc, 50, seed=12)
     s, p = np.asarray(model.project(g)).T
     xm, ym = np.asarray(rpc.project(g)).T
@@ -94,7 +94,7 @@ def test_gradients(pleiades, kind):
 
 
 def test_biased_model_keeps_the_soft_constraints_of_the_model_it_wraps(pleiades):
-    import jaxgeo.models.base as base
+    import jaxgeo.models._base as base
 
     rpc, _ = pleiades
 
@@ -116,6 +116,6 @@ def test_biased_model_keeps_the_soft_constraints_of_the_model_it_wraps(pleiades)
         def prior_residuals(self):
             return jnp.array([1.5, -2.0])
 
-    wrapped = Biased(Constrained(rpc), Affine())
+    wrapped = Biased(Constrained(rpc), AffineBias())
     np.testing.assert_array_equal(np.asarray(wrapped.prior_residuals()), [1.5, -2.0])
-    assert Biased(rpc, Shift()).prior_residuals().shape == (0,)
+    assert Biased(rpc, ShiftBias()).prior_residuals().shape == (0,)

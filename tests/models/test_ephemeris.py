@@ -11,17 +11,12 @@ import pytest
 from jax.test_util import check_grads
 
 from jaxgeo import geodesy
-from jaxgeo.models import EphemerisModel
-from jaxgeo.models.ephemeris import gmst_rad
-from jaxgeo.models.rpc_fit import localize_points as localize
-from jaxgeo.models.rpc_fit import project_points as project
+from jaxgeo.models import EphemerisModel, gmst_rad
+from jaxgeo.models import localize_points as localize
+from jaxgeo.models import project_points as project
 from jaxgeo.rotations import angles_from_matrix, omega_phi_kappa
-from jaxgeo.simulate.orbit import (
-    CircularOrbit,
-    ephemeris_from_orbit,
-    ground_track_attitude,
-    sun_synchronous_inclination_deg,
-)
+from jaxgeo.simulate import CircularOrbit, ephemeris_from_orbit
+from jaxgeo.simulate._orbit import ground_track_attitude, sun_synchronous_inclination_deg
 
 LON, LAT = 147.30, -42.88  # Hobart
 N = 12000

@@ -1,4 +1,4 @@
-"""``jaxgeo.models.host``: numpy in and out of a compiled kernel without copies. The exact path
+"""``jaxgeo.models._host``: numpy in and out of a compiled kernel without copies. The exact path
 must give the chunked path's numbers, never touch the input, and hand out arrays that behave as
 the user's own."""
 
@@ -9,7 +9,7 @@ import jax.numpy as jnp
 import numpy as np
 import pytest
 
-from jaxgeo.models import host
+from jaxgeo.models import _host as host
 
 
 def _at_offset(values: np.ndarray, offset: int) -> np.ndarray:

@@ -11,22 +11,19 @@ from jaxgeo.models import (
     RPC,
     AbstractMultiImageModel,
     AbstractSensorModel,
-    Affine,
     Affine3D,
+    AffineBias,
     Biased,
     GenericPushbroom,
     KeplerSequence,
     SceneMetadata,
-    Shift,
-    ShiftDrift,
+    ShiftBias,
+    ShiftDriftBias,
+    gmst_rad,
     newton_root,
 )
-from jaxgeo.models.ephemeris import gmst_rad
-from jaxgeo.simulate.orbit import (
-    CircularOrbit,
-    ephemeris_from_orbit,
-    sun_synchronous_inclination_deg,
-)
+from jaxgeo.simulate import CircularOrbit, ephemeris_from_orbit
+from jaxgeo.simulate._orbit import sun_synchronous_inclination_deg
 
 LON, LAT = 147.30, -42.88
 
@@ -74,9 +71,9 @@ def _models() -> dict[str, AbstractSensorModel]:
     seq = KeplerSequence.from_metadata([_scene()])
     return {
         "rpc": rpc,
-        "biased_shift": Biased(rpc, Shift((0.5, -1.0))),
-        "biased_drift": Biased(rpc, ShiftDrift((0.5, -1.0), (1e-5, 0.0))),
-        "biased_affine": Biased(rpc, Affine((0.5, -1.0), ((1e-5, 0.0), (0.0, 2e-5)))),
+        "biased_shift": Biased(rpc, ShiftBias((0.5, -1.0))),
+        "biased_drift": Biased(rpc, ShiftDriftBias((0.5, -1.0), (1e-5, 0.0))),
+        "biased_affine": Biased(rpc, AffineBias((0.5, -1.0), ((1e-5, 0.0), (0.0, 2e-5)))),
         "affine3d": Affine3D.fit(ground, np.asarray(rpc.project(ground)), space="geographic"),
         "pushbroom": GenericPushbroom.from_metadata(_scene()),
         "ephemeris": _ephemeris(),
@@ -86,9 +83,9 @@ def _models() -> dict[str, AbstractSensorModel]:
 
 MODELS = _models()
 EXPECTED_GCPS = {
-    "biased_shift": (1, "the Shift bias (2 parameters)"),
-    "biased_drift": (2, "the ShiftDrift bias (4 parameters)"),
-    "biased_affine": (3, "the Affine bias (6 parameters)"),
+    "biased_shift": (1, "the ShiftBias (2 parameters)"),
+    "biased_drift": (2, "the ShiftDriftBias (4 parameters)"),
+    "biased_affine": (3, "the AffineBias (6 parameters)"),
     "affine3d": (4, "the 3D affine model (8 parameters, non-coplanar GCPs)"),
 }
 
@@ -127,7 +124,7 @@ def test_biased_rpc_filter_is_the_bias_only():
 
 def test_a_zero_drift_folds_exactly_into_the_rpc():
     rpc = MODELS["rpc"]
-    exact = Biased(rpc, ShiftDrift((0.5, -1.0), (0.0, 0.0))).exact_rpc()
+    exact = Biased(rpc, ShiftDriftBias((0.5, -1.0), (0.0, 0.0))).exact_rpc()
     np.testing.assert_allclose(exact.image_offset, np.asarray(rpc.image_offset) - [0.5, -1.0])
 
 

@@ -16,15 +16,8 @@ import pytest
 import scipy.integrate
 from jax.test_util import check_grads
 
-from jaxgeo.models.kepler import (
-    KeplerImage,
-    KeplerSequence,
-    propagate,
-    propagate_taylor2,
-    taylor_coefficients,
-    taylor_state,
-)
-from jaxgeo.models.metadata import SceneMetadata
+from jaxgeo.models import KeplerImage, KeplerSequence, SceneMetadata
+from jaxgeo.models._kepler import propagate, propagate_taylor2, taylor_coefficients, taylor_state
 
 GM = 398600.4415e9
 OMEGA_E = 7.2921151467e-5

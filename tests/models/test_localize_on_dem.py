@@ -8,8 +8,9 @@ from jax.test_util import check_grads
 
 import jaxgeo
 from jaxgeo.io import read_dem, to_rasterio_rpc
-from jaxgeo.models.dem import DEMGrid, DEMStatus, localize_on_dem
+from jaxgeo.models import DEMGrid, DEMStatus, localize_on_dem
 from tests.ortho.conftest import ventoux_dem_ellipsoidal  # noqa: F401  (fixture)
+from tests.typecheck import unchecked
 
 GTX = "ventoux/dem/egm96_15_crop_lon3-8_lat42-47.gtx"
 SRTM = "ventoux/dem/N44E005_srtm90.tif"
@@ -133,7 +134,7 @@ def test_agrees_with_gdal_rpc_dem(left, real_data, ventoux_dem_ellipsoidal):  # 
 
 def test_shareloc_geoid_and_dem_values(real_data):
     """shareloc test_dtm_intersection.py: geoid heights and DEM + geoid (reference_values.json)."""
-    from jaxgeo.io.geoid import read_geoid
+    from jaxgeo.io._geoid import read_geoid
 
     geoid = read_geoid(real_data / GTX)
     np.testing.assert_allclose(geoid(5.19368066, 44.20749145), 50.8618354, atol=1e-6)
@@ -161,3 +162,20 @@ def test_read_dem_errors(real_data, tmp_path):
         dst.write(np.zeros((1, 4, 4), dtype="float32"))
     with pytest.raises(ValueError, match="no CRS"):
         read_dem(nocrs)
+
+
+def test_method_takes_what_read_dem_returns(left, ventoux_dem_ellipsoidal):  # noqa: F811
+    """``model.localize_on_dem(xy, read_dem(...))``: the window is read for the caller, for any
+    model (here a biased RPC: its base RPC's validity heights), same answer as a grid by hand."""
+    dem = read_dem(ventoux_dem_ellipsoidal, height="ellipsoidal")
+    biased = jaxgeo.Biased(left, jaxgeo.ShiftBias((1.5, -2.0)))
+    assert biased.base_rpc() is left and left.base_rpc() is left
+    rng = np.random.default_rng(3)
+    xy = np.stack([rng.uniform(5000, 5500, 64), rng.uniform(5000, 5500, 64)], -1)
+    g, st = biased.localize_on_dem(xy, dem)
+    assert np.all(np.asarray(st) == DEMStatus.OK)
+    by_hand, _ = localize_jit(biased, xy, dem.grid((5.16, 44.16, 5.2395, 44.2395)))
+    np.testing.assert_allclose(g, by_hand, atol=1e-9)
+    np.testing.assert_allclose(biased.project(g), xy, atol=1e-6)
+    with pytest.raises(TypeError, match="DEMGrid or a DEM"):  # the library's own message
+        unchecked(localize_on_dem)(left, xy, str(ventoux_dem_ellipsoidal))

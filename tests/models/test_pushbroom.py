@@ -20,10 +20,8 @@ from scipy.interpolate import BSpline
 from scipy.optimize import brentq
 
 from jaxgeo import GenericPushbroom
-from jaxgeo.models.metadata import SceneMetadata
-from jaxgeo.models.newton import newton_root
-from jaxgeo.models.pushbroom import mounting_rotation
-from jaxgeo.models.spline import Spline, SplineObservations
+from jaxgeo.models import SceneMetadata, Spline, SplineObservations, newton_root
+from jaxgeo.models._pushbroom import mounting_rotation
 from tests.typecheck import unchecked
 
 GM_M3_S2 = 398600.4418e9

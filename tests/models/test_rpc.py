@@ -9,7 +9,7 @@ from jax.test_util import check_grads
 from rasterio.transform import RPCTransformer
 
 from jaxgeo import RPC
-from jaxgeo.models.rpc import A_TO_B, B_TO_A, RPC00A_TERMS, RPC00B_TERMS, from_rpc00b
+from jaxgeo.models._rpc import A_TO_B, B_TO_A, RPC00A_TERMS, RPC00B_TERMS, from_rpc00b
 from tests.conftest import REFERENCE_GROUND, REFERENCE_IMAGE, cube_points
 from tests.typecheck import unchecked
 
@@ -169,3 +169,22 @@ def test_gradients_localize(pleiades):
     check_grads(
         jax.jit(f), (params,), order=1, modes=("fwd", "rev"), eps=1e-8, atol=1e-9, rtol=1e-3
     )
+
+
+def test_which_calls_return_numpy_and_which_jax(pleiades):
+    """As documented in ``jaxgeo.models``: an RPC's ``project`` / ``localize`` return numpy for
+    numpy (or list) input, JAX for JAX input or under a transformation; every other model
+    returns JAX arrays."""
+    from jaxgeo import Biased, ShiftBias
+
+    rpc = pleiades[0]
+    g = np.asarray(rpc.reference_ground())[None].repeat(4, axis=0)
+    assert type(rpc.project(g)) is np.ndarray
+    assert type(rpc.project(g.tolist())) is np.ndarray
+    assert isinstance(rpc.project(jnp.asarray(g)), jax.Array)
+    assert type(rpc.localize(np.zeros((4, 2)), 100.0)) is np.ndarray
+    assert isinstance(rpc.localize(jnp.zeros((4, 2)), 100.0), jax.Array)
+    np.testing.assert_array_equal(rpc.project(g), rpc.project(jnp.asarray(g)))
+    assert isinstance(jax.jit(lambda x: rpc.project(x))(g), jax.Array)
+    assert isinstance(jax.jit(lambda x: rpc.localize(x, 100.0))(np.zeros((4, 2))), jax.Array)
+    assert isinstance(Biased(rpc, ShiftBias()).project(g), jax.Array)

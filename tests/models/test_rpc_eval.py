@@ -1,11 +1,11 @@
-"""The numpy-in/numpy-out paths of ``jaxgeo.models.rpc_eval``: chunking, padding buckets and
+"""The numpy-in/numpy-out paths of ``jaxgeo.models._rpc_eval``: chunking, padding buckets and
 asynchronous collection give the same numbers as one traced call."""
 
 import jax
 import numpy as np
 import pytest
 
-from jaxgeo.models import rpc_eval
+from jaxgeo.models import _rpc_eval as rpc_eval
 
 
 @pytest.mark.parametrize("n", [1, 17, 100, 1000])

@@ -4,14 +4,17 @@ import jax.numpy as jnp
 import numpy as np
 import pytest
 
-from jaxgeo.models import AbstractSensorModel, EphemerisModel, fit_rpc, fit_rpcs
-from jaxgeo.models.ephemeris import gmst_rad
-from jaxgeo.models.rpc_fit import localize_points, project_points
-from jaxgeo.simulate.orbit import (
-    CircularOrbit,
-    ephemeris_from_orbit,
-    sun_synchronous_inclination_deg,
+from jaxgeo.models import (
+    AbstractSensorModel,
+    EphemerisModel,
+    fit_rpc,
+    fit_rpcs,
+    gmst_rad,
+    localize_points,
+    project_points,
 )
+from jaxgeo.simulate import CircularOrbit, ephemeris_from_orbit
+from jaxgeo.simulate._orbit import sun_synchronous_inclination_deg
 
 N = 12000
 H_RANGE = (-100.0, 1400.0)

@@ -7,7 +7,8 @@ import pytest
 from jax.test_util import check_grads
 from scipy.interpolate import BSpline
 
-from jaxgeo.models.spline import Spline, uniform_basis_matrix
+from jaxgeo.models import Spline
+from jaxgeo.models._spline import uniform_basis_matrix
 
 
 def _random_spline(degree, n_segments, dim=3, seed=0, t0=-1.5, t1=2.5):

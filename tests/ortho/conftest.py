@@ -29,7 +29,7 @@ def write_dem(path, z, west, north, step):
 @pytest.fixture(scope="session")
 def ventoux_dem_ellipsoidal(real_data, tmp_path_factory):
     """SRTM N44E005 + EGM96 (the shared crop) over lon 5.10..5.30, lat 44.12..44.30: ellipsoidal."""
-    from jaxgeo.io.geoid import read_geoid
+    from jaxgeo.io._geoid import read_geoid
 
     dem_dir = real_data / "ventoux" / "dem"
     geoid = read_geoid(dem_dir / "egm96_15_crop_lon3-8_lat42-47.gtx")

@@ -7,9 +7,9 @@ import rasterio
 
 import jaxgeo
 from jaxgeo.io import read_dem
-from jaxgeo.models.dem import DEMGrid, DEMStatus, localize_on_dem
+from jaxgeo.models import DEMGrid, DEMStatus, localize_on_dem
 from jaxgeo.ortho import orthorectify
-from jaxgeo.ortho.occlusion import occluded_pixels
+from jaxgeo.ortho._occlusion import occluded_pixels
 from tests.conftest import PLEIADES_TIF
 from tests.ortho.conftest import write_dem
 

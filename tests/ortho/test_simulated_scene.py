@@ -7,7 +7,7 @@ import rasterio
 
 import jaxgeo
 from jaxgeo.io import read_dem
-from jaxgeo.models.dem import DEMStatus, localize_on_dem
+from jaxgeo.models import DEMStatus, localize_on_dem
 from jaxgeo.ortho import orthorectify
 from tests.conftest import PLEIADES_TIF
 

@@ -7,9 +7,8 @@ import numpy as np
 import pytest
 
 from jaxgeo import geodesy
-from jaxgeo.io import read_rpc
-from jaxgeo.io.tables import read_ground, read_observations
-from jaxgeo.models.rpc_fit import localize_points, project_points
+from jaxgeo.io import read_ground, read_observations, read_rpc
+from jaxgeo.models import localize_points, project_points
 from jaxgeo.simulate import carto2s_strip
 
 N_SCENES = 6

@@ -10,9 +10,9 @@ the test short; the simulation is otherwise the full strip.
 import numpy as np
 import pytest
 
-from jaxgeo.models.rpc_fit import project_points
+from jaxgeo.models import project_points
 from jaxgeo.simulate import carto2s_strip
-from jaxgeo.simulate.carto2s import VENDOR_RMS_RANGE_PX
+from jaxgeo.simulate._carto2s import VENDOR_RMS_RANGE_PX
 
 
 @pytest.mark.parametrize("n_scenes", [80, 100, 160, 320])

@@ -7,11 +7,10 @@ import numpy as np
 import pytest
 
 from jaxgeo import geodesy
-from jaxgeo.io import read_rpc
-from jaxgeo.io.tables import read_ground, read_observations
-from jaxgeo.models.rpc_fit import localize_points, project_points
+from jaxgeo.io import read_ground, read_observations, read_rpc
+from jaxgeo.models import localize_points, project_points
 from jaxgeo.simulate import cartosat1_stereo, demo_dir, write_demo
-from jaxgeo.simulate.scene import enu_errors, rms
+from jaxgeo.simulate._scene import enu_errors, rms
 
 
 @pytest.fixture(scope="module")

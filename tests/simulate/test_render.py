@@ -3,7 +3,7 @@
 import numpy as np
 import pytest
 
-from jaxgeo.simulate.render import cartosat1_rendered, localize_on_terrain, render, write_image
+from jaxgeo.simulate._render import cartosat1_rendered, localize_on_terrain, render, write_image
 
 SIZE = 160
 

@@ -4,10 +4,10 @@ import numpy as np
 import pytest
 import rasterio
 
-from jaxgeo.stereo.dense import resample, sgm_disparity
-from jaxgeo.stereo.dsm import rasterize, to_map, write_dsm
-from jaxgeo.stereo.matching import to_uint8
-from jaxgeo.stereo.rectification import EpipolarGrids, node_xy
+from jaxgeo.stereo import EpipolarGrids, rasterize, resample_epipolar, sgm_disparity, write_dsm
+from jaxgeo.stereo._dsm import to_map
+from jaxgeo.stereo._matching import to_uint8
+from jaxgeo.stereo._rectification import node_xy
 
 
 def _texture(rows, cols, seed=0):
@@ -21,13 +21,15 @@ def test_resample_through_identity_grid_shifted():
     img = _texture(90, 120)
     nodes = node_xy((5, 6), 30.0)
     grids = EpipolarGrids(nodes + (3.0, 2.0), nodes, 30.0, (60, 80), np.nan, np.zeros((5, 6)))
-    left = resample(img, grids, "left", interpolation="linear")
+    left = resample_epipolar(img, grids, "left", interpolation="linear")
     np.testing.assert_allclose(left, img[2:62, 3:83], atol=1e-5)
     # sampling across the epipolar lines moves rows; outside the image is NaN
-    right = resample(img, grids, "right", y_shift_px=1.0, interpolation="linear")
+    right = resample_epipolar(img, grids, "right", y_shift_px=1.0, interpolation="linear")
     np.testing.assert_allclose(right[:59], img[1:60, :80], atol=1e-5)
     # a window starting at sensor x = 60: epipolar columns left of it have no data
-    window = resample(img[:, 60:], grids, "left", origin_xy=(60.0, 0.0), interpolation="linear")
+    window = resample_epipolar(
+        img[:, 60:], grids, "left", origin_xy=(60.0, 0.0), interpolation="linear"
+    )
     assert np.isnan(window[:, :57]).all()
     np.testing.assert_allclose(window[:, 57:], img[2:62, 60:83], atol=1e-5)
 

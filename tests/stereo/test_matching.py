@@ -4,7 +4,7 @@ import numpy as np
 
 from jaxgeo.cli import main
 from jaxgeo.io import read_observations, read_rpc
-from jaxgeo.stereo.matching import epipolar_offsets
+from jaxgeo.stereo import epipolar_offsets
 
 
 def test_match_agrees_with_s2p_ties(shared_data, tmp_path):

@@ -8,8 +8,7 @@ import pytest
 import rasterio
 
 from jaxgeo.io import read_rpc
-from jaxgeo.stereo.rectification import EpipolarGrids, epipolar_grids
-from jaxgeo.stereo.triangulation import disparity_to_matches, triangulate
+from jaxgeo.stereo import EpipolarGrids, disparity_to_matches, epipolar_grids, triangulate
 
 LEFT_WINDOW = (5000, 5000, 500, 500)  # left_image.tif: geotransform origin (5000, 5000)
 
@@ -105,10 +104,10 @@ def test_triangulation_matches_cars(ventoux):
 def test_grids_of_a_biased_model(ventoux, grids0):
     """Any model works: an RPC + image shift as the right model moves the right grid by the
     shift and leaves the left grid (the epipolar geometry in the left image) unchanged."""
-    from jaxgeo.models import Biased, Shift
+    from jaxgeo.models import Biased, ShiftBias
 
     left, right, _, _ = ventoux
-    biased = Biased(right, Shift((1.25, -0.75)))  # measured = model - shift
+    biased = Biased(right, ShiftBias((1.25, -0.75)))  # measured = model - shift
     g = epipolar_grids(left, biased, LEFT_WINDOW, elevation=0.0, epi_step=30)
     np.testing.assert_allclose(g.left, grids0.left, atol=1e-8, rtol=0)
     np.testing.assert_allclose(

@@ -4,11 +4,10 @@ and dense matching in bands of epipolar rows against one pass."""
 import numpy as np
 import pytest
 
-from jaxgeo.models.rpc_fit import fit_rpcs
-from jaxgeo.simulate.dsm_truth import height_errors
-from jaxgeo.simulate.render import cartosat1_rendered
-from jaxgeo.stereo.dsm import rasterize
-from jaxgeo.stereo.pipeline import stereo_pair
+from jaxgeo.models import fit_rpcs
+from jaxgeo.simulate._dsm_truth import height_errors
+from jaxgeo.simulate._render import cartosat1_rendered
+from jaxgeo.stereo import rasterize, stereo_pair
 
 SIZE = 320
 

@@ -7,13 +7,12 @@ import jax.numpy as jnp
 import numpy as np
 import pytest
 
-from jaxgeo.bundle import band
-from jaxgeo.bundle.errors import RESULTS, SingularNormalEquations
-from jaxgeo.bundle.result import finish
-from jaxgeo.bundle.solve import solve_jit
-from jaxgeo.strip import UniversalCorrectionWarning, adjust_strip
-from jaxgeo.strip.config import STRIP_SOLVER
-from jaxgeo.strip.export import summary
+from jaxgeo.bundle import SingularNormalEquations, make_result
+from jaxgeo.lsq import RESULTS
+from jaxgeo.lsq import _band as band
+from jaxgeo.lsq._solve import solve_jit
+from jaxgeo.strip import STRIP_SOLVER, UniversalCorrectionWarning, adjust_strip
+from jaxgeo.strip import strip_summary as summary
 from tests.strip.conftest import strip_config
 
 
@@ -99,4 +98,4 @@ def test_banded_singular_sub_scene_is_named(dense, strip_result):
     strip = strip_result.strip
     name = strip.names[5]
     with pytest.raises(SingularNormalEquations, match=rf"{name}\.bias\.shift_px\[0\]"):
-        finish(setup, sol, strip.observations, strip.ground, STRIP_SOLVER)
+        make_result(setup, sol, strip.observations, strip.ground, STRIP_SOLVER)

@@ -5,8 +5,12 @@ import warnings
 import numpy as np
 import pytest
 
-from jaxgeo.strip.distribution import GCPDistributionWarning, check_gcp_distribution
-from jaxgeo.strip.universal import UniversallyCorrected, fit_universal_correction
+from jaxgeo.strip import (
+    GCPDistributionWarning,
+    UniversallyCorrected,
+    check_gcp_distribution,
+    fit_universal_correction,
+)
 from tests.conftest import cube_points
 
 

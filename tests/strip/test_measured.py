@@ -7,11 +7,9 @@ import numpy as np
 import pytest
 
 from jaxgeo.io import Observations
-from jaxgeo.strip import adjust_strip
-from jaxgeo.strip.errors import MeasuredTieWarning
-from jaxgeo.strip.level1 import level1_input
-from jaxgeo.strip.snooping import gross_checks
-from jaxgeo.strip.ties import strip_ties
+from jaxgeo.strip import MeasuredTieWarning, adjust_strip, strip_ties
+from jaxgeo.strip._level1 import level1_input
+from jaxgeo.strip._snooping import gross_checks
 from tests.strip.conftest import TIES, strip_config
 
 GSD_M = 0.65  # Carto-2S, as test_solve
@@ -62,7 +60,7 @@ def test_measured_ties_enter_level1_and_one_view_points_are_named(strip_quarter)
         level1_input(dataclasses.replace(strip, observations=clash))
 
 
-@pytest.mark.filterwarnings("ignore::jaxgeo.strip.errors.UniversalCorrectionWarning")
+@pytest.mark.filterwarnings("ignore::jaxgeo.strip._errors.UniversalCorrectionWarning")
 def test_measured_tie_and_check_gross_errors_named(strip_quarter):
     """One measured tie ray moved by 40 px: flagged at level 1 (the measured tie is in the
     adjustment); one check measurement moved by 30 px: named as a gross check and out of the

@@ -18,26 +18,27 @@ import jax.numpy as jnp
 import numpy as np
 import pytest
 
-import jaxgeo.strip.adjustment as strip_adjustment
-from jaxgeo.bundle.errors import RESULTS
+import jaxgeo.strip._adjustment as strip_adjustment
 from jaxgeo.io import Observations, read_observations
-from jaxgeo.models.rpc_fit import project_points
-from jaxgeo.simulate.gross import flag_scores
+from jaxgeo.lsq import RESULTS
+from jaxgeo.models import project_points
+from jaxgeo.simulate._gross import flag_scores
 from jaxgeo.strip import (
     GCPDistributionWarning,
     Level1Config,
     LineOffsetWarning,
     StripConfig,
     StripFormatError,
+    adjust_individually,
     adjust_strip,
+    evaluate_models,
     read_strip,
 )
-from jaxgeo.strip.adjustment import adjust_individually, evaluate_models
-from jaxgeo.strip.batch import monte_carlo_inputs
-from jaxgeo.strip.level1 import level1_input
-from jaxgeo.strip.report import line_offset_message
-from jaxgeo.strip.snooping import suspect_offsets
-from jaxgeo.strip.solve import degree_index, two_level_batch, two_level_jit
+from jaxgeo.strip._batch import monte_carlo_inputs
+from jaxgeo.strip._level1 import level1_input
+from jaxgeo.strip._report import line_offset_message
+from jaxgeo.strip._snooping import suspect_offsets
+from jaxgeo.strip._solve import degree_index, two_level_batch, two_level_jit
 from tests.strip.conftest import N_SCENES, QUARTER, TIES
 from tests.strip.conftest import strip_config as _config
 
@@ -136,7 +137,7 @@ def test_auto_degree_picks_the_best_cross_validated(quarter, result, individual)
 
 # with GCPs in only a quarter of the scenes the fixed quadratic predicts worse than the affine
 # correction, and the library says so (the warning the "auto" degree exists for)
-@pytest.mark.filterwarnings("ignore::jaxgeo.strip.errors.UniversalCorrectionWarning")
+@pytest.mark.filterwarnings("ignore::jaxgeo.strip._errors.UniversalCorrectionWarning")
 def test_ties_only_level1_then_universal_correction(quarter, strip_ties_only):
     """The paper's pure flow: level 1 with ties only (relative), level 2 absolute."""
     with pytest.raises(ValueError, match="bias priors"):
@@ -244,7 +245,7 @@ def test_read_strip_round_trip_and_errors(sim, tmp_path):
 FRACTION = 0.1
 PRIOR = np.array([50.0, 50.0, 1e-4, 1e-4, 1e-4, 1e-4])  # ties-only level 1: weak bias priors
 _GROSS = pytest.mark.filterwarnings(
-    "ignore::jaxgeo.strip.errors.UniversalCorrectionWarning"  # 4 GCP scenes: see above
+    "ignore::jaxgeo.strip._errors.UniversalCorrectionWarning"  # 4 GCP scenes: see above
 )
 
 
@@ -287,7 +288,7 @@ def _corrupting_ties(rng, bad: set):
 
 
 def _scores(result, bad_obs: set, bad_ties: set) -> tuple[float, float, int]:
-    """Recall, precision and count of the flags (:func:`jaxgeo.simulate.gross.flag_scores`)."""
+    """Recall, precision and count of the flags (:func:`jaxgeo.simulate._gross.flag_scores`)."""
     return tuple(flag_scores(result.gross_errors.flagged, bad_obs, bad_ties))
 
 

@@ -1,0 +1,304 @@
+"""Writing an adjustment: adjusted models (JSON and RPC files), points, residuals, report.
+
+Nothing the user gave is overwritten: every path is checked against the inputs and against
+existing files before anything is written, and each file is written atomically.
+"""
+
+from __future__ import annotations
+
+import csv
+import io
+import json
+import os
+import pathlib
+from collections.abc import Iterable, Mapping
+from typing import Any
+
+import jax
+import numpy as np
+
+from ..io import (
+    atomic_write_text,
+    format_rpc_txt,
+    image_stem,
+    plan_rpc_outputs,
+    vendor_values,
+    write_rpc_outputs,
+)
+from ..models import RPC, Biased, fit_rpc
+from ._report import format_reports
+
+
+def adjusted_rpc(model: Any, domain: RPC | None = None) -> tuple[RPC, float, str]:
+    """An RPC equivalent to an adjusted model: ``(rpc, max_error_px, how)``.
+
+    The model's own :meth:`~jaxgeo.models.AbstractSensorModel.exact_rpc` when it has one (an
+    RPC, or an RPC with a shift folded into its image offsets: ``how = "exact"``). Otherwise
+    (a bias with drift or affine terms mixes the sample and line rational functions, whose
+    denominators differ) the RPC is re-fitted to the model over the validity cube and image of
+    ``domain`` (the delivered RPC; ``how = "refit"``, ``max_error_px`` the maximum error on the
+    independent check grid). Raises ``TypeError`` when neither is possible.
+    """
+    exact = model.exact_rpc()
+    if exact is not None:
+        return exact, 0.0, "exact"
+    if domain is None:  # Biased(RPC, drift/affine): its RPC
+        domain = model.base_rpc()
+    if domain is None:
+        raise TypeError(f"no RPC form for a {type(model).__name__} model")
+    off, scale = np.asarray(domain.image_offset), np.asarray(domain.image_scale)
+    n_cols, n_rows = (int(round(o + s)) + 1 for o, s in zip(off, scale, strict=True))
+    go, gs = np.asarray(domain.ground_offset), np.asarray(domain.ground_scale)
+    refit, report = fit_rpc(model, n_cols, n_rows, (go[2] - gs[2], go[2] + gs[2]))
+    return refit, float(report.check_max_px), "refit"
+
+
+def delivered_rpcs(result) -> dict[str, RPC | None]:
+    """Image name -> the exact RPC of the model the adjustment started from (``None`` if it
+    has none): the validity domain of a refit, and the delivered RPC in the JSON."""
+    setup = result.setup
+    groups = setup.problem.groups
+    start = setup.image_models(groups, tuple(g.theta0 for g in groups))
+    return {name: model.exact_rpc() for name, model in start.items()}
+
+
+def _csv(header: list[str], rows: Iterable[Iterable[Any]]) -> str:
+    buf = io.StringIO()
+    w = csv.writer(buf, lineterminator="\n")
+    w.writerow(header)
+    w.writerows(rows)
+    return buf.getvalue()
+
+
+def _r(v: float) -> str:
+    return repr(float(v))
+
+
+def _leaves(tree) -> dict[str, Any]:
+    out = {}
+    for path, leaf in jax.tree_util.tree_flatten_with_path(tree)[0]:
+        out[jax.tree_util.keystr(path)] = np.asarray(leaf).tolist()
+    return out
+
+
+def models_json(result) -> dict[str, Any]:
+    """JSON-ready adjusted models: per image the RPC (vendor names) and bias, or the parameters,
+    with a posteriori sigmas of every adjusted parameter."""
+    images = {}
+    delivered = delivered_rpcs(result)
+    for name, model in result.models.items():
+        entry: dict[str, Any] = {"model": type(model).__name__}
+        key = next(k for k in result.blocks if k == name or (not isinstance(k, str) and name in k))
+        own = result.parameters(key)
+        entry["parameters"] = {k: v for k, (v, _) in own.items()}
+        entry["sigmas"] = {k: s for k, (_, s) in own.items()}
+        if delivered[name] is not None:
+            entry["rpc"] = vendor_values(delivered[name])
+        if isinstance(model, Biased):  # the correction on its own, with its kind
+            entry["bias"] = {"kind": type(model.bias).__name__, **_leaves(model.bias)}
+        images[name] = entry
+    return {"images": images}
+
+
+FIXED_OUTPUTS = (
+    "adjusted_models.json", "ground_adjusted.csv", "residuals.csv", "report.json", "report.txt",
+)  # fmt: skip
+
+
+def rpc_plans(
+    images: Mapping[str, str | os.PathLike],
+    out: pathlib.Path,
+    rpc_format: str = "txt",
+    copy_images: bool = False,
+    write_into: bool = False,
+) -> dict[str, Any]:
+    """Image name -> where its adjusted RPC goes (:func:`~jaxgeo.io.plan_rpc_outputs`;
+    two images of the same stem are written under their image names)."""
+    stems = {name: image_stem(path) for name, path in images.items()}
+    clash = {s for s in stems.values() if list(stems.values()).count(s) > 1}
+    return {
+        name: plan_rpc_outputs(
+            name,
+            images[name],
+            out,
+            rpc_format,
+            stem=name if stems[name] in clash else None,
+            copy_image=copy_images,
+            write_into=write_into,
+        )  # fmt: skip
+        for name in images
+    }
+
+
+def output_paths(
+    out_dir: str | os.PathLike,
+    images: Mapping[str, str | os.PathLike] | Iterable[str],
+    rpc_format: str = "txt",
+    copy_images: bool = False,
+    write_into: bool = False,
+) -> list[pathlib.Path]:
+    """Every file :func:`write_outputs` may write: the fixed outputs and, per image, its RPC
+    (and image copy) as planned from ``images`` (name -> file), or ``NAME_adjusted_RPC.TXT``
+    when only names are given."""
+    out = pathlib.Path(out_dir)
+    paths = [out / n for n in FIXED_OUTPUTS]
+    if isinstance(images, Mapping):
+        plans = rpc_plans(images, out, rpc_format, copy_images, write_into)
+        paths += [p for plan in plans.values() for p in plan.targets]
+    else:
+        paths += [out / f"{n}_adjusted_RPC.TXT" for n in images]
+    return paths
+
+
+def check_out_dir(
+    out_dir: str | os.PathLike,
+    images: Mapping[str, str | os.PathLike] | Iterable[str],
+    inputs: Iterable[str | os.PathLike] = (),
+    overwrite: bool = False,
+    rpc_format: str = "txt",
+    copy_images: bool = False,
+    write_into: bool = False,
+) -> None:
+    """Before any computation: ``out_dir`` is (or can be created as) a writable folder, and no
+    file :func:`write_outputs` will write (:func:`output_paths`, with the same ``images`` and
+    options) is an input or (unless ``overwrite``) exists. Raises ``FileExistsError`` /
+    ``PermissionError`` / ``NotADirectoryError`` naming the path, ``ValueError`` when an image
+    to copy is not found."""
+    out = pathlib.Path(out_dir)
+    if out.exists() and not out.is_dir():
+        raise NotADirectoryError(f"{out}: --out exists and is not a folder")
+    base = out
+    while not base.exists():
+        base = base.parent if base.parent != base else base
+        if base == base.parent:
+            break
+    if not os.access(base, os.W_OK | os.X_OK):
+        raise PermissionError(f"{out}: cannot write there ({base} is not writable)")
+    given = {pathlib.Path(p).resolve() for p in inputs}
+    for target in output_paths(out, images, rpc_format, copy_images, write_into):
+        path = target.resolve()
+        if path in given:
+            raise FileExistsError(f"{path}: refusing to write an adjusted file over an input")
+        if path.exists() and not overwrite:
+            raise FileExistsError(f"{path}: exists (choose another --out or pass --overwrite)")
+
+
+def write_outputs(
+    out_dir: str | os.PathLike,
+    result,
+    report_text: str,
+    report: dict[str, Any],
+    inputs: Iterable[str | os.PathLike] = (),
+    overwrite: bool = False,
+    rpc_files: bool = True,
+    images: Mapping[str, str | os.PathLike | str] | None = None,
+    rpc_format: str = "txt",
+    copy_images: bool = False,
+    write_into: bool = False,
+) -> list[pathlib.Path]:
+    """Write the adjustment into ``out_dir``; refuse to touch an input or (unless
+    ``overwrite``) an existing file. Returns the paths written.
+
+    Without ``images`` each adjusted RPC is ``NAME_adjusted_RPC.TXT``. With ``images`` (image
+    name -> the image or RPC file it was read from) each goes where GDAL/OTB/shareloc find it
+    for that image (:mod:`jaxgeo.io._rpc_place`: ``<image stem>_RPC.TXT`` / ``.RPB`` / ``.geom`` /
+    ``RPC_<stem>.XML`` by ``rpc_format``, beside a copy of the image with ``copy_images``, or in
+    the tags of a copy of the GeoTIFF with ``write_into``). An RPC is folded exactly where the
+    bias allows, else refitted; the refit error is in ``report.txt`` and ``report.json``."""
+    out = pathlib.Path(out_dir)
+    files: dict[str, str] = {}
+    notes = []
+    placed = []
+    if rpc_files and images is not None:
+        placed, notes, report = _place_rpcs(
+            result, images, out, rpc_format, copy_images, write_into, report
+        )
+    elif rpc_files:
+        delivered = delivered_rpcs(result)
+        for name, model in result.models.items():
+            try:
+                rpc, err, how = adjusted_rpc(model, delivered[name])
+            except TypeError:
+                continue
+            files[f"{name}_adjusted_RPC.TXT"] = format_rpc_txt(rpc)
+            notes.append(
+                f"{name}_adjusted_RPC.TXT: {how}"
+                + (f" (max error {err:.3g} px on the check grid)" if how == "refit" else "")
+            )
+    files["adjusted_models.json"] = json.dumps(models_json(result), indent=1) + "\n"
+    files["ground_adjusted.csv"] = _csv(
+        ["id", "lon", "lat", "h", "role", "sigma_e_m", "sigma_n_m", "sigma_h_m"],
+        [
+            [p, *(_r(v) for v in g), role, *(_r(v) for v in s)]
+            for p, role, g, s in zip(
+                result.point_ids,
+                result.point_role,
+                result.ground,
+                result.ground_sigma_m,
+                strict=True,
+            )
+        ],
+    )
+    files["residuals.csv"] = _csv(
+        ["id", "image", "vx_px", "vy_px", "wx", "wy", "blunder"],
+        [
+            [p, img, _r(v[0]), _r(v[1]), _r(w[0]), _r(w[1]), int(b)]
+            for p, img, v, w, b in zip(
+                result.observation_ids,
+                result.observation_images,
+                result.residuals_px,
+                result.standardized,
+                result.blunders,
+                strict=True,
+            )
+        ],
+    )
+    files["report.json"] = json.dumps(report, indent=1) + "\n"
+    files["report.txt"] = report_text + ("\n\n" + "\n".join(notes) if notes else "") + "\n"
+    targets = {n: (out / n).resolve() for n in files}
+    given = {pathlib.Path(p).resolve() for p in inputs}
+    for path in [*targets.values(), *(p.resolve() for _, plan in placed for p in plan.targets)]:
+        if path in given:
+            raise FileExistsError(f"{path}: refusing to write an adjusted file over an input")
+        if path.exists() and not overwrite:
+            raise FileExistsError(f"{path}: exists (choose another --out or pass --overwrite)")
+    written = []
+    for rpc, plan in placed:
+        written += write_rpc_outputs(rpc, plan, overwrite=overwrite)["written"]
+    return written + [
+        atomic_write_text(targets[n], text, overwrite=overwrite) for n, text in files.items()
+    ]
+
+
+def _place_rpcs(result, images, out, rpc_format, copy_images, write_into, report):
+    """Plan every image's adjusted RPC (exact or refitted) before anything is written."""
+    delivered = delivered_rpcs(result)
+    plans = rpc_plans({n: images[n] for n in result.models}, out, rpc_format, copy_images,
+                      write_into)  # fmt: skip
+    placed, notes, info = [], [], {}
+    for name, model in result.models.items():
+        try:
+            rpc, err, how = adjusted_rpc(model, delivered[name])
+        except TypeError as e:
+            notes.append(f"{name}: no RPC written ({e})")
+            info[name] = {"how": "none", "reason": str(e)}
+            continue
+        plan = plans[name]
+        placed.append((rpc, plan))
+        where = ", ".join(p.name for p in plan.targets)
+        notes.append(f"{name} -> {where}: {how}" + (
+            f" (max error {err:.3g} px on the check grid)" if how == "refit" else ""))  # fmt: skip
+        info[name] = {"how": how, "max_error_px": err, "files": [str(p) for p in plan.targets]}
+    return placed, notes, {**report, "rpc_files": info}
+
+
+__all__ = [
+    "adjusted_rpc",
+    "check_out_dir",
+    "delivered_rpcs",
+    "format_reports",
+    "models_json",
+    "output_paths",
+    "rpc_plans",
+    "write_outputs",
+]

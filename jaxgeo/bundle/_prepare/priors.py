@@ -1,0 +1,79 @@
+"""Parameter priors: the models' own soft constraints and the user's ``theta0 +- sigma``.
+
+A prior is a weighted residual per parameter block: the model's ``prior_residuals()`` (orbit
+and attitude constraints of the physical models, none for RPCs) and, when the user gives a
+``prior_sigma``, ``(theta - theta0) / sigma`` on its adjustable parameters (``inf`` = none).
+"""
+
+from __future__ import annotations
+
+import dataclasses
+from collections.abc import Callable, Mapping, Sequence
+from typing import Any
+
+import jax
+import jax.numpy as jnp
+import numpy as np
+from jaxtyping import Array, Float
+
+from ...lsq import ModelGroup
+from .._errors import AdjustmentError
+from .checks import label
+from .grouping import partition_block, per_key, ravel_stacked
+
+
+def prior_from_sigma(
+    sigma: Any, theta0: np.ndarray, key: Any, partition: Callable[[Any], Any]
+) -> tuple[np.ndarray, np.ndarray] | None:
+    """Raveled ``(mean, weight)`` of a parameter prior (``sigma``: scalar, array or pytree
+    like the model, ``partition``-ed like it); ``None`` without a prior."""
+    if sigma is None:
+        return None
+    p = theta0.shape[0]
+    if np.ndim(sigma) == 0 and not dataclasses.is_dataclass(sigma):
+        sig = np.full(p, float(sigma))
+    elif isinstance(sigma, np.ndarray | jax.Array | list | tuple) and np.size(sigma) == p:
+        sig = np.asarray(sigma, dtype=float).reshape(p)
+    else:
+        dyn, _ = partition(sigma)
+        sig = ravel_stacked([np.asarray(x)[None] for x in jax.tree.leaves(dyn)], 1)[0]
+    if sig.shape != (p,) or np.any(~(sig > 0)):
+        raise AdjustmentError(
+            f"{label(key)}: prior sigma must be positive, one per adjustable parameter ({p})"
+        )
+    weight = np.where(np.isfinite(sig), 1.0 / sig, 0.0)
+    return np.asarray(theta0, dtype=float), weight
+
+
+def prior_arrays(
+    groups: Sequence[ModelGroup],
+    labels: Sequence[Sequence[Any]],
+    models: Mapping[Any, Any],
+    filters: Any,
+    prior_sigma: Any,
+) -> tuple[tuple[Float[Array, "b p"], ...], tuple[Float[Array, "b p"], ...], int]:
+    """Per group ``(prior_mean, prior_weight)`` (``(n_blocks, 0)`` without user priors) and the
+    number of prior rows (user priors with non-zero weight plus the models' own residuals)."""
+    prior_mean, prior_weight, n_rows = [], [], 0
+    for g, grp in enumerate(groups):
+        means = []
+        for k, key in enumerate(labels[g]):
+            spec = per_key(filters, key)
+            spec = models[key].adjustable_filter() if spec is None else spec
+
+            def partition(tree, key=key, spec=spec):
+                return partition_block(tree, spec, f"prior of {label(key)}")
+
+            theta_k = np.asarray(grp.theta0)[k]
+            means.append(prior_from_sigma(per_key(prior_sigma, key), theta_k, key, partition))
+        if any(m is not None for m in means):
+            mean = np.stack([m[0] if m else np.zeros(grp.n_params) for m in means])
+            weight = np.stack([m[1] if m else np.zeros(grp.n_params) for m in means])
+            n_rows += int(np.count_nonzero(weight))
+        else:
+            mean = weight = np.zeros((grp.n_blocks, 0))
+        prior_mean.append(jnp.asarray(mean))
+        prior_weight.append(jnp.asarray(weight))
+        for key in labels[g]:
+            n_rows += int(np.prod(jax.eval_shape(models[key].prior_residuals).shape))
+    return tuple(prior_mean), tuple(prior_weight), n_rows

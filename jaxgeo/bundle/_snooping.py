@@ -1,0 +1,248 @@
+"""Data snooping: Baarda's w-test with redundancy numbers, iterated (host side).
+
+After each (robust) solve every observation gets its standardised residual
+``w = e / (sigma sqrt(r))`` (``e`` the residual, ``r`` its redundancy number in the weighted
+normal equations); those above ``blunder_k`` are flagged. Unless told otherwise
+(``SolverConfig.remove_blunders``) the worst flagged observations are removed and the block
+re-solved, until none is flagged: with least squares one observation per round (a gross error
+spreads into its neighbours' residuals; but see :data:`BATCH_RATIO` for blocks with many
+observations per parameter), with a robust loss every flagged observation within a factor 2 of
+the worst (the robust solution already isolates them; rounds repeat for the
+smaller ones). An image observation of a point without ground coordinates (tie or check) whose
+removal leaves the point in fewer than two images takes the point's other observations with it
+(a two-ray point's gross error cannot be told from its partner: the point group is removed,
+with its height-only ground observation if it has one; such an observation flagged takes its
+point's rays with it).
+Removal is a weight (``REMOVED_WEIGHT`` of the solve), with the measurement moved to the last
+solution's prediction (a point left with removed observations only then stays where it was and
+costs nothing), so that the compiled solve is reused; the residuals reported are against the
+measurements as given. A GCP's coordinates are removed only where the point is measured in two
+images or more (it then becomes a tie point); otherwise they are flagged only. When every ray of
+a GCP is flagged, the rays agree with each other and the coordinates do not: the coordinates
+are removed instead (a height-only ground observation, a DEM height on a tie, is not a GCP:
+its point's rays are removed as a tie point's).
+"""
+
+from __future__ import annotations
+
+import dataclasses
+
+import equinox as eqx
+import jax.numpy as jnp
+import numpy as np
+
+from .. import _exported
+from ..lsq import (
+    BLUNDER_K,
+    DEFAULT_SOLVER,
+    RESULTS,
+    Solution,
+    SolverConfig,
+    initial_unknowns,
+    solve,
+)
+from ._prepare import Prepared
+from ._report import enu_errors as enu
+
+DEFAULT_ROUNDS = SolverConfig().snooping_rounds
+MAX_REMOVED_FRACTION = 0.2
+"""Snooping stops rather than remove more than this fraction of the image observations: so many
+"gross errors" are a model that does not fit (e.g. two RPC files swapped), which the s0 warning
+then reports, not something to cut away."""
+BATCH_RATIO = 200
+"""Least squares removes one observation per round (a gross error spreads into the others'
+residuals through the shared parameters), a robust loss the flagged ones within
+``ROBUST_FRACTION`` of the worst, unless there are this many image observations per camera
+parameter or more (e.g. a pair with thousands of ties): the spread through the parameters is
+then negligible, and every flagged point loses its worst observation in the same round (at most
+one per point: within a point a gross error spreads into the other rays)."""
+DETECT_IRLS = 5
+"""Reweighted solves at most in the first solve of a block with ``BATCH_RATIO`` observations per
+parameter or more, while the gross errors are all still in: they stand out after a few (the
+same ones are flagged after 5 as after 20 on a pair with 20 000 ties and 1 % gross errors),
+while on such data the weights settle only once they are gone; the re-solves after a removal
+get the configured ``irls_iterations``, and so does a first solve that flags nothing but did
+not settle (it is repeated)."""
+ROBUST_FRACTION = 0.5
+"""With a robust loss, a round removes the flagged observations with ``|w|`` at least this
+fraction of the largest."""
+
+
+def standardized(sol: Solution) -> tuple[np.ndarray, np.ndarray]:
+    """``(image (M, 2), ground (c, 3))`` standardised residuals in problem order (NaN where the
+    redundancy number is ~0: the observation is not controlled by the others)."""
+    out = []
+    for r, red in (
+        (sol.residuals_image, sol.redundancy_image),
+        (sol.residuals_ground, sol.redundancy_ground),
+    ):
+        r, red = np.asarray(r), np.asarray(red)
+        with np.errstate(invalid="ignore", divide="ignore"):
+            out.append(np.where(red > 1e-10, r / np.sqrt(np.maximum(red, 1e-300)), np.nan))
+    return out[0], out[1]
+
+
+def _worst_per_point(w: np.ndarray, point: np.ndarray, cut: float) -> np.ndarray:
+    """The observations with ``w >= cut`` that have the largest ``w`` of their point (one per
+    point: within a point a gross error spreads into the other rays)."""
+    best = np.full(point.max(initial=-1) + 1, -np.inf)
+    np.maximum.at(best, point, w)
+    pick = (w >= cut) & (w >= best[point])
+    first = np.zeros_like(pick)  # ties within a point: the first one
+    idx = np.flatnonzero(pick)
+    _, keep = np.unique(point[idx], return_index=True)
+    first[idx[keep]] = True
+    return first
+
+
+def _largest(w: np.ndarray) -> np.ndarray:
+    return np.max(np.abs(np.nan_to_num(w)), axis=1) if w.size else np.zeros(w.shape[0])
+
+
+def solve_settings(solver: SolverConfig) -> SolverConfig:
+    """``solver`` with the fields the compiled solve does not use at their defaults (one
+    compilation whatever the snooping settings)."""
+    return dataclasses.replace(
+        solver, blunder_k=BLUNDER_K, remove_blunders=True, snooping_rounds=DEFAULT_ROUNDS
+    )
+
+
+def _solve(*args, **kwargs) -> Solution:
+    """:func:`jaxgeo.lsq.solve` compiled and traced once per structure, across runs too
+    (:mod:`jaxgeo._exported`)."""
+    return _exported.call(solve, *args, **kwargs)
+
+
+def snoop(
+    setup: Prepared, solver: SolverConfig = DEFAULT_SOLVER
+) -> tuple[Solution, np.ndarray, np.ndarray, int]:
+    """Solve, then remove gross errors and re-solve (see the module docstring).
+
+    Returns ``(solution, removed image observations (M,), removed ground observations (c,),
+    rounds)``, the masks in problem order. Stops early when a solve fails (singular,
+    non-finite), and before a removal that would leave unknowns undetermined (those
+    observations stay, flagged only).
+    """
+    problem = setup.problem
+    compiled = solve_settings(solver)
+    point = np.asarray(problem.structure.obs_point)
+    m, c = point.shape[0], int(problem.ground.point.shape[0])
+    gcp_point = np.zeros(problem.structure.n_points, dtype=bool)
+    gw = np.asarray(problem.ground.weight)
+    # control in plan: a height-only prior (a DEM height on a tie) does not make a GCP, whose
+    # rays could all disagree with its coordinates
+    gcp_point[np.asarray(problem.ground.point)[np.any(gw[:, :2] > 0, axis=1)]] = True
+    rem_i, rem_g = np.zeros(m, dtype=bool), np.zeros(c, dtype=bool)
+    rays = np.bincount(point, minlength=problem.structure.n_points)
+    removable_g = rays[np.asarray(problem.ground.point)] >= 2
+    height_only = ~np.any(gw[:, :2] > 0, axis=1) & (gw[:, 2] > 0)
+    xy0 = np.concatenate([np.asarray(ob.xy) for ob in problem.images] + [np.zeros((0, 2))])
+    w_xy = np.concatenate([np.asarray(ob.weight) for ob in problem.images] + [np.zeros(0)])
+    g0 = np.asarray(problem.ground.lonlath)
+    xy, g = xy0.copy(), g0.copy()
+    limit = solver.snooping_rounds if solver.remove_blunders else 0
+    full = jnp.asarray(solver.irls_iterations)
+    at_scale = m >= BATCH_RATIO * max(problem.structure.n_params, 1)
+    brief = bool(limit) and solver.loss != "l2" and at_scale  # a short first reweighting
+    irls = jnp.asarray(DETECT_IRLS) if brief else full
+    cold = (initial_unknowns(problem), jnp.ones(m), jnp.ones(c))
+
+    def warm(last: Solution):
+        # at scale a removal barely moves the solution: the re-solve goes on from the last one
+        # (its weights too). A small block starts afresh: a gross error there biased the last
+        # solution, whose robust weights would keep good observations out (Cauchy is not convex)
+        return (last.unknowns, last.weight_image, last.weight_ground) if at_scale else cold
+
+    sol = _solve(
+        problem, compiled, removed_image=rem_i, removed_ground=rem_g, irls_limit=irls, start=cold
+    )
+    rounds = 0
+    # a robust solve whose weights still move (not_converged) is snooped on: removing the gross
+    # errors is what lets the reweighting settle
+    ok = (RESULTS.successful, RESULTS.not_converged)
+    while rounds < limit and any(bool(sol.result == r) for r in ok):
+        w_i, w_g = (_largest(w) for w in standardized(sol))
+        w_i, w_g = np.where(rem_i, 0.0, w_i), np.where(rem_g | ~removable_g, 0.0, w_g)
+        worst = max(w_i.max(initial=0.0), w_g.max(initial=0.0))
+        if not worst > solver.blunder_k:
+            break
+        if at_scale:
+            # many rays per parameter: points are all but independent, and one's gross error
+            # does not show in another's w: every flagged point loses its worst ray at once
+            cut = solver.blunder_k
+            pick_i, pick_g = _worst_per_point(w_i, point, cut), w_g >= cut
+        elif solver.loss == "l2":
+            pick_i, pick_g = w_i >= worst, w_g >= worst
+        else:
+            cut = max(solver.blunder_k, ROBUST_FRACTION * worst)
+            pick_i, pick_g = w_i >= cut, w_g >= cut
+        # every ray of a GCP flagged: the rays agree with each other, its coordinates do not
+        gpts = np.asarray(problem.ground.point)
+        for p in np.unique(point[pick_i]):
+            own = (point == p) & ~rem_i
+            if gcp_point[p] and own.sum() >= 2 and np.all(pick_i[own]):
+                pick_i &= ~own
+                pick_g |= (gpts == p) & removable_g
+        # a height-only ground observation (a DEM height on a tie) flagged: its rays disagree
+        # with it, and without it they (near-parallel along a strip) leave the point
+        # undetermined: the point goes as a whole
+        pick_i |= np.isin(point, gpts[pick_g & height_only]) & ~rem_i
+        # a point without (kept) ground coordinates left in < 2 images goes as a whole
+        left = np.bincount(point[~(rem_i | pick_i)], minlength=problem.structure.n_points)
+        controlled = gcp_point.copy()  # a GCP whose coordinates go is a tie point now
+        controlled[gpts[rem_g | pick_g]] = False
+        short = (left < 2) & ~controlled
+        hit = np.zeros(short.size, dtype=bool)
+        hit[point[pick_i]] = True
+        whole = np.flatnonzero(short & hit)
+        pick_i |= np.isin(point, whole)
+        # with its height prior, if any (a DEM height on a tie): a point kept by that alone at
+        # full weight, its rays at the removed weight, would be undetermined in plan
+        pick_g |= np.isin(gpts, whole) & removable_g
+        if np.sum(rem_i | pick_i) > MAX_REMOVED_FRACTION * m:
+            break
+        new_i, new_g = pick_i & ~rem_i, pick_g & ~rem_g
+        # removed measurements sit at the last prediction: (project - xy) = r sigma
+        r_px = np.asarray(sol.residuals_image) / w_xy[:, None]
+        xy_try, g_try = xy.copy(), g.copy()
+        xy_try[new_i] = xy0[new_i] + r_px[new_i]
+        g_try[new_g] = np.asarray(sol.ground)[np.asarray(problem.ground.point)[new_g]]
+        moved = eqx.tree_at(
+            lambda p: p.ground.lonlath, problem.with_xy(jnp.asarray(xy_try)), jnp.asarray(g_try)
+        )
+        tried = _solve(
+            moved,
+            compiled,
+            removed_image=rem_i | pick_i,
+            removed_ground=rem_g | pick_g,
+            irls_limit=full,
+            start=warm(sol),
+        )
+        if bool(tried.result == RESULTS.undetermined):
+            # these removals would leave unknowns undetermined (the control of an image): they
+            # stay, flagged only, and the snooping stops here
+            break
+        sol, xy, g = tried, xy_try, g_try
+        rem_i, rem_g = rem_i | pick_i, rem_g | pick_g
+        problem = moved
+        rounds += 1
+    if brief and not rounds and bool(sol.result == RESULTS.not_converged):
+        # the reweighting had the snooping's short budget: the answer gets the whole one
+        sol = _solve(
+            problem,
+            compiled,
+            removed_image=rem_i,
+            removed_ground=rem_g,
+            irls_limit=full,
+            start=warm(sol),
+        )
+    if rounds:  # residuals against the measurements as given
+        r_img = np.asarray(sol.residuals_image) + (xy - xy0) * w_xy[:, None]
+        pts = np.asarray(sol.ground)[np.asarray(problem.ground.point)]
+        r_gnd = np.asarray(enu(pts, g0)) * np.asarray(problem.ground.weight)
+        sol = eqx.tree_at(
+            lambda s: (s.residuals_image, s.residuals_ground),
+            sol,
+            (jnp.asarray(r_img), jnp.asarray(r_gnd)),
+        )
+    return sol, rem_i, rem_g, rounds

@@ -1,0 +1,308 @@
+"""``jaxgeo strip``: two-level full-strip adjustment of the sub-scenes of a strip (003_).
+
+    jaxgeo strip STRIP [--ground CSV] [--observations CSV] [--ties-per-pair N]
+                 [--tie-height M | --dem FILE] [--bias affine|shift-drift|shift]
+                 [--degree quadratic|affine|shift] [--loss l2|huber|cauchy]
+                 [--loss-scale C] [--keep-blunders] [--json]
+                 [--out DIR [--rpc-format txt|rpb|geom|dimap]] [--overwrite]
+
+STRIP is a folder holding ``strip.json`` (or the json file itself; see
+:func:`jaxgeo.strip.read_strip`) with the sub-scenes' vendor RPCs, ``ground.csv`` and
+``observations.csv`` beside it, as ``jaxgeo simulate carto2s-strip`` writes them. Level 1 forms
+tie points in the overlaps of adjacent sub-scenes and bundle-adjusts an image bias per
+sub-scene with the ties and the GCPs; level 2 fits one universal lat/lon correction to the GCPs
+and applies it to every sub-scene (003_a7d3ea260371d8c5.txt sections 6-9). The report gives,
+per sub-scene, the check-point RMS (east/north m) of the vendor RPCs (``direct``), after level 1
+and after level 2, and per adjacent pair the gap between a tie localised in one sub-scene and in
+the other. ``--out DIR`` writes one RPC per sub-scene refitted to its final model
+(``NAME_RPC.TXT`` or ``NAME.RPB``), ``report.json`` and ``report.txt``; every destination is
+checked before anything is written, inputs are never replaced and existing files only with
+``--overwrite``.
+
+Gross errors, as ``jaxgeo adjust``: by default a Cauchy loss at 3 a priori sigmas (``--loss``,
+``--loss-scale``; IRLS) at both levels, then data snooping (Baarda's w-test with redundancy
+numbers, iterated) removes the flagged observations and re-solves (``--keep-blunders``: flag
+only); the report lists them (level, point, sub-scene, w). A sub-scene whose line offset is
+wrong shows at its seams (the vendor RPCs disagree at its formed ties) and is named in a
+warning: its bias would absorb it silently.
+
+The command parses, builds a :class:`jaxgeo.strip.StripConfig`, calls the library and prints;
+the checks and their messages are the library's (settings named by their flags, :data:`FLAGS`).
+"""
+
+from __future__ import annotations
+
+import argparse
+
+
+def _flag(name: str):
+    """Name a :class:`jaxgeo.strip.Setting` by its flag (with the value a message proposes)."""
+    return lambda s: f"{name} {s.value}" if s.has_value and not isinstance(s.value, bool) else name
+
+
+FLAGS = {
+    "ties.per_pair": _flag("--ties-per-pair"),
+    "ties.margin_px": _flag("--tie-margin-px"),
+    "ties.sigma_px": _flag("--tie-sigma-px"),
+    "ties.height": _flag("--tie-height"),
+    "ties.height_sigma_m": _flag("--tie-height-sigma-m"),
+    "level1.bias": _flag("--bias"),
+    "level1.use_gcps": _flag("--ties-only-level1"),
+    "level1.bias_prior_shift_px": _flag("--bias-prior-shift-px"),
+    "level1.bias_prior_matrix": _flag("--bias-prior-matrix"),
+    "level2.degree": _flag("--degree"),
+    "refit.grid": _flag("--rpc-grid"),
+    "rpc_format": _flag("--rpc-format"),
+    "out": _flag("--out"),
+    "overwrite": _flag("--overwrite"),
+}
+"""Library setting (:class:`jaxgeo.strip.Setting` path) -> how this command names it."""
+
+
+def register(sub) -> None:
+    from ..lsq import LOSSES
+    from ..models import BIAS_KINDS
+    from ..strip import (
+        DEGREES,
+        STRIP_SOLVER,
+        SUFFIX,
+        Level1Config,
+        Level2Config,
+        RefitConfig,
+        TieConfig,
+    )
+
+    ties0, level1, refit0 = TieConfig(), Level1Config(), RefitConfig()
+    parser = sub.add_parser(
+        "strip",
+        help="two-level full-strip adjustment of a Carto-2S-style strip of sub-scenes",
+        description=__doc__.split("\n\n")[0],
+    )
+    parser.add_argument("strip", metavar="STRIP", help="strip folder or its strip.json")
+    parser.add_argument("--ground", metavar="CSV", help="GCPs/check points (default ground.csv)")
+    parser.add_argument(
+        "--observations", metavar="CSV", help="image measurements (default observations.csv)"
+    )
+    ties = parser.add_argument_group("level 1: tie points and biases")
+    ties.add_argument("--ties-per-pair", type=int, default=ties0.per_pair, metavar="N",
+                      help=f"ties formed per adjacent pair (default {ties0.per_pair})")  # fmt: skip
+    ties.add_argument("--tie-margin-px", type=float, default=ties0.margin_px, metavar="PX",
+                      help=f"ties kept this far inside each overlap (px, default "
+                      f"{ties0.margin_px:g})")  # fmt: skip
+    ties.add_argument("--tie-sigma-px", type=float, default=ties0.sigma_px, metavar="PX",
+                      help=f"a priori tie sigma (px, default {ties0.sigma_px:g})")  # fmt: skip
+    height = ties.add_mutually_exclusive_group()
+    height.add_argument(
+        "--tie-height",
+        type=float,
+        metavar="M",
+        help="one ellipsoidal height (m) for all ties (default: mean GCP/check height)",
+    )
+    height.add_argument(
+        "--dem",
+        metavar="FILE",
+        help="tie heights from a single-band DEM raster (ellipsoidal m, any CRS)",
+    )
+    ties.add_argument(
+        "--dem-offset-m",
+        type=float,
+        default=0.0,
+        metavar="N",
+        help="added to the DEM heights (e.g. the geoid undulation for orthometric DEMs)",
+    )
+    ties.add_argument("--tie-height-sigma-m", type=float, default=ties0.height_sigma_m,
+                      metavar="M", help="sigma of the tie height priors (m, default "
+                      f"{ties0.height_sigma_m:g}; smaller with a good --dem)")  # fmt: skip
+    ties.add_argument(
+        "--bias",
+        choices=tuple(BIAS_KINDS),
+        default=level1.bias,
+        help=f"image bias adjusted per sub-scene (default {level1.bias}, as in 003_)",
+    )
+    ties.add_argument(
+        "--ties-only-level1",
+        action="store_true",
+        help="level 1 sees the ties only (the GCPs enter at level 2); needs the bias priors",
+    )
+    ties.add_argument(
+        "--bias-prior-shift-px",
+        type=float,
+        metavar="S",
+        help="prior sigma (px) of every sub-scene's bias shift",
+    )
+    ties.add_argument(
+        "--bias-prior-matrix",
+        type=float,
+        metavar="X",
+        help="prior sigma (px/px) of the affine matrix (or shift-drift drift) terms",
+    )
+    ties.add_argument("--method", choices=("lm", "gn"), default="lm", help="level-1 solver")
+    ties.add_argument(
+        "--max-steps", type=int, default=100, metavar="N", help="level-1 solver steps (100)"
+    )
+    gross = parser.add_argument_group("gross errors (both levels, as jaxgeo adjust)")
+    gross.add_argument(
+        "--loss",
+        choices=LOSSES,
+        default=STRIP_SOLVER.loss,
+        help=f"loss on image measurements and GCP coordinates (default {STRIP_SOLVER.loss}, IRLS)",
+    )
+    gross.add_argument(
+        "--loss-scale",
+        type=float,
+        default=STRIP_SOLVER.loss_scale,
+        metavar="C",
+        help=f"robust loss threshold in a priori sigmas (default {STRIP_SOLVER.loss_scale:g})",
+    )
+    gross.add_argument(
+        "--keep-blunders",
+        action="store_true",
+        help="flag gross errors (w-test) but do not remove them and re-solve",
+    )
+    parser.add_argument(
+        "--degree",
+        choices=DEGREES,
+        default=Level2Config().degree,
+        help="level 2: the universal correction (default quadratic, eq. 12-13 of 003_; auto: "
+        "the degree that best predicts each GCP scene left out)",
+    )
+    out = parser.add_argument_group("output")
+    out.add_argument("--json", action="store_true", help="print one JSON object")
+    out.add_argument("--out", metavar="DIR", help="write the updated RPCs and the report here")
+    out.add_argument(
+        "--rpc-format",
+        choices=tuple(SUFFIX),
+        default="txt",
+        help="updated RPC files as NAME_RPC.TXT (default), NAME.RPB, OSSIM NAME.geom or DIMAP v2 "
+        "RPC_NAME.XML",
+    )
+    out.add_argument(
+        "--rpc-grid",
+        type=int,
+        nargs=3,
+        default=refit0.grid,
+        metavar=("NX", "NY", "NH"),
+        help="RPC refit grid: columns, rows, height layers (default %(default)s)",
+    )
+    out.add_argument(
+        "--overwrite", action="store_true", help="replace earlier outputs (never the inputs)"
+    )
+    parser.set_defaults(func=run)
+
+
+def strip_config(args: argparse.Namespace, tie_height=None):
+    """The :class:`jaxgeo.strip.StripConfig` and :class:`~jaxgeo.strip.RefitConfig` of the
+    arguments (``tie_height``: a DEM, else ``--tie-height``)."""
+    import dataclasses
+
+    from ..strip import (
+        STRIP_SOLVER,
+        Level1Config,
+        Level2Config,
+        RefitConfig,
+        StripConfig,
+        TieConfig,
+    )
+
+    ties = TieConfig(
+        per_pair=args.ties_per_pair,
+        margin_px=args.tie_margin_px,
+        sigma_px=args.tie_sigma_px,
+        height=args.tie_height if tie_height is None else tie_height,
+        height_sigma_m=args.tie_height_sigma_m,
+    )
+    level1 = Level1Config(
+        bias=args.bias,
+        use_gcps=not args.ties_only_level1,
+        bias_prior_shift_px=args.bias_prior_shift_px,
+        bias_prior_matrix=args.bias_prior_matrix,
+    )
+    solver = dataclasses.replace(
+        STRIP_SOLVER,
+        method=args.method,
+        max_steps=args.max_steps,
+        loss=args.loss,
+        loss_scale=args.loss_scale,
+        remove_blunders=not args.keep_blunders,
+    )
+    strip = StripConfig(ties=ties, level1=level1, level2=Level2Config(args.degree), solver=solver)
+    return strip, RefitConfig(grid=tuple(args.rpc_grid))
+
+
+def run(args: argparse.Namespace) -> int:
+    from ..strip import ConfigError
+    from . import CommandError
+
+    try:
+        return _run(args)
+    except ConfigError as err:
+        raise CommandError(err.render(FLAGS)) from None
+
+
+def _run(args: argparse.Namespace) -> int:
+    import json
+    import sys
+    import warnings
+
+    from ..bundle import NotConvergedWarning, PoorFitWarning
+    from ..io import read_dem
+    from ..strip import (
+        REFIT_WARN_PX,
+        GCPDistributionWarning,
+        LineOffsetWarning,
+        MeasuredTieWarning,
+        UniversalCorrectionWarning,
+        adjust_strip,
+        format_strip_result,
+        read_strip,
+        strip_output_paths,
+        strip_summary,
+        worst_refit,
+        write_strip_outputs,
+    )
+    from . import CommandError
+
+    if args.dem_offset_m and not args.dem:
+        raise CommandError("--dem-offset-m applies to --dem heights only")
+    config, refit = strip_config(args)  # checked before any work
+    strip = read_strip(args.strip, args.ground, args.observations)
+    targets = None
+    if args.out:
+        targets = strip_output_paths(strip, args.out, args.rpc_format, args.overwrite,
+                                      [args.dem] if args.dem else [])  # fmt: skip
+    if args.dem:
+        dem = read_dem(args.dem, offset_m=args.dem_offset_m)
+        if dem.vertical_crs and not args.dem_offset_m:
+            print(f"jaxgeo strip: note: {args.dem} declares vertical CRS {dem.vertical_crs!r}; "
+                  "heights are used as ellipsoidal", file=sys.stderr)  # fmt: skip
+        config, _ = strip_config(args, tie_height=dem)
+    with warnings.catch_warnings(record=True) as caught:
+        warnings.simplefilter("always")
+        try:
+            result = adjust_strip(strip, config)
+        finally:  # the GCP distribution warning matters most when the adjustment fails
+            for w in caught:
+                warns = (GCPDistributionWarning, UniversalCorrectionWarning, LineOffsetWarning,
+                         NotConvergedWarning, PoorFitWarning, MeasuredTieWarning)  # fmt: skip
+                kind = "warning" if issubclass(w.category, warns) else "note"
+                print(f"jaxgeo strip: {kind}: {w.message}", file=sys.stderr)
+    converged = bool(result.report.strip["converged"])
+    if not converged:
+        print("jaxgeo strip: warning: the level-1 bundle adjustment did not converge",
+              file=sys.stderr)  # fmt: skip
+    if targets is not None:
+        data = write_strip_outputs(result, targets, refit, args.rpc_format, args.overwrite)
+        worst, px = worst_refit(data)
+        if px > REFIT_WARN_PX:
+            print(f"jaxgeo strip: warning: the refitted RPC of {worst} differs from its adjusted "
+                  f"model by up to {px:.3g} px on the check grid", file=sys.stderr)  # fmt: skip
+    else:
+        data = strip_summary(result)
+    if args.json:
+        print(json.dumps(data, indent=1))
+    else:
+        print(format_strip_result(result))
+        if targets is not None:
+            print(f"\nwrote {len(data['written'])} files to {args.out} (updated RPCs: refit "
+                  f"error <= {px:.2g} px on the check grid)")  # fmt: skip
+    return 0 if converged else 1

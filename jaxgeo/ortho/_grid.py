@@ -1,0 +1,175 @@
+"""The ground footprint of an image on a DEM and the output grid of its orthoimage."""
+
+from __future__ import annotations
+
+import dataclasses
+import math
+
+import equinox as eqx
+import numpy as np
+
+from ..geodesy import utm_epsg, utm_zone
+from ..io import dem_coverage
+from ..models import DEMStatus, localize_on_dem
+
+BATCH = 64
+CHUNK = 4096
+"""Host-side localisation calls are padded to ``BATCH`` points or run in ``CHUNK``-point
+pieces: few shapes, few compilations."""
+
+
+@eqx.filter_jit
+def _on_dem(model, xy, grid):
+    return localize_on_dem(model, xy, grid)
+
+
+@eqx.filter_jit
+def _at_height(model, xy, h):
+    return model.localize(xy, h)
+
+
+def localize_on_dem_padded(model, xy: np.ndarray, grid) -> tuple[np.ndarray, np.ndarray]:
+    """Jitted :func:`localize_on_dem` on ``(n, 2)`` points padded to a multiple of ``BATCH``."""
+    xy = np.asarray(xy, dtype=float).reshape(-1, 2)
+    n = len(xy)
+    size = BATCH if n <= BATCH else CHUNK  # two shapes at most: two compilations
+    gs, sts = [], []
+    for i in range(0, max(n, 1), size):
+        part = xy[i : i + size] if n else np.zeros((1, 2))
+        pad = np.concatenate([part, np.repeat(part[:1], size - len(part), axis=0)])
+        g, st = _on_dem(model, pad, grid)
+        gs.append(np.asarray(g)[: len(part)])
+        sts.append(np.asarray(st)[: len(part)])
+    return np.concatenate(gs)[:n], np.concatenate(sts)[:n]
+
+
+@dataclasses.dataclass(frozen=True)
+class OutputGrid:
+    """A north-up output raster: ``crs`` (pyproj CRS), ``res_m``, ``west``/``north`` (outer
+    corner, CRS units), ``width``/``height`` pixels."""
+
+    crs: object
+    res_m: float
+    west: float
+    north: float
+    width: int
+    height: int
+
+    @property
+    def transform(self):
+        from affine import Affine
+
+        return Affine(self.res_m, 0.0, self.west, 0.0, -self.res_m, self.north)
+
+
+def border_pixels(width: int, height: int, n: int = 16) -> np.ndarray:
+    """``(4n, 2)`` points along the image's outer pixel edges (jaxgeo ``(x, y)``)."""
+    t = np.linspace(0.0, 1.0, n, endpoint=False)
+    x0, x1, y0, y1 = -0.5, width - 0.5, -0.5, height - 0.5
+    top = np.stack([x0 + t * (x1 - x0), np.full(n, y0)], -1)
+    right = np.stack([np.full(n, x1), y0 + t * (y1 - y0)], -1)
+    bottom = np.stack([x1 - t * (x1 - x0), np.full(n, y1)], -1)
+    left = np.stack([np.full(n, x0), y1 - t * (y1 - y0)], -1)
+    return np.concatenate([top, right, bottom, left])
+
+
+def rough_bounds(model, border_xy: np.ndarray, dh_m: float = 500.0, heights=None):
+    """lon/lat box of the border localised at the model's reference height +- ``dh_m`` (or at
+    ``(h_min, h_ref, h_max)`` given as ``heights``), and the box at the middle height."""
+    h0 = float(model.reference_ground()[2])
+    pts = []
+    for h in heights if heights is not None else (h0 - dh_m, h0, h0 + dh_m):
+        g = np.asarray(_at_height(model, border_xy, np.full(len(border_xy), float(h))))
+        pts.append(g[:, :2])
+    pts = np.concatenate(pts)
+    if not np.all(np.isfinite(pts)):
+        raise ValueError("the model cannot localise the image border (localisation failed)")
+    at_ref = pts[len(border_xy) : 2 * len(border_xy)]
+    lo, hi = pts.min(0), pts.max(0)
+    pad = 0.05 * (hi - lo)
+    box = (lo[0] - pad[0], lo[1] - pad[1], hi[0] + pad[0], hi[1] + pad[1])
+    ref_box = (*at_ref.min(0), *at_ref.max(0))
+    return box, ref_box
+
+
+def dem_for_image(model, dem, width: int, height: int, source: str = "image"):
+    """The :class:`DEMGrid` around the image footprint; error if the DEM does not cover it."""
+    border = border_pixels(width, height)
+    box, ref_box = rough_bounds(model, border)
+    cover = dem_coverage(dem, ref_box)
+    if cover < 1.0 - 1e-9:
+        b = dem.bounds_lonlat
+        raise ValueError(
+            f"{dem.path}: the DEM covers only {100 * cover:.1f}% of the footprint of {source} "
+            f"(lon {ref_box[0]:.5f}..{ref_box[2]:.5f}, lat {ref_box[1]:.5f}..{ref_box[3]:.5f}); "
+            f"it spans lon {b[0]:.5f}..{b[2]:.5f}, lat {b[1]:.5f}..{b[3]:.5f}"
+        )
+    b = dem.bounds_lonlat
+
+    def clip(box):
+        return (max(box[0], b[0]), max(box[1], b[1]), min(box[2], b[2]), min(box[3], b[3]))
+
+    grid = dem.grid(clip(box))
+    # second pass: the footprint at the DEM's own height range, which the first box may miss
+    lo, hi = (float(v) for v in grid.height_range())
+    box2, _ = rough_bounds(model, border, heights=(lo - 10.0, 0.5 * (lo + hi), hi + 10.0))
+    if not (box2[0] >= box[0] and box2[1] >= box[1] and box2[2] <= box[2] and box2[3] <= box[3]):
+        box = (min(box[0], box2[0]), min(box[1], box2[1]), max(box[2], box2[2]),
+               max(box[3], box2[3]))  # fmt: skip
+        grid = dem.grid(clip(box))
+    return grid
+
+
+def footprint(model, grid, width: int, height: int) -> np.ndarray:
+    """``(m, 3)`` ground points of the image border on the DEM (those that meet it)."""
+    g, st = localize_on_dem_padded(model, border_pixels(width, height), grid)
+    ok = st == DEMStatus.OK
+    if ok.mean() < 0.5:
+        raise ValueError(
+            f"only {100 * ok.mean():.0f}% of the image border meets the DEM: the DEM does not "
+            "cover the image footprint"
+        )
+    return g[ok]
+
+
+def default_crs(lonlat: np.ndarray):
+    """The WGS84 UTM zone of the centre of ``lonlat`` points."""
+    import pyproj
+
+    lon, lat = np.mean(lonlat[:, 0]), np.mean(lonlat[:, 1])
+    return pyproj.CRS.from_epsg(utm_epsg(utm_zone(float(lon)), bool(lat >= 0)))
+
+
+def ground_sample_distance(model, grid, crs, width: int, height: int) -> float:
+    """Geometric mean ground size (CRS units) of a pixel at the image centre, on the DEM."""
+    import pyproj
+
+    c = np.array([(width - 1) / 2, (height - 1) / 2])
+    pts = np.stack([c, c + [1.0, 0.0], c + [0.0, 1.0]])
+    g, st = localize_on_dem_padded(model, pts, grid)
+    if not np.all(np.asarray(st) == DEMStatus.OK):
+        raise ValueError("the image centre does not meet the DEM: cannot derive the GSD")
+    tr = pyproj.Transformer.from_crs(4326, crs, always_xy=True)
+    x, y = tr.transform(g[:, 0], g[:, 1])
+    a = np.array([[x[1] - x[0], x[2] - x[0]], [y[1] - y[0], y[2] - y[0]]])
+    return float(math.sqrt(abs(np.linalg.det(a))))
+
+
+def output_grid(ground: np.ndarray, crs, res_m: float, bounds=None) -> OutputGrid:
+    """The grid covering ``ground`` lon/lat points (or ``bounds`` W S E N in ``crs``)."""
+    import pyproj
+
+    if bounds is None:
+        tr = pyproj.Transformer.from_crs(4326, crs, always_xy=True)
+        x, y = tr.transform(ground[:, 0], ground[:, 1])
+        bounds = (np.min(x), np.min(y), np.max(x), np.max(y))
+    w, s, e, n = (float(v) for v in bounds)
+    if not (e > w and n > s):
+        raise ValueError(f"empty output bounds {bounds}")
+    if not res_m > 0:
+        raise ValueError(f"the output resolution must be > 0, got {res_m}")
+    west = math.floor(w / res_m) * res_m
+    north = math.ceil(n / res_m) * res_m
+    width = int(math.ceil((e - west) / res_m))
+    height = int(math.ceil((north - s) / res_m))
+    return OutputGrid(crs, float(res_m), west, north, max(width, 1), max(height, 1))

@@ -1,0 +1,308 @@
+"""Simulated Cartosat-1 along-track stereo pairs (000_ and 002_, tables 1).
+
+One platform on a 618 km sun-synchronous orbit carries the fore (+26 deg) and aft (-5 deg)
+cameras (f = 1945 mm, 7 um pixels, 12 000 x 12 000 px, line time 0.336 ms); the body is
+yaw-steered so both sweep the same ground strip, about 52 s apart. The truth is one
+:class:`~jaxgeo.models.EphemerisModel` per camera sharing the orbit and attitude polynomials. The
+"vendor" RPCs are fitted (terrain-independent, :func:`jaxgeo.fit_rpc`) to a perturbed copy of
+the truth (:class:`~jaxgeo.simulate._scene.VendorErrors`), so they carry the tens-of-pixels bias
+the papers report. Ground points are a GPS field on a smooth synthetic terrain; image
+measurements are the true projections plus Gaussian noise.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import math
+import os
+import pathlib
+
+import equinox as eqx
+import numpy as np
+
+from .. import geodesy
+from ..io import GroundPoints, Observations, write_ground, write_observations
+from ..models import RPC, EphemerisModel, RPCFitReport, fit_rpcs, gmst_rad
+from . import _scene as sc
+from ._orbit import CircularOrbit, ephemeris_from_orbit, sun_synchronous_inclination_deg
+from ._terrain import Terrain
+
+SITES = {
+    # Hobart (000_): 69 GPS points in the top-left quarter, sea level to 1260 m
+    "hobart": dict(lon=147.30, lat=-42.88, h_range=(0.0, 1260.0), n_points=69, layout="quarter"),
+    # Warsaw (002_): 36 well-distributed points, flat
+    "warsaw": dict(lon=21.01, lat=52.23, h_range=(75.0, 160.0), n_points=36, layout="grid"),
+}
+NAMES = ("fore", "aft")
+
+
+def stereo_output_files(directory: str | os.PathLike) -> list[pathlib.Path]:
+    """The files :meth:`StereoScene.save` writes."""
+    d = pathlib.Path(directory)
+    return [d / f"{n}.txt" for n in NAMES] + [
+        d / "ground.csv",
+        d / "observations.csv",
+        d / "truth.json",
+    ]
+
+
+@dataclasses.dataclass(frozen=True)
+class StereoScene:
+    """A simulated stereo pair: truth, vendor RPCs, ground points and image measurements.
+
+    ``ground`` holds the surveyed (noisy) coordinates with roles ``gcp`` / ``check``;
+    ``ground_true`` the true ones (same order). ``observations`` are the noisy measurements,
+    ``image_true`` the exact projections of ``ground_true`` (same rows, sigma 0).
+    """
+
+    names: tuple[str, ...]
+    truth: dict[str, EphemerisModel]
+    vendor_models: dict[str, EphemerisModel]
+    vendor: dict[str, RPC]
+    fit_reports: dict[str, RPCFitReport]
+    ground: GroundPoints
+    ground_true: np.ndarray
+    observations: Observations
+    image_true: Observations
+    terrain: Terrain
+    params: dict
+
+    def accuracy(self) -> dict:
+        """Direct georeferencing with the vendor RPCs against truth (000_, table 3).
+
+        Image: RMS (x, y and length) of ``vendor.project(ground_true) - image_true`` per image.
+        Object: forward intersection of the measurements with the vendor RPCs, RMS east,
+        north, planimetric and height error in metres.
+        """
+        out: dict = {"image_px": {}}
+        for name in self.names:
+            res = np.asarray(sc.project(self.vendor[name], self.ground_true)) - self._true(name)
+            rx, ry = sc.rms(res)
+            out["image_px"][name] = {"rms_x": rx, "rms_y": ry, "rms": math.hypot(rx, ry)}
+        obs = np.stack([self._measured(name) for name in self.names])
+        est = sc.forward_intersect([self.vendor[n] for n in self.names], obs)
+        e, n, u = sc.rms(sc.enu_errors(est, self.ground_true))
+        out["intersection_m"] = {"rms_e": e, "rms_n": n, "rms_plan": math.hypot(e, n), "rms_h": u}
+        return sc.rounded(out)
+
+    def _rows(self, obs: Observations, name: str) -> np.ndarray:
+        index = {pid: i for i, pid in enumerate(self.ground.ids)}
+        sel = [i for i, img in enumerate(obs.images) if img == name]
+        order = np.argsort([index[obs.point_ids[i]] for i in sel])
+        return obs.xy[np.asarray(sel)[order]]
+
+    def _true(self, name: str) -> np.ndarray:
+        return self._rows(self.image_true, name)
+
+    def _measured(self, name: str) -> np.ndarray:
+        return self._rows(self.observations, name)
+
+    def files(self, directory: str | os.PathLike) -> list[pathlib.Path]:
+        return stereo_output_files(directory)
+
+    def save(self, directory: str | os.PathLike, overwrite: bool = False) -> list[pathlib.Path]:
+        """Write ``fore.txt``, ``aft.txt`` (Cartosat-1 ``_RPC.TXT`` layout), ``ground.csv``,
+        ``observations.csv`` and ``truth.json`` into ``directory``; refuses to replace any
+        existing file unless ``overwrite`` (checked before anything is written)."""
+        from ..io import write_rpc_text
+
+        paths = self.files(directory)
+        sc.check_writable(paths, overwrite)
+        pathlib.Path(directory).mkdir(parents=True, exist_ok=True)
+        for name, path in zip(self.names, paths, strict=False):
+            write_rpc_text(self.vendor[name], path, overwrite=overwrite)
+        write_ground(self.ground, paths[-3], overwrite=overwrite)
+        write_observations(self.observations, paths[-2], overwrite=overwrite)
+        sc.write_json(paths[-1], self.truth_json(), overwrite)
+        return paths
+
+    def truth_json(self) -> dict:
+        return {
+            "generator": "jaxgeo.simulate.cartosat1_stereo",
+            "params": self.params,
+            "images": {
+                n: {
+                    "rpc_file": f"{n}.txt",
+                    "truth_model": self.truth[n].to_dict(),
+                    "vendor_model": self.vendor_models[n].to_dict(),
+                    "rpc_fit": sc.rounded(self.fit_reports[n].to_dict(), 9),
+                }
+                for n in self.names
+            },
+            **sc.truth_tail(self),
+        }
+
+
+def _centre_time(model: EphemerisModel, ground: np.ndarray) -> float:
+    """Scan time at which ``model`` sees ``ground``."""
+    row = float(np.asarray(sc.project(model, ground))[1])
+    return float(model.row_time(row))
+
+
+def cartosat1_stereo(
+    seed: int = 0,
+    *,
+    site: str = "hobart",
+    centre_lon_deg: float | None = None,
+    centre_lat_deg: float | None = None,
+    h_range_m: tuple[float, float] | None = None,
+    n_points: int | None = None,
+    layout: str | None = None,
+    n_gcps: int = 9,
+    image_noise_px: float = 0.3,
+    image_sigma_px: float = 0.5,
+    ground_noise_m: float = 0.1,
+    ground_sigma_m: float = 0.3,
+    vendor_errors: sc.VendorErrors = sc.CARTOSAT1_ERRORS,
+    altitude_m: float = 618e3,
+    view_angles_deg: tuple[float, float] = (26.0, -5.0),
+    focal_length_m: float = 1.945,
+    pixel_size_m: float = 7e-6,
+    line_time_s: float = 0.336e-3,
+    n_rows: int = 12000,
+    n_cols: int = 12000,
+    epoch_utc: str = "2006-10-01T00:40:00Z",
+    position_order: int = 3,
+    attitude_order: int = 5,
+    attitude_wobble_rad: float = 5e-6,
+    rpc_grid: tuple[int, int, int] = (21, 21, 7),
+    terrain_wavelengths_m: tuple[float, float] = (4000.0, 40000.0),
+    centre_columns: bool = False,
+) -> StereoScene:
+    """Simulate a Cartosat-1 stereo pair (see the module docstring).
+
+    ``site`` ``"hobart"`` (69 points in the top-left quarter, relief 0..1260 m, 000_) or
+    ``"warsaw"`` (36 points on a jittered grid over the common area, flat, 002_) sets the
+    defaults of ``centre_*``, ``h_range_m``, ``n_points`` and ``layout`` (``"quarter"`` or
+    ``"grid"``). ``n_gcps`` points spread over the field get role ``gcp``, the rest ``check``.
+    ``attitude_wobble_rad`` is the size of the true attitude's smooth departure from ideal yaw
+    steering. ``terrain_wavelengths_m``: the range of the terrain's wavelengths (shorter ones
+    for small images, whose footprint is a few kilometres). ``centre_columns``: shift each
+    camera's principal column so that the site centre is seen in the middle column (a window of
+    a longer CCD; without it the Earth's rotation between the fore and aft passes moves the aft
+    footprint ~270 px across, which matters only in small images). Returns a :class:`StereoScene`.
+    """
+    if site not in SITES:
+        raise ValueError(f"unknown site {site!r}; expected one of {sorted(SITES)}")
+    preset = SITES[site]
+    lon = preset["lon"] if centre_lon_deg is None else float(centre_lon_deg)
+    lat = preset["lat"] if centre_lat_deg is None else float(centre_lat_deg)
+    h_range = tuple(preset["h_range"] if h_range_m is None else h_range_m)
+    n_points = int(preset["n_points"] if n_points is None else n_points)
+    layout = preset["layout"] if layout is None else layout
+    if layout not in ("quarter", "grid"):
+        raise ValueError(f"unknown point layout {layout!r}; expected 'quarter' or 'grid'")
+    centre_lon_deg, centre_lat_deg, h_range_m = lon, lat, h_range
+    skip = ("preset", "vendor_errors", "lon", "lat", "h_range")
+    params = {k: v for k, v in locals().items() if k not in skip}
+    params["vendor_errors"] = vendor_errors.to_dict()
+    # recorded only when set (the packaged demo's truth.json predates these options)
+    if tuple(terrain_wavelengths_m) == (4000.0, 40000.0):
+        params.pop("terrain_wavelengths_m")
+    if not centre_columns:
+        params.pop("centre_columns")
+    rng = np.random.default_rng(seed)
+
+    # --- the pass: orbit over the site, then the scan times of the two images
+    theta0 = gmst_rad(epoch_utc)
+    orbit = CircularOrbit.over(
+        lon, lat, altitude_m, sun_synchronous_inclination_deg(altitude_m), theta0
+    )
+    h_mid = 0.5 * (h_range[0] + h_range[1])
+    target = np.array([lon, lat, h_mid])
+    v_ground = orbit.mean_motion_rad_s * geodesy.WGS84_A_M  # sub-satellite speed (m/s)
+    duration = (n_rows - 1) * line_time_s
+    common = dict(
+        sidereal_angle_rad=theta0, line_time_s=line_time_s, n_rows=n_rows, n_cols=n_cols,
+        focal_length_m=focal_length_m, pixel_size_m=pixel_size_m,
+        position_order=position_order, attitude_order=attitude_order, h_ref_m=h_mid,
+    )  # fmt: skip
+    times = []
+    for angle in view_angles_deg:  # a rough time, then the exact one from a provisional model
+        t = -altitude_m * math.tan(math.radians(angle)) / v_ground
+        model = ephemeris_from_orbit(
+            orbit, (t - 60, t + 60), first_line_time_s=t - duration / 2,
+            view_angles_deg=(angle, 0.0, 0.0), **common,
+        )  # fmt: skip
+        times.append(_centre_time(model, target))
+    span = (min(times) - duration, max(times) + duration)
+    n_att = min(attitude_order, 3) + 1
+    wobble = rng.normal(0.0, attitude_wobble_rad, (3, n_att)) / np.arange(1, n_att + 1)
+    truth = {}
+    for name, angle, t in zip(NAMES, view_angles_deg, times, strict=False):
+        model = ephemeris_from_orbit(
+            orbit, span, first_line_time_s=t - duration / 2, view_angles_deg=(angle, 0.0, 0.0),
+            attitude_offsets_rad=wobble, **common,
+        )  # fmt: skip
+        if centre_columns:
+            col = float(np.asarray(sc.project(model, target))[0])
+            shift = 0.5 * (n_cols - 1) - col  # columns are linear in the principal column
+            model = eqx.tree_at(lambda m: m.principal_col_px, model, model.principal_col_px + shift)
+        truth[name] = sc.quantize_model(model)
+
+    # --- terrain over both footprints, and the GPS point field
+    corners = np.array([[0, 0], [n_cols - 1, 0], [0, n_rows - 1], [n_cols - 1, n_rows - 1]], float)
+    foot = [np.asarray(sc.localize(m, corners, h_mid)) for m in truth.values()]
+    terrain = Terrain.random(
+        rng, np.concatenate(foot)[:, :2], h_range, wavelength_range_m=terrain_wavelengths_m
+    )
+    fore, aft = truth["fore"], truth["aft"]
+    aft_in_fore = np.asarray(sc.project(fore, foot[1]))
+    margin = min(200.0, min(n_rows, n_cols) / 8.0)  # 200 px, less in small images
+    lo = np.maximum(aft_in_fore.min(0), 0.0) + margin
+    hi = np.minimum(aft_in_fore.max(0), [n_cols - 1, n_rows - 1]) - margin
+    if layout == "quarter":
+        hi = 0.5 * (lo + hi)
+        cand = lo + (hi - lo) * rng.uniform(0.0, 1.0, (4 * n_points, 2))
+    else:
+        side = math.ceil(math.sqrt(n_points))
+        cells = np.stack(np.meshgrid(np.arange(side), np.arange(side)), -1).reshape(-1, 2)
+        jitter = rng.uniform(0.15, 0.85, (4, len(cells), 2))
+        cand = (lo + (hi - lo) * (cells + jitter) / side).reshape(-1, 2)
+    ground_all = sc.points_on_terrain(fore, cand, terrain)
+    img_fore = np.asarray(sc.project(fore, ground_all))
+    img_aft = np.asarray(sc.project(aft, ground_all))
+    size = np.array([n_cols - 1, n_rows - 1])
+    m = margin / 4.0
+    inside = np.all(
+        (img_fore > m) & (img_fore < size - m) & (img_aft > m) & (img_aft < size - m), -1
+    )
+    keep = np.flatnonzero(inside)[:n_points]
+    if len(keep) < n_points:
+        raise ValueError(f"could only place {len(keep)} of {n_points} points in both images")
+    ground_true = ground_all[keep]
+    ids = tuple(f"P{i + 1:03d}" for i in range(n_points))
+    gcp = set(sc.spread_selection(img_fore[keep], n_gcps).tolist())
+    roles = tuple("gcp" if i in gcp else "check" for i in range(n_points))
+    surveyed = sc.ground_noise(rng, ground_true, ground_noise_m)
+    ground = GroundPoints(ids, surveyed, roles, np.full((n_points, 3), float(ground_sigma_m)))
+
+    # --- image measurements (true + noise), per image then per point
+    true_xy = [sc.quantize_image(sc.project(truth[n], ground_true)) for n in NAMES]
+    noisy_xy = [sc.quantize_image(xy + rng.normal(0.0, image_noise_px, xy.shape)) for xy in true_xy]
+    pids = tuple(p for _ in NAMES for p in ids)
+    images = tuple(n for n in NAMES for _ in ids)
+    image_true = Observations(pids, images, np.concatenate(true_xy), np.zeros(2 * n_points))
+    observations = Observations(
+        pids, images, np.concatenate(noisy_xy), np.full(2 * n_points, float(image_sigma_px))
+    )
+
+    # --- the vendor's orientation and its RPCs
+    d_att, d_pos = sc.draw_common_errors(rng, vendor_errors, fore)
+    d_view = sc.draw_mount_errors(rng, vendor_errors, fore, len(NAMES))
+    vendor_models = {
+        n: sc.quantize_model(sc.perturb(truth[n], d_att, d_pos, d_view[i]))
+        for i, n in enumerate(NAMES)
+    }
+    pad = 0.1 * (h_range[1] - h_range[0]) + 50.0
+    fits = fit_rpcs(
+        [vendor_models[n] for n in NAMES],
+        h_range=(h_range[0] - pad, h_range[1] + pad),
+        grid=rpc_grid,
+    )
+    vendor = {n: sc.quantize_model(rpc) for n, (rpc, _) in zip(NAMES, fits, strict=False)}
+    reports = {n: rep for n, (_, rep) in zip(NAMES, fits, strict=False)}
+    return StereoScene(
+        NAMES, truth, vendor_models, vendor, reports, ground, ground_true, observations,
+        image_true, terrain, sc.rounded(params, 12),
+    )  # fmt: skip
