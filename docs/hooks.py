@@ -12,18 +12,28 @@ ROOT = pathlib.Path(__file__).resolve().parents[1]
 MARKER = re.compile(r"^::: public (jaxgeo(?:\.\w+)*)\s*$", re.MULTILINE)
 
 
+def _source(module: str) -> pathlib.Path:
+    path = ROOT.joinpath(*module.split("."))
+    return path / "__init__.py" if path.is_dir() else path.with_suffix(".py")
+
+
+def _is_class(module: str, name: str) -> bool:
+    """Whether ``module`` defines ``name`` as a class (e.g. ``RESULTS``, an enumeration)."""
+    tree = ast.parse(_source(module).read_text())
+    return any(isinstance(n, ast.ClassDef) and n.name == name for n in tree.body)
+
+
 def public_names(module: str) -> list[tuple[str, str]]:
     """``(qualified name to document, heading name)`` of the names ``module`` re-exports."""
-    parts = module.split(".")
-    path = ROOT.joinpath(*parts)
-    path = path / "__init__.py" if path.is_dir() else path.with_suffix(".py")
-    tree = ast.parse(path.read_text())
+    tree = ast.parse(_source(module).read_text())
     out = []
     for node in tree.body:
         if isinstance(node, ast.ImportFrom) and node.level == 1:
             for a in node.names:
-                if a.asname == a.name and not a.name.isupper():  # constants: in their module
-                    out.append((f"{module}.{node.module}.{a.name}", a.name))
+                where = f"{module}.{node.module}"
+                # constants are documented in their module; upper-case classes (RESULTS) here
+                if a.asname == a.name and (not a.name.isupper() or _is_class(where, a.name)):
+                    out.append((f"{where}.{a.name}", a.name))
         elif isinstance(node, ast.Assign) and any(
             isinstance(t, ast.Name) and t.id == "_EXPORTS" for t in node.targets
         ):

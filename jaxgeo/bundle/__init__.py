@@ -18,6 +18,7 @@ from ._errors import NotConvergedWarning as NotConvergedWarning
 from ._errors import PoorFitWarning as PoorFitWarning
 from ._errors import SingularNormalEquations as SingularNormalEquations
 from ._errors import TooFewControlPoints as TooFewControlPoints
+from ._export import adjusted_rpc as adjusted_rpc
 from ._export import check_out_dir as check_out_dir
 from ._prepare import Prepared as Prepared
 from ._prepare import prepare as prepare

@@ -9,7 +9,7 @@ warns with :class:`~._errors.NotConvergedWarning` and returns the last state).
 
 The stages: :func:`~._prepare.prepare` (checks, groups, initial points, priors) ->
 :func:`jaxgeo.lsq.solve` (Schur LM, covariance, singularity test; jitted) ->
-:func:`~._result.finish` (names, statistics, report).
+:func:`~._result.make_result` (names, statistics, report).
 """
 
 from __future__ import annotations

@@ -55,7 +55,7 @@ class AdjustResult:
     residual of each flagged GCP; ``checks_excluded`` check points left out of ``report``
     because an observation of theirs is flagged; ``snooping_rounds`` re-solves.
     Statistics: ``s0``, ``redundancy``, ``cost`` (sum of squared weighted residuals),
-    ``converged``, ``message`` (short), ``result`` (:class:`~._errors.RESULTS`), ``num_steps``;
+    ``converged``, ``message`` (short), ``result`` (:class:`jaxgeo.lsq.RESULTS`), ``num_steps``;
     ``report`` (check points, tables 2-6 of 000_)
     or None.
     """

@@ -7,7 +7,7 @@ metres_per_unit``, by the angle-addition formulas (:func:`~jaxgeo.geodesy.geodet
 exact to rounding up to ``geodesy.OFFSET_MAX_RAD`` from the origin); the origins' sines and the
 ENU frames of the measured coordinates are computed once per solve (:func:`with_frames`). With
 ``jnp.sin`` in the residuals, XLA recomputed the sines in every element of the Jacobian's fused
-loops: 17 % of the time of the 4000 9-GCP bias problems of ``benchmarks/batch.py``. A point
+loops: 17 % of the time of the 4000 9-GCP bias problems of ``benchmarks/speed/batch.py``. A point
 farther than that from its origin is reported (:func:`beyond_offset`: ``outside_domain``).
 """
 

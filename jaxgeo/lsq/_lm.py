@@ -264,7 +264,7 @@ class StructuredGaussNewton(optx.AbstractLeastSquaresSolver):
             tiny = jnp.finfo(jnp.result_type(state.step_size)).tiny
             undamped = self.damping / jnp.maximum(state.step_size, tiny) <= NEGLIGIBLE_DAMPING
         # the extrapolated decrement 100x below tol**2: at tol**2 the answers of the 4000 9-GCP
-        # bias problems of benchmarks/batch.py were up to 3.6 tol from the M-estimate (taken
+        # bias problems of benchmarks/speed/batch.py were up to 3.6 tol from the M-estimate (taken
         # at tol 1e-10); with the margin they are those of the solve without extrapolation
         fast = (dec <= CONTRACTION * prev) & (dec * dec < 1e-2 * tol**2 * prev)
         fast &= jnp.isfinite(prev)
@@ -331,7 +331,7 @@ class StructuredGaussNewton(optx.AbstractLeastSquaresSolver):
             )
             # a new weighted solve (or the final one) starts from the reweighting's point, with
             # the trust region as it was (restarting it at lambda = 1e-4 delays the undamped
-            # steps that end a solve: 6.5 steps instead of 6.0 on benchmarks/batch.py)
+            # steps that end a solve: 6.5 steps instead of 6.0 on benchmarks/speed/batch.py)
             accept = accept | reweigh
             step_size = jnp.where(reweigh, state.step_size, step_size)
         else:

@@ -1,6 +1,6 @@
 """Observation blocks as arrays: image measurements per (group, image slot), ground coordinates.
 
-Built from the user's tables by :func:`jaxgeo.bundle._prepare.build`; the pieces of a
+Built from the user's tables by :func:`jaxgeo.bundle.prepare`; the pieces of a
 :class:`~jaxgeo.lsq.Problem`. Image coordinates ``(x, y) = (col, row)`` px, ground
 ``(lon_deg, lat_deg, h_m)``; weights are ``1 / sigma``.
 """

@@ -213,9 +213,10 @@ IRLS_INNER_TOL = 0.5
 """Tolerance (``StructuredGaussNewton.tol``) of the reweighting's weighted solves. They only
 steer it: a step below 0.5 sigma moves a Cauchy weight (threshold 3 sigma) by 0.11 at most, and
 the final robust phase reaches the M-estimate to ``SolverConfig.tol`` from wherever they stop.
-Against 0.1 (``irls_tol`` 0.05 against 0.01): 6.6 steps instead of 8.0 on ``benchmarks/batch.py``
-(answers within 3e-7 px); on ``benchmarks/adjust_scale.py`` 7 instead of 8 (Cauchy), 9 instead
-of 11 (Huber), same s0 to 1e-12 and the same gross errors removed."""
+Against 0.1 (``irls_tol`` 0.05 against 0.01): 6.6 steps instead of 8.0 on
+``benchmarks/speed/batch.py`` (answers within 3e-7 px); on ``benchmarks/speed/adjust_scale.py``
+7 instead of 8 (Cauchy), 9 instead of 11 (Huber), same s0 to 1e-12 and the same gross errors
+removed."""
 REMOVED_WEIGHT = 1e-8
 """Weight factor of an observation removed as a gross error: it keeps the arrays (and the
 compiled solve) of the same shape while its influence (``1e-16`` of the normal equations) is

@@ -17,7 +17,7 @@ used a second time (:data:`SEEN_MAX`, :data:`PROGRAMS_MAX`): a one-off call of a
 keeps the bucketed, chunked path of :mod:`._rpc_eval` (a few programs for all sizes), a
 repeated size (tiles of one raster, a loop over epochs) runs whole, in one call.
 
-Measured (2-core AVX-512 CPU, 1e6 points, the Pleiades RPC, ``benchmarks/projection.py``):
+Measured (2-core AVX-512 CPU, 1e6 points, the Pleiades RPC, ``benchmarks/speed/projection.py``):
 ``rpc.project(numpy)`` 5.1 ms chunked (a size used once), 1.7 ms here (173x GDAL); a size's
 second use compiles for ~0.13 s (~0.05 s from the persistent compilation cache).
 """

@@ -2,8 +2,9 @@
 matching (OpenCV SGM), triangulation through the models and DSM rasterisation.
 
 Pipeline entry points: :func:`stereo_pair` (one pair -> 3D points) and :func:`dsm_from_images`
-(reference + secondaries -> one DSM grid); the stages are public modules: :mod:`._matching`,
-:mod:`._rectification`, :mod:`._dense`, :mod:`._triangulation`, :mod:`._dsm`.
+(reference + secondaries -> one DSM grid); each stage's names are public here, from its private
+module: matching (``_matching``), rectification (``_rectification``), dense matching
+(``_dense``), triangulation (``_triangulation``), rasterisation (``_dsm``).
 """
 
 from ._dense import SGMSettings as SGMSettings

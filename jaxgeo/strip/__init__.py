@@ -3,24 +3,25 @@
 ``adjust_strip(read_strip("strip.json"), StripConfig())``: ties formed from the sub-scenes'
 line offsets, one bundle adjustment of all sub-scenes (level 1), the universal correction of
 eq. 12-13 from the GCPs (level 2), reports per sub-scene; ``monte_carlo`` runs a batch in one
-vmapped call. Modules, in the order the data passes them:
+vmapped call. Its private modules, in the order the data passes them (their names are
+public here):
 
-- ``config``: ``TieConfig``, ``Level1Config``, ``Level2Config``, ``RefitConfig``,
+- ``_config``: ``TieConfig``, ``Level1Config``, ``Level2Config``, ``RefitConfig``,
   ``StripConfig`` (frozen, checked settings);
-- ``errors``: ``ConfigError`` (names the settings at fault), ``StripFormatError``, warnings;
-- ``delivery``: the strip as delivered (``SubScene``, ``Strip``, ``read_strip``);
-- ``distribution``: the GCP distribution rule of section 9;
-- ``ties``: tie points formed from the line offsets;
-- ``level1``: level-1 observations and ground points (ties, tie height priors, GCPs);
-- ``level2``: level-2 data (GCP, check and tie rows);
-- ``universal``: the universal correction of eq. 12-13;
-- ``solve``: both levels as one pure function of arrays (jit, vmap);
-- ``snooping``: gross errors at both levels (robust loss, w-test, removal) and wrong line
+- ``_errors``: ``ConfigError`` (names the settings at fault), ``StripFormatError``, warnings;
+- ``_delivery``: the strip as delivered (``SubScene``, ``Strip``, ``read_strip``);
+- ``_distribution``: the GCP distribution rule of section 9;
+- ``_ties``: tie points formed from the line offsets;
+- ``_level1``: level-1 observations and ground points (ties, tie height priors, GCPs);
+- ``_level2``: level-2 data (GCP, check and tie rows);
+- ``_universal``: the universal correction of eq. 12-13;
+- ``_solve``: both levels as one pure function of arrays (jit, vmap);
+- ``_snooping``: gross errors at both levels (robust loss, w-test, removal) and wrong line
   offsets (the seams of the vendor RPCs);
-- ``report``: per sub-scene and per pair figures;
-- ``result``: ``StripResult`` and the refitted RPCs;
-- ``adjustment``: ``adjust_strip`` (tables in, result out), ``adjust_individually``;
-- ``batch``: Monte-Carlo batches and timing of the compiled call.
+- ``_report``: per sub-scene and per pair figures;
+- ``_result``: ``StripResult`` and the refitted RPCs;
+- ``_adjustment``: ``adjust_strip`` (tables in, result out), ``adjust_individually``;
+- ``_batch``: Monte-Carlo batches and timing of the compiled call.
 """
 
 from ._adjustment import N_BIAS_GCPS as N_BIAS_GCPS

@@ -172,7 +172,7 @@ def adjust_strip(strip: Strip, config: StripConfig | None = None) -> StripResult
 def unsliced(setup: Prepared) -> Prepared:
     """``setup`` with its image residuals evaluated per observation, not block by block.
 
-    :func:`~jaxgeo.bundle._prepare.build` sorts an image slot's observations by block when the
+    :func:`~jaxgeo.bundle.prepare` sorts an image slot's observations by block when the
     blocks are about equally observed and evaluates each block's padded slice with its own
     model (``ImageObs.block_start``). For a strip (one block per sub-scene, a few hundred
     observations) the per-observation evaluation runs as fast, and it keeps the strip's

@@ -19,6 +19,7 @@
 # in Python too.
 
 # %%
+import json
 import time
 import warnings
 
@@ -51,6 +52,15 @@ def rms(x):
     return float(np.sqrt(np.mean(np.asarray(x) ** 2)))
 
 
+def num(x):
+    """``x`` (a number or an array) rounded to 4 significant digits, for ``key_numbers``."""
+    a = np.asarray(x, dtype=float)
+    return float(f"{a:.4g}") if a.ndim == 0 else [num(v) for v in a]
+
+
+key_numbers = {"n_scenes": N_SCENES}  # printed as one line at the end (the tests read it)
+
+
 # %% [markdown]
 # ## Two GCP distributions
 #
@@ -69,6 +79,8 @@ for name, keep in (("respecting", rule), ("violating", violating)):
         warnings.simplefilter("always")
         check_gcp_distribution(N_SCENES, keep, names=full.names)
     print(f"{name}: {[str(w.message) for w in caught] or 'no warning'}")
+    key_numbers[f"warnings_{name}"] = sum(issubclass(w.category, GCPDistributionWarning)
+                                      for w in caught)  # fmt: skip
 
 # %% [markdown]
 # The paper's flow: level 1 with ties only (relative; an affine bias per sub-scene, with weak
@@ -107,17 +119,23 @@ v = results["violating"].report.strip
 gap_ind = np.hypot(*individual["tie_gap_m"].T)
 chk_ind = np.hypot(*individual["check_error_m"].T)
 print(f"{'':42s}{'check RMS plan (m)':>20s}{'tie gap RMS / max':>26s}")
-for label, c, g in (
-    ("vendor RPCs (direct)", s["check_rms_m"]["direct"]["plan"], s["tie_gap_m"]["direct"]),
-    ("level 1, ties only", s["check_rms_m"]["level1"]["plan"], s["tie_gap_m"]["level1"]),
-    ("level 2, GCPs respecting the rule", s["check_rms_m"]["level2"]["plan"],
+for key, label, c, g in (
+    ("direct", "vendor RPCs (direct)", s["check_rms_m"]["direct"]["plan"],
+     s["tie_gap_m"]["direct"]),
+    ("level1", "level 1, ties only", s["check_rms_m"]["level1"]["plan"], s["tie_gap_m"]["level1"]),
+    ("respecting", "level 2, GCPs respecting the rule", s["check_rms_m"]["level2"]["plan"],
      s["tie_gap_m"]["level2"]),
-    ("level 2, GCPs violating the rule", v["check_rms_m"]["level2"]["plan"],
+    ("violating", "level 2, GCPs violating the rule", v["check_rms_m"]["level2"]["plan"],
      v["tie_gap_m"]["level2"]),
-    ("one by one, GCPs in every sub-scene", rms(chk_ind),
+    ("one_by_one", "one by one, GCPs in every sub-scene", rms(chk_ind),
      {"rms": rms(gap_ind), "max": float(gap_ind.max())}),
 ):  # fmt: skip
     print(f"{label:42s}{c:20.3f}{1e3 * g['rms']:15.1f} / {1e3 * g['max']:.1f} mm")
+    key_numbers[key] = {
+        "check_plan_m": num(c),
+        "gap_rms_m": num(g["rms"]),
+        "gap_max_m": num(g["max"]),
+    }
 print()
 print("two-level as accurate as one by one (within 25 %):",
       s["check_rms_m"]["level2"]["plan"] < 1.25 * rms(chk_ind))  # fmt: skip
@@ -159,11 +177,19 @@ axes[1].set(xlabel="sub-scene (green lines: GCP sub-scenes of the rule; red: no 
             ylabel="check RMS plan (m)")  # fmt: skip
 axes[1].legend(fontsize=8, ncol=2)
 fig.tight_layout()
+plt.show()
 last = slice(max(violating) + 1, N_SCENES)
 print(f"check RMS plan over the sub-scenes after the last GCP of the violating layout "
       f"({last.start}..{N_SCENES - 1}): rule respected {rms(per_scene['respecting'][last]):.3f} m, "
       f"violated {rms(per_scene['violating'][last]):.3f} m, one by one "
       f"{rms(per_scene_ind[last]):.3f} m")  # fmt: skip
+key_numbers["after_last_gcp"] = {  # check RMS plan over the sub-scenes that violating leaves bare
+    "first_scene": last.start,
+    "respecting_m": num(rms(per_scene["respecting"][last])),
+    "violating_m": num(rms(per_scene["violating"][last])),
+    "one_by_one_m": num(rms(per_scene_ind[last])),
+    "violating_per_scene_m": num(per_scene["violating"][last]),
+}
 
 # %% [markdown]
 # What the simulation shows, against the paper: scenes adjusted one by one leave gaps of
@@ -177,7 +203,14 @@ print(f"check RMS plan over the sub-scenes after the last GCP of the violating l
 # absolute numbers (13-22 m in table 1) are not comparable: its reference data were at that
 # level; the simulation's GCPs are surveyed to 0.1 m.
 
+# %% [markdown]
+# ## The numbers in one line
+#
+# The key numbers above as one JSON line: `tests/notebooks/test_notebook_03.py` runs this
+# notebook and checks the statements of the text against them.
+
 # %%
+print("NOTEBOOK_RESULTS", json.dumps(key_numbers, sort_keys=True))
 print(
     f"notebook run time {time.perf_counter() - T0:.0f} s wall, "
     f"{time.process_time() - C0:.0f} s CPU (jaxgeo {jaxgeo.__version__})"

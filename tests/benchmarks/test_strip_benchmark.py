@@ -1,31 +1,16 @@
-"""benchmarks/strip.py: the peers' problem dict is jaxgeo's level-1 problem (same cost at the
+"""benchmarks/speed/strip.py: the peers' problem dict is jaxgeo's level-1 problem (same cost at the
 start and at jaxgeo's solution), and the peers reach jaxgeo's solution to 1e-6 px.
 
 (Not named test_strip.py: tests/cli/test_strip.py has that basename, and the test directories
 are not packages.)"""
 
-import importlib.util
-import pathlib
-import sys
 import warnings
 
 import numpy as np
 import pytest
 
-BENCH = pathlib.Path(__file__).resolve().parents[2] / "benchmarks"
-sys.path.insert(0, str(BENCH))
-
-import strip_peers as sp  # noqa: E402
-
-
-def _load_benchmark():
-    spec = importlib.util.spec_from_file_location("strip_benchmark", BENCH / "strip.py")
-    module = importlib.util.module_from_spec(spec)
-    spec.loader.exec_module(module)
-    return module
-
-
-sb = _load_benchmark()
+from benchmarks.peers import strip as sp
+from benchmarks.speed import strip as sb
 
 
 @pytest.fixture(scope="module")

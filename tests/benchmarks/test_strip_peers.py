@@ -1,8 +1,5 @@
-"""The strip-benchmark peers (benchmarks/strip_peers.py): model checked against jaxgeo, and
+"""The strip-benchmark peers (benchmarks/peers/strip.py): model checked against jaxgeo, and
 scipy and Ceres converging to the same minimum, which recovers the injected biases."""
-
-import pathlib
-import sys
 
 import jax
 import jax.numpy as jnp
@@ -10,13 +7,10 @@ import numpy as np
 import pytest
 import scipy.stats
 
-sys.path.insert(0, str(pathlib.Path(__file__).resolve().parents[2] / "benchmarks"))
-
-import strip_peers as sp  # noqa: E402
-from strip_problem_synth import make_problem  # noqa: E402
-
-from jaxgeo import RPC, Affine, Biased  # noqa: E402
-from jaxgeo.geodesy import geodetic_to_enu  # noqa: E402
+from benchmarks.peers import strip as sp
+from benchmarks.peers.strip_synth import make_problem
+from jaxgeo import RPC, AffineBias, Biased
+from jaxgeo.geodesy import geodetic_to_enu
 
 GEOM = "phr_ventoux__left_image.geom"
 
@@ -29,7 +23,7 @@ def problem(real_data):
 def _biased_model(problem, s, bias6):
     rpc = RPC(*(problem[k][s] for k in ("num", "den", "ground_offset", "ground_scale",
                                         "image_offset", "image_scale")))  # fmt: skip
-    return Biased(rpc, Affine(shift_px=bias6[:2], matrix=jnp.reshape(bias6[2:], (2, 2))))
+    return Biased(rpc, AffineBias(shift_px=bias6[:2], matrix=jnp.reshape(bias6[2:], (2, 2))))
 
 
 def test_projection_matches_jaxgeo(problem):
@@ -74,7 +68,7 @@ def test_ceres_cost_functions_match_vectorised(problem):
     pytest.importorskip(
         "pyceres"
     )  # optional peer (`bench` extra), the vectorised model is tested above
-    from strip_peers_ceres import ImageCost as image_cost
+    from benchmarks.peers.strip_ceres import ImageCost as image_cost
 
     bias, points = problem["bias_true"] * 50.0, problem["points_true"]
     r_all = sp.residuals(problem, bias, points)

@@ -1,6 +1,6 @@
 """``jaxgeo adjust`` on a pair controlled through tie points (issue 11): 2 000 simulated ties with
 1 % gross errors, GCPs measured in one image only, affine bias with priors (the scale case of
-``benchmarks/adjust_scale.py``, small)."""
+``benchmarks/speed/adjust_scale.py``, small)."""
 
 import csv
 import json

@@ -83,13 +83,15 @@ def test_per_scene_rpcs(strip):
         rep = strip.fit_reports[name]
         assert rep.check_rms_px < 0.01 and rep.check_max_px < 0.05
         assert 5.0 < acc["image_px"][name]["rms"] < 80.0  # ~13-19 m at 0.63 m (003_ table 1)
-    # each RPC reproduces its own perturbed sub-scene model
-    ground = strip.ground_true[:5]
+    # each RPC reproduces its own perturbed sub-scene model over its own scene (its validity
+    # cube: far outside it an RPC extrapolates, and the last scene's cube lies ~9 normalised
+    # units from the first scene's points)
     for k in (0, N_SCENES - 1):
-        d = project_points(strip.vendor[strip.names[k]], ground) - project_points(
-            strip.vendor_model(k), ground
-        )
-        assert np.abs(d).max() < 0.05
+        rpc = strip.vendor[strip.names[k]]
+        ground = strip.ground_true[np.asarray(rpc.in_domain(strip.ground_true))]
+        assert len(ground) >= 5
+        d = project_points(rpc, ground) - project_points(strip.vendor_model(k), ground)
+        assert np.abs(d).max() < 1e-3  # the fit check grid gives ~1e-5 px
 
 
 def test_save_files_and_determinism(strip, tmp_path):

@@ -1,4 +1,4 @@
-"""Build: from user input (models, GROUND/OBS tables) to an array :class:`~..problem.Problem`.
+"""Build: from user input (models, GROUND/OBS tables) to an array :class:`jaxgeo.lsq.Problem`.
 
 Everything that can be wrong with the input is found here, before any solving, and raised as an
 :class:`~jaxgeo.bundle.AdjustmentError` naming the image, point or parameter at fault
