@@ -22,6 +22,7 @@ COMMANDS = {
     "ortho": "orthorectify an image with any sensor model over a DEM (COG out)",
     "match": "tie points by SIFT matching guided by the sensor models",
     "dsm": "digital surface model from a stereo pair or triplet",
+    "coregister": "align a DSM onto a reference DEM (Nuth and Kääb), statistics before/after",
 }
 """Sub-commands (module ``jaxgeo.cli.<name>``) and their one-line help."""
 
@@ -66,20 +67,62 @@ def build_parser(command: str | None = None) -> argparse.ArgumentParser:
 
 def _one_line(err: BaseException) -> str:
     msg = err.args[0] if isinstance(err, KeyError) and err.args else err
-    return " ".join(str(msg).split("\n"))
+    text = " ".join(str(msg).split("\n"))
+    # library messages name the API's keyword; on the command line it is an option
+    return text.replace("(pass overwrite=True)", "(pass --overwrite to replace it)")
+
+
+def _terminate(signum, frame):  # pragma: no cover - exercised through a subprocess in the tests
+    raise KeyboardInterrupt
 
 
 def main(argv: list[str] | None = None) -> int:
+    """Run one sub-command; every error ends as one line on stderr and an exit status (the
+    codes of ``jaxgeo.cli._common``), never as a traceback (``JAXGEO_TRACEBACK=1`` re-raises)."""
+    import os
+    import signal
+
+    from ._common import EXIT_INPUT, EXIT_INTERNAL, EXIT_INTERRUPTED
+
     argv = sys.argv[1:] if argv is None else list(argv)
     # top-level options take no values: the first word that is not an option is the command
     command = next((a for a in argv if not a.startswith("-")), None)
     parser = build_parser(command if command in COMMANDS else None)
     args = parser.parse_args(argv)
+    previous = None
+    if threading_main():
+        # SIGTERM unwinds like Ctrl-C, so temporary outputs are removed (atomic_output)
+        previous = signal.signal(signal.SIGTERM, _terminate)
+    name = f"jaxgeo {args.command}"
     try:
         return int(args.func(args) or 0)
-    except (CommandError, ValueError, FileNotFoundError, FileExistsError, KeyError) as err:
-        print(f"jaxgeo {args.command}: error: {_one_line(err)}", file=sys.stderr)
-        return 2
+    except KeyboardInterrupt:
+        print(f"{name}: interrupted; no output was written", file=sys.stderr)
+        return EXIT_INTERRUPTED
+    except (JaxgeoError, ValueError, FileNotFoundError, FileExistsError, KeyError) as err:
+        print(f"{name}: error: {_one_line(err)}", file=sys.stderr)
+        return EXIT_INPUT
+    except OSError as err:  # permissions, a full disk, a folder where a file is expected
+        where = f"{err.filename}: " if getattr(err, "filename", None) else ""
+        print(f"{name}: error: {where}{err.strerror or _one_line(err)}", file=sys.stderr)
+        return EXIT_INPUT
+    except Exception as err:
+        if os.environ.get("JAXGEO_TRACEBACK"):
+            raise
+        print(f"{name}: internal error ({type(err).__name__}: {_one_line(err)}); this is a "
+              "bug: please report it (JAXGEO_TRACEBACK=1 shows the traceback)",
+              file=sys.stderr)  # fmt: skip
+        return EXIT_INTERNAL
+    finally:
+        if previous is not None:
+            signal.signal(signal.SIGTERM, previous)
+
+
+def threading_main() -> bool:
+    """Whether this is the main thread (signal handlers can only be set there)."""
+    import threading
+
+    return threading.current_thread() is threading.main_thread()
 
 
 if __name__ == "__main__":  # pragma: no cover

@@ -16,10 +16,14 @@ import dataclasses
 def register(sub) -> None:
     from ..models import BIAS_KINDS
 
-    parser = sub.add_parser(
+    from ._common import add_command
+
+    parser = add_command(
+        sub,
         "demo",
-        help="direct georeferencing vs bias-corrected adjustment on the embedded scene",
-        description=__doc__.split("\n\n")[0],
+        "direct georeferencing vs bias-corrected adjustment on the embedded scene",
+        __doc__,
+        {1: "the adjustment did not converge (the last state is reported)"},
     )
     parser.add_argument(
         "--bias",

@@ -1,90 +1,219 @@
 """``jaxgeo dsm``: a digital surface model from two or more images and their sensor models.
 
-    jaxgeo dsm IMG1 IMG2 [IMG3 ...] [--model IMG=RPCFILE ...] [--roi X Y W H] [--res M]
-               [--crs EPSG:n] [--triangulation {intersect,los_midpoint}] [--no-register]
-               [--band-rows N] [--keep DIR] [--quiet] -o dsm.tif [--overwrite]
+    jaxgeo dsm IMG1 IMG2 [IMG3 ...] [--model IMG=FILE ...] [--image-origin IMG=COL,ROW ...]
+               [--roi X Y W H] [--res M] [--crs EPSG:n] [--triangulation {intersect,los_midpoint}]
+               [--no-register] [--band-rows N] [--keep DIR] [--quiet] [--json] -o dsm.tif
+               [--overwrite]
 
 IMG1 is the reference: each pair (IMG1, IMGi) is rectified, matched densely (SGM) and
 triangulated; the points are pooled into one height per cell (median; bands: height above the
-WGS84 ellipsoid, count, spread). ``--roi`` in pixels of IMG1; ``--res`` metres (default 0.5);
-CRS default the local UTM zone. ``--keep DIR`` writes each pair's intermediate products.
-Dense matching runs over bands of ``--band-rows`` epipolar rows (default 512), so its memory
-follows the band, not the image; a progress bar per pair shows the bands (``--quiet``: none).
+WGS84 ellipsoid, count, spread, ...). ``--roi`` in pixels of IMG1 (default: all of it);
+``--res`` metres (default 0.5); CRS default the local UTM zone (a projected CRS in metres; a
+geographic CRS is refused). ``--keep DIR`` writes each pair's intermediate products. Dense
+matching runs over bands of ``--band-rows`` epipolar rows (default 512), so its memory follows
+the band, not the image. Everything given is checked before any computation: the images and
+their models, the ROI, the CRS, the output (never an input) and the DSM's size.
 """
 
 from __future__ import annotations
 
 import argparse
-import json
+import math
+
+from ._common import (
+    add_command,
+    add_image_options,
+    add_json,
+    add_out,
+    add_quiet,
+    guard_outputs,
+    open_images,
+    print_json,
+)
+
+MAX_CELLS = 400_000_000
+"""Largest DSM (cells) made without ``--max-cells``: 20 000 x 20 000."""
 
 
 def register(sub) -> None:
-    parser = sub.add_parser(
-        "dsm",
-        help="digital surface model from a stereo pair or triplet",
-        description=__doc__.split("\n\n")[0],
+    parser = add_command(sub, "dsm", "digital surface model from a stereo pair or triplet", __doc__)
+    parser.add_argument("images", nargs="+", metavar="IMG", help="images, the reference first")
+    add_image_options(parser)
+    parser.add_argument(
+        "--roi",
+        type=int,
+        nargs=4,
+        metavar=("X", "Y", "W", "H"),
+        help="region of the reference image, pixels (default: the whole image)",
     )
-    parser.add_argument("images", nargs="+", metavar="IMG", help="images, reference first")
-    parser.add_argument("--model", action="append", default=[], metavar="IMG=RPCFILE")
-    parser.add_argument("--roi", type=int, nargs=4, metavar=("X", "Y", "W", "H"))
     parser.add_argument("--res", type=float, default=0.5, help="cell size, m (default 0.5)")
-    parser.add_argument("--crs", help="output CRS as EPSG:n (default local UTM)")
     parser.add_argument(
-        "--triangulation", choices=("intersect", "los_midpoint"), default="intersect"
+        "--crs", help="output CRS, a projected CRS in metres, e.g. EPSG:32631 (default: local UTM)"
     )
     parser.add_argument(
-        "--no-register", action="store_true", help="do not remove the pairs' height offsets"
+        "--triangulation",
+        choices=("intersect", "los_midpoint"),
+        default="intersect",
+        help="least-squares intersection (default) or the midpoint of the two lines of sight",
     )
     parser.add_argument(
-        "--band-rows", type=int, default=512, metavar="N",
-        help="epipolar rows per band of dense matching (default 512)",
-    )  # fmt: skip
-    parser.add_argument("--keep", metavar="DIR", help="keep intermediate products here")
-    parser.add_argument("--quiet", action="store_true", help="no progress display")
-    parser.add_argument("-o", "--output", required=True, metavar="DSM.tif")
-    parser.add_argument("--overwrite", action="store_true")
+        "--no-register",
+        action="store_true",
+        help="with 3+ images, keep each pair's height offset (default: removed; see the docs)",
+    )
+    parser.add_argument(
+        "--band-rows",
+        type=int,
+        default=512,
+        metavar="N",
+        help="epipolar rows per band of dense matching (default 512; memory follows it)",
+    )
+    parser.add_argument("--keep", metavar="DIR", help="write intermediate products to this folder")
+    parser.add_argument(
+        "--max-cells",
+        type=float,
+        default=MAX_CELLS,
+        metavar="N",
+        help=f"refuse a DSM larger than N cells (default {MAX_CELLS:.0e})",
+    )
+    add_quiet(parser)
+    add_json(parser)
+    add_out(parser, "DSM.tif", "the DSM GeoTIFF to write")
     parser.set_defaults(func=run)
 
 
-def _epsg(crs: str | None) -> int | None:
+def output_epsg(crs: str | None) -> int | None:
+    """The EPSG code of ``--crs`` (``None``: local UTM), refused unless projected in metres."""
     from . import CommandError
 
     if crs is None:
         return None
-    code = crs.upper().removeprefix("EPSG:")
-    if not code.isdigit():
-        raise CommandError(f"--crs {crs!r}: expected EPSG:n")
+    import pyproj
+
+    try:
+        parsed = pyproj.CRS.from_user_input(crs)
+    except pyproj.exceptions.CRSError:
+        raise CommandError(
+            f"--crs {crs!r}: not a CRS PROJ knows (expected e.g. EPSG:32631)"
+        ) from None
+    if not parsed.is_projected:
+        raise CommandError(
+            f"--crs {crs!r}: {parsed.name} is not a projected CRS; a DSM's cells are in metres "
+            "(--res is metres): use a projected CRS such as the local UTM zone (the default)"
+        )
+    unit = parsed.axis_info[0].unit_name if parsed.axis_info else "metre"
+    if unit not in ("metre", "meter"):
+        raise CommandError(f"--crs {crs!r}: its unit is {unit}, expected metres")
+    code = parsed.to_epsg()
+    if code is None:
+        raise CommandError(f"--crs {crs!r}: give the CRS by its EPSG code")
     return int(code)
+
+
+def check_roi(roi, image) -> tuple[int, int, int, int] | None:
+    """``--roi`` inside the reference image, else a named error."""
+    from . import CommandError
+
+    if roi is None:
+        return None
+    x, y, w, h = roi
+    width, height = image.size
+    if w <= 0 or h <= 0 or x < 0 or y < 0 or x + w > width or y + h > height:
+        raise CommandError(
+            f"--roi {x} {y} {w} {h}: not inside {image.path} ({width} x {height} px)"
+        )
+    return (x, y, w, h)
+
+
+def footprint_cells(image, roi, res_m: float, epsg: int | None) -> tuple[float, float]:
+    """Approximate DSM size (rows, cols) of ``roi`` of ``image`` at ``res_m``: its corners
+    localised at the model's reference height, in the output CRS."""
+    import numpy as np
+    import pyproj
+
+    from ..geodesy import utm_epsg, utm_zone
+
+    x, y, w, h = roi if roi is not None else (0, 0, *image.size)
+    corners = np.array([[x, y], [x + w, y], [x, y + h], [x + w, y + h]], dtype=float) - 0.5
+    height = float(np.asarray(image.model.reference_ground())[2])
+    ground = np.asarray(image.model.localize(corners, np.full(4, height)))
+    if not np.all(np.isfinite(ground)):
+        return (math.nan, math.nan)
+    lon, lat = float(ground[:, 0].mean()), float(ground[:, 1].mean())
+    epsg = epsg or utm_epsg(utm_zone(lon, lat), north=lat >= 0)
+    tr = pyproj.Transformer.from_crs(4326, epsg, always_xy=True)
+    mx, my = tr.transform(ground[:, 0], ground[:, 1])
+    return ((np.ptp(my) / res_m), (np.ptp(mx) / res_m))
 
 
 def run(args: argparse.Namespace) -> int:
     import numpy as np
 
-    from ..io import refuse_existing
     from ..stereo import dsm_from_images, write_dsm
     from . import CommandError
-    from ._match import models_of
 
     if len(args.images) < 2:
-        raise CommandError("give at least two images")
+        raise CommandError("give at least two images (the reference first)")
     if args.band_rows < 1:
         raise CommandError(f"--band-rows {args.band_rows}: expected a positive number of rows")
-    refuse_existing(args.output, args.overwrite)
-    models = models_of(args.images, args.model)
+    if not (math.isfinite(args.res) and args.res > 0):
+        raise CommandError(f"--res {args.res:g}: expected a positive cell size in metres")
+    epsg = output_epsg(args.crs)
+    images = open_images(args.images, args)
+    inputs = [p for im in images for p in im.inputs]
+    guard_outputs([args.out], inputs, args.overwrite)
+    if args.keep is not None:
+        guard_outputs([], inputs, True)  # the folder is created; its files are new names
+    roi = check_roi(args.roi, images[0])
+    rows, cols = footprint_cells(images[0], roi, args.res, epsg)
+    if math.isfinite(rows) and rows * cols > args.max_cells:
+        raise CommandError(
+            f"the DSM would have about {rows:.0f} x {cols:.0f} cells at --res {args.res:g} m "
+            f"(more than --max-cells {args.max_cells:.0e}); raise --res or --max-cells"
+        )
+    if math.isfinite(rows) and rows * cols < 4:
+        raise CommandError(
+            f"the DSM would have about {rows:.1f} x {cols:.1f} cells at --res {args.res:g} m: "
+            "lower --res"
+        )
     dsm, stats = dsm_from_images(
-        models,
-        args.images,
-        roi=tuple(args.roi) if args.roi else None,
+        [im.model for im in images],
+        [im.path for im in images],
+        roi=roi,
         res_m=args.res,
-        epsg=_epsg(args.crs),
+        epsg=epsg,
         method=args.triangulation,
         keep_dir=args.keep,
         progress=not args.quiet,
         register=not args.no_register,
         band_rows=args.band_rows,
     )
-    write_dsm(dsm, args.output, overwrite=args.overwrite)
+    write_dsm(dsm, args.out, overwrite=args.overwrite)
     filled = float(np.isfinite(dsm.height).mean())
-    print(json.dumps({"output": str(args.output), "epsg": dsm.epsg, "shape": dsm.height.shape,
-                      "filled": round(filled, 4), "pairs": stats}, default=str))  # fmt: skip
+    result = {
+        "output": str(args.out),
+        "epsg": dsm.epsg,
+        "res_m": dsm.res_m,
+        "shape": list(dsm.height.shape),
+        "filled": round(filled, 4),
+        "pairs": [
+            {"images": [images[0].name, images[i + 1].name], **st} for i, st in enumerate(stats)
+        ],
+    }
+    if args.json:
+        print_json(result)
+        return 0
+    rows, cols = dsm.height.shape
+    print(f"wrote {args.out}: {cols} x {rows} cells of {dsm.res_m:g} m, EPSG:{dsm.epsg}, "
+          f"{100 * filled:.1f}% with a height (ellipsoidal, m)")  # fmt: skip
+    for pair in result["pairs"]:
+        a, b = pair["images"]
+        parts = [f"{pair.get('n_ties', '?')} ties"]
+        if "vertical_disparity_px" in pair:
+            parts.append(f"vertical disparity {pair['vertical_disparity_px']:+.2f} px removed")
+        if "disparity_fill" in pair:
+            parts.append(f"{100 * pair['disparity_fill']:.1f}% of pixels matched")
+        if "height_offset_removed_m" in pair:
+            parts.append(f"height offset {pair['height_offset_removed_m']:+.2f} m removed")
+        print(f"  {a} - {b}: " + ", ".join(parts))
     return 0

@@ -15,6 +15,11 @@ from ._atomic import refuse_existing as refuse_existing
 from ._dem import DEM as DEM
 from ._dem import read_dem as read_dem
 from ._dem_grid import dem_coverage as dem_coverage
+from ._image import ImageError as ImageError
+from ._image import SensorImage as SensorImage
+from ._image import open_image as open_image
+from ._image import outside_domain as outside_domain
+from ._image import pixel_frame as pixel_frame
 from ._metadata import MetadataError as MetadataError
 from ._metadata import SceneMetadata as SceneMetadata
 from ._metadata import read_metadata as read_metadata

@@ -18,7 +18,9 @@ grid), or, for a small area where the undulation ``N`` is nearly constant, pass
 declares, if any.
 
 A point outside the raster or on a nodata cell raises a ``ValueError`` naming the file, how
-many points are affected and where: the DEM must cover everything it is asked about.
+many points are affected and where: the DEM must cover everything it is asked about. Values no
+terrain has (outside :data:`PLAUSIBLE_HEIGHTS_M`, e.g. an undeclared void value -32768 or -9999)
+are nodata, whatever the file declares, and :func:`read_dem` warns when a file holds them.
 """
 
 from __future__ import annotations
@@ -34,7 +36,18 @@ import numpy as np
 
 from ..models import AbstractDEM
 
-__all__ = ["DEM", "read_dem"]
+__all__ = ["DEM", "PLAUSIBLE_HEIGHTS_M", "implausible", "read_dem"]
+
+PLAUSIBLE_HEIGHTS_M = (-500.0, 9000.0)
+"""Heights (m) a DEM value may take (the Dead Sea shore to above Everest, geoid to ellipsoid
+included); anything else is a void marker or garbage and is read as nodata."""
+
+
+def implausible(z: np.ndarray) -> np.ndarray:
+    """Where DEM values are non-finite or outside :data:`PLAUSIBLE_HEIGHTS_M`."""
+    lo, hi = PLAUSIBLE_HEIGHTS_M
+    with np.errstate(invalid="ignore"):
+        return ~((z >= lo) & (z <= hi))
 
 
 def _span(lonlat: np.ndarray) -> str:
@@ -66,6 +79,17 @@ class DEM(AbstractDEM):
     _transformer: Any = dataclasses.field(repr=False)  # WGS84 lon/lat -> raster CRS, or None
     height_reference: str = "ellipsoidal"  # of the file's values; "orthometric": geoid added
     geoid: Any = dataclasses.field(default=None, repr=False)  # io.geoid.GeoidGrid or None
+
+    def describe(self) -> str:
+        """The height reference assumed, in words (the CLI prints it)."""
+        if self.height_reference == "orthometric":
+            name = pathlib.Path(str(self.geoid.source)).name
+            ref = f"orthometric heights + {name} undulation -> ellipsoidal"
+        else:
+            ref = "ellipsoidal heights (WGS84), as read"
+        if self.offset_m:
+            ref += f", {self.offset_m:+g} m offset"
+        return f"DEM {self.path.name}: {ref}"
 
     def grid(self, bounds_lonlat, margin_cells: int = 2):
         """The DEM over ``(lon_min, lat_min, lon_max, lat_max)`` as a models-layer ``DEMGrid``.
@@ -136,7 +160,7 @@ class DEM(AbstractDEM):
         except RasterioError as err:  # e.g. a truncated or corrupt file
             raise ValueError(f"{self.path}: cannot read the DEM's heights ({err})") from None
         z = np.ma.getdata(band).astype(float)
-        invalid = np.ma.getmaskarray(band) | ~np.isfinite(z)
+        invalid = np.ma.getmaskarray(band) | implausible(z)
         z = np.where(invalid, 0.0, z)
         h = np.zeros(n)
         hole = np.zeros(n, dtype=bool)
@@ -227,6 +251,7 @@ def read_dem(
         transformer = pyproj.Transformer.from_crs(wgs84, horizontal, always_xy=True)
         crs_out = wkt
     reference, geoid_grid = _height_reference(path, vertical, height, geoid)
+    _warn_implausible(path)
     return DEM(path, shape, crs_out, bounds_lonlat, vertical, offset_m, inverse, transformer,
                reference, geoid_grid)  # fmt: skip
 
@@ -261,3 +286,27 @@ def _height_reference(path, vertical: str | None, height, geoid):
         raise ValueError(f"{path}: orthometric heights need a geoid ('egm96', 'egm2008' or a "
                          "geoid grid file)")  # fmt: skip
     return "orthometric", read_geoid(geoid)
+
+
+def _warn_implausible(path: pathlib.Path, max_cells: int = 4_000_000) -> None:
+    """Warn (naming the file) when valid-looking cells hold impossible heights: an undeclared
+    void marker such as -32768. They are read as nodata. Large rasters are checked on a
+    decimated read."""
+    import rasterio
+
+    with rasterio.open(path) as src:
+        scale = max(1, math.ceil(math.sqrt(src.width * src.height / max_cells)))
+        shape = (max(src.height // scale, 1), max(src.width // scale, 1))
+        band = src.read(1, out_shape=shape, masked=True)
+    z = np.ma.getdata(band).astype(float)
+    bad = implausible(z) & ~np.ma.getmaskarray(band) & np.isfinite(z)
+    if bad.any():
+        values = np.unique(z[bad])
+        shown = ", ".join(f"{v:g}" for v in values[:3]) + (", ..." if len(values) > 3 else "")
+        warnings.warn(
+            f"{path}: {100 * bad.mean():.2g}% of the cells hold heights no terrain has ({shown}; "
+            f"plausible: {PLAUSIBLE_HEIGHTS_M[0]:g}..{PLAUSIBLE_HEIGHTS_M[1]:g} m) without being "
+            "declared nodata: they are read as nodata (voids)",
+            UserWarning,
+            stacklevel=3,
+        )

@@ -14,6 +14,7 @@ import math
 import numpy as np
 
 from ..models import DEMGrid
+from ._dem import implausible
 
 __all__ = ["dem_coverage", "dem_grid"]
 
@@ -76,7 +77,7 @@ def dem_grid(dem, bounds_lonlat, margin_cells: int = 2) -> DEMGrid:
         band = src.read(1, window=window, masked=True)
         wt = src.window_transform(window)
         z = np.ma.filled(band.astype(float), np.nan)
-        z[~np.isfinite(z)] = np.nan
+        z[implausible(z)] = np.nan  # non-finite, or a void marker the file does not declare
         src_crs = src.crs
     wgs84 = pyproj.CRS.from_epsg(4326)
     zone = _utm_zone_of(crs)

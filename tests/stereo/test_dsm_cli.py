@@ -16,6 +16,7 @@ def test_dsm_cli_pair_against_s2p(shared_data, tmp_path, capsys):
     out = tmp_path / "dsm.tif"
     argv = ["dsm", str(folder / "img_02.tif"), str(folder / "img_01.tif")]
     argv += ["--roi", "350", "350", "200", "200", "--triangulation", "los_midpoint", "--quiet"]
+    argv += ["--json"]
     assert main([*argv, "--keep", str(tmp_path / "keep"), "-o", str(out)]) == 0
     report = json.loads(capsys.readouterr().out.strip().splitlines()[-1])
     assert report["epsg"] == 32631  # local UTM by default

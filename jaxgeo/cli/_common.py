@@ -1,0 +1,198 @@
+"""What every sub-command shares: option names, images, output guards, exit codes.
+
+One convention across commands: ``-o/--out`` names the output (a file, or a folder where a
+command writes several), ``--overwrite`` allows replacing an earlier output (never an input),
+``--quiet`` silences progress, ``--json`` prints the result as one JSON object on stdout instead
+of the human summary. Images are given as rasters (their RPC inside or beside them) with
+``--model IMG=FILE`` for a separate model file and ``--image-origin IMG=COL,ROW`` for a crop
+whose pixel frame the raster does not carry (:func:`jaxgeo.io.open_image`).
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import os
+import pathlib
+import sys
+from collections.abc import Iterable, Sequence
+
+EXIT_OK, EXIT_NOT_CONVERGED, EXIT_INPUT, EXIT_POOR_FIT, EXIT_WRITE = 0, 1, 2, 3, 4
+EXIT_INTERNAL, EXIT_INTERRUPTED = 70, 130
+
+_BASE_CODES = {
+    EXIT_OK: "done",
+    EXIT_INPUT: "bad input or options (the file, line, image or point is named); nothing written",
+    EXIT_INTERNAL: "internal error (a bug: please report it; JAXGEO_TRACEBACK=1 shows the trace)",
+    EXIT_INTERRUPTED: "interrupted (Ctrl-C or SIGTERM); no partial output is left",
+}
+
+
+def exit_codes(extra: dict[int, str] | None = None) -> str:
+    """The ``exit status`` epilog of a sub-command: the shared codes plus ``extra``."""
+    codes = {**_BASE_CODES, **(extra or {})}
+    lines = [f"  {code:>3}  {text}" for code, text in sorted(codes.items())]
+    return "exit status:\n" + "\n".join(lines)
+
+
+def add_command(sub, name: str, help: str, doc: str, extra_codes: dict[int, str] | None = None):
+    """A sub-command parser with the module docstring's first paragraph as description and the
+    exit codes as epilog."""
+    return sub.add_parser(
+        name,
+        help=help,
+        description=doc.split("\n\n")[0],
+        epilog=exit_codes(extra_codes),
+        formatter_class=argparse.RawDescriptionHelpFormatter,
+    )
+
+
+def add_out(parser: argparse.ArgumentParser, metavar: str, help: str) -> None:
+    """``-o/--out`` (required) and ``--overwrite``."""
+    parser.add_argument("-o", "--out", required=True, metavar=metavar, help=help)
+    parser.add_argument(
+        "--overwrite",
+        action="store_true",
+        help="replace an existing output (an input is never replaced)",
+    )
+
+
+def add_quiet(parser: argparse.ArgumentParser) -> None:
+    parser.add_argument("--quiet", action="store_true", help="no progress display on stderr")
+
+
+def add_json(parser: argparse.ArgumentParser) -> None:
+    parser.add_argument(
+        "--json", action="store_true", help="print the result as one JSON object (machine use)"
+    )
+
+
+def add_image_options(parser: argparse.ArgumentParser) -> None:
+    """``--model IMG=FILE`` and ``--image-origin IMG=COL,ROW`` (both repeatable)."""
+    parser.add_argument(
+        "--model",
+        action="append",
+        default=[],
+        metavar="IMG=FILE",
+        help="the sensor model file of image IMG (default: the RPC in the image or its "
+        "sidecar); repeat per image",
+    )
+    parser.add_argument(
+        "--image-origin",
+        action="append",
+        default=[],
+        metavar="IMG=COL,ROW",
+        help="model pixel of the first pixel of image IMG, for a crop whose model describes the "
+        "full product (default: the crop's pixel-space geotransform, else 0,0)",
+    )
+
+
+def _by_image(specs: Sequence[str], images: Sequence[str], option: str) -> dict[str, str]:
+    """``{image path: value}`` from ``IMG=VALUE`` specs; IMG is the path as given, its file name
+    or its stem; a spec without ``IMG=`` is allowed when there is one image."""
+    from . import CommandError
+
+    aliases = {}
+    for img in images:
+        path = pathlib.Path(img)
+        for alias in (img, path.name, path.stem):
+            aliases.setdefault(alias, img)
+    out = {}
+    for spec in specs:
+        key, sep, value = spec.partition("=")
+        if not sep and len(images) == 1:
+            key, value = images[0], spec
+        if not sep and len(images) != 1 or key not in aliases:
+            expected = "FILE" if option == "--model" else "COL,ROW"
+            raise CommandError(
+                f"{option} {spec!r}: expected IMG={expected} with IMG one of the images "
+                f"({', '.join(images)})"
+            )
+        img = aliases[key]
+        if img in out:
+            raise CommandError(f"{option}: image {img} given twice")
+        out[img] = value
+    return out
+
+
+def _origin(text: str, option_value: str):
+    from . import CommandError
+
+    try:
+        col, row = (float(v) for v in text.replace(" ", "").split(","))
+    except ValueError:
+        raise CommandError(f"--image-origin {option_value!r}: expected IMG=COL,ROW") from None
+    return col, row
+
+
+def open_images(paths: Sequence[str], args: argparse.Namespace):
+    """The :class:`~jaxgeo.io.SensorImage` of each raster in ``paths`` (``args.model`` and
+    ``args.image_origin`` applied); file stems must differ (they name the images)."""
+    from ..io import open_image
+    from . import CommandError
+
+    names = [pathlib.Path(p).stem for p in paths]
+    if len(set(names)) != len(names):
+        raise CommandError("image file names (stems) must differ: they name the images")
+    keys = list(paths)
+    models = _by_image(getattr(args, "model", []), keys, "--model")
+    origins = {
+        k: _origin(v, v)
+        for k, v in _by_image(getattr(args, "image_origin", []), keys, "--image-origin").items()
+    }
+    return [open_image(p, model=models.get(p), origin=origins.get(p)) for p in paths]
+
+
+def _same(a: pathlib.Path, b: pathlib.Path) -> bool:
+    try:
+        return a.resolve() == b.resolve() or (a.exists() and b.exists() and os.path.samefile(a, b))
+    except OSError:
+        return False
+
+
+def guard_outputs(
+    outputs: Iterable[str | os.PathLike], inputs: Iterable[str | os.PathLike], overwrite: bool
+) -> list[pathlib.Path]:
+    """Check outputs before any computation: none is an input (whatever ``overwrite``), none
+    exists unless ``overwrite``, each one's folder exists and is writable."""
+    from . import CommandError
+
+    inputs = [pathlib.Path(p) for p in inputs]
+    checked = []
+    for out in map(pathlib.Path, outputs):
+        for inp in inputs:
+            if _same(out, inp):
+                raise CommandError(f"{out}: this output is an input of the command; name another")
+        if out.is_dir():
+            raise CommandError(f"{out}: is a folder; give a file name")
+        if out.exists() and not overwrite:
+            raise CommandError(f"{out}: exists; pass --overwrite to replace it")
+        parent = out.parent if str(out.parent) else pathlib.Path(".")
+        if not parent.is_dir():
+            what = "is not a folder" if parent.exists() else "does not exist"
+            raise CommandError(f"{out}: the output folder {parent} {what}")
+        if not os.access(parent, os.W_OK | os.X_OK):
+            raise CommandError(f"{out}: the output folder {parent} is not writable")
+        checked.append(out)
+    return checked
+
+
+def print_json(result: dict) -> None:
+    """``result`` as one JSON line on stdout (numpy values converted)."""
+    print(json.dumps(result, default=_jsonable))
+
+
+def _jsonable(value):
+    import numpy as np
+
+    if isinstance(value, np.generic):
+        return value.item()
+    if isinstance(value, np.ndarray):
+        return value.tolist()
+    return str(value)
+
+
+def note(message: str, quiet: bool = False) -> None:
+    """A progress or context line on stderr (not with ``--quiet``)."""
+    if not quiet:
+        print(message, file=sys.stderr, flush=True)

@@ -1,0 +1,214 @@
+"""A sensor image: a raster, its sensor model and its pixel frame.
+
+Every command and the API take an image the same way. The raster (any file GDAL reads) is optional
+where only its model is needed; the model is the raster's own RPC (GeoTIFF tags, ``.RPB`` or
+``_RPC.TXT`` sidecar) unless a model file is given. The **pixel frame** relates the raster's pixels
+to the model's: a crop of a product whose model describes the full product carries a pixel-space
+geotransform (a translation with unit scale and no CRS; shareloc's and CARS' convention), read as
+the model pixel ``origin = (col, row)`` of the raster's first pixel. ``origin=`` overrides it (the
+CLI's ``--image-origin``); a conflict with the file's own frame is an error.
+
+:attr:`SensorImage.model` works in the raster's pixels (the origin folded in: an RPC's image offsets
+are shifted, any other model is wrapped in a :class:`~jaxgeo.models.ShiftBias`), so every stage
+downstream (matching, rectification, orthorectification, adjustment) is frame-agnostic, and every
+pixel coordinate jaxgeo reads or writes for an image is a pixel of the raster the user gave.
+"""
+
+from __future__ import annotations
+
+import math
+import os
+import pathlib
+import warnings
+from dataclasses import dataclass
+
+import numpy as np
+
+from ..errors import JaxgeoError
+from ..models import RPC, AbstractSensorModel, Biased, ShiftBias
+
+
+class ImageError(JaxgeoError, ValueError):
+    """An image that cannot be used as given (no model, a conflicting pixel frame, unreadable)."""
+
+
+@dataclass(frozen=True)
+class SensorImage:
+    """An image: ``name`` (the raster's or model's file stem), ``model`` in the raster's pixel
+    frame, ``origin`` (model pixel of the raster's pixel (0, 0); ``(0, 0)`` without a frame),
+    ``path`` of the raster (``None`` when only a model was given), ``size`` ``(width, height)`` px
+    (``None`` without a raster), ``model_path`` (where the model came from) and ``source_model``
+    (the model in its own frame)."""
+
+    name: str
+    model: AbstractSensorModel
+    origin: tuple[float, float]
+    path: pathlib.Path | None
+    size: tuple[int, int] | None
+    model_path: pathlib.Path | None
+    source_model: AbstractSensorModel
+
+    @property
+    def inputs(self) -> tuple[pathlib.Path, ...]:
+        """The files this image was read from (outputs must never be one of them)."""
+        return tuple(p for p in (self.path, self.model_path) if p is not None)
+
+    def domain(self) -> tuple[float, float, float, float]:
+        """``(x_min, y_min, x_max, y_max)`` px in the raster frame of valid pixel coordinates:
+        the raster's extent when there is one (pixel centres, +-0.5 px for the edges), else the
+        RPC's image domain (offset +- scale), else unbounded."""
+        if self.size is not None:
+            w, h = self.size
+            return (-0.5, -0.5, w - 0.5, h - 0.5)
+        rpc = self.model.base_rpc()
+        if rpc is None:
+            return (-math.inf, -math.inf, math.inf, math.inf)
+        off, scale = np.asarray(rpc.image_offset), np.abs(np.asarray(rpc.image_scale))
+        lo, hi = off - scale, off + scale
+        return (float(lo[0]), float(lo[1]), float(hi[0]), float(hi[1]))
+
+    def validity_heights(self) -> tuple[float, float] | None:
+        """``(h_min, h_max)`` m of the model's validity cube (its RPC's height offset +- scale),
+        ``None`` for a model without one."""
+        rpc = self.model.base_rpc()
+        if rpc is None:
+            return None
+        off, scale = float(rpc.ground_offset[2]), abs(float(rpc.ground_scale[2]))
+        return (off - scale, off + scale)
+
+    def check_heights(self, h_min: float, h_max: float, source: str) -> str | None:
+        """Warn (and return the message) when heights ``h_min..h_max`` from ``source`` (e.g. a
+        DEM's file name) leave the model's validity range: the RPC extrapolates there, or the
+        DEM holds another height reference than the model (geoid vs ellipsoid)."""
+        valid = self.validity_heights()
+        if valid is None or (h_min >= valid[0] and h_max <= valid[1]):
+            return None
+        message = (
+            f"{source}: heights {h_min:.0f}..{h_max:.0f} m leave the validity range "
+            f"{valid[0]:.0f}..{valid[1]:.0f} m of the model of image {self.name}: the model "
+            "extrapolates there (check the DEM's height reference: ellipsoidal or geoid)"
+        )
+        warnings.warn(message, UserWarning, stacklevel=2)
+        return message
+
+
+def _quiet_open(path):
+    import rasterio
+    from rasterio.errors import NotGeoreferencedWarning
+
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore", NotGeoreferencedWarning)
+        return rasterio.open(path)
+
+
+def pixel_frame(path: str | os.PathLike) -> tuple[float, float]:
+    """The model pixel ``(col, row)`` of a raster's first pixel read from its geotransform:
+    ``(0, 0)`` for none (identity) or a map georeferencing (a CRS); the translation of a
+    pixel-space geotransform (unit scale, no rotation, no CRS). Anything else is an
+    :class:`ImageError` naming the file."""
+    with _quiet_open(path) as src:
+        t, crs = src.transform, src.crs
+    if crs is not None:
+        return (0.0, 0.0)
+    if (t.a, t.b, t.d, t.e) == (1.0, 0.0, 0.0, 1.0):
+        return (float(t.c), float(t.f))
+    raise ImageError(
+        f"{path}: its geotransform {tuple(t)[:6]} is neither a map georeferencing (no CRS) nor a "
+        "pixel-space translation of a crop (unit scale); give the crop's origin with --image-origin"
+    )
+
+
+def _shifted(model: AbstractSensorModel, origin: tuple[float, float]) -> AbstractSensorModel:
+    """``model`` in the frame whose pixel (0, 0) is the model's pixel ``origin``."""
+    if origin == (0.0, 0.0):
+        return model
+    if isinstance(model, RPC):
+        import equinox as eqx
+        import jax.numpy as jnp
+
+        return eqx.tree_at(
+            lambda m: m.image_offset, model, model.image_offset - jnp.asarray(origin, float)
+        )
+    return Biased(model, ShiftBias(origin))
+
+
+def open_image(
+    path: str | os.PathLike | None = None,
+    model: str | os.PathLike | AbstractSensorModel | None = None,
+    origin: tuple[float, float] | None = None,
+    name: str | None = None,
+) -> SensorImage:
+    """A :class:`SensorImage` from a raster ``path`` and/or a ``model`` (a file any RPC reader
+    of :func:`~jaxgeo.io.read_rpc` knows, or a model object; default: the raster's own RPC).
+
+    ``origin``: the model pixel of the raster's first pixel, overriding the raster's pixel-space
+    geotransform; a different non-zero frame in the file is an :class:`ImageError`. Missing
+    files raise ``FileNotFoundError``; a raster without a model an :class:`ImageError` naming it.
+    """
+    from ._rpc_formats import read_rpc
+
+    if path is None and model is None:
+        raise ImageError("an image needs a raster or a model")
+    raster = pathlib.Path(path) if path is not None else None
+    size, frame = None, (0.0, 0.0)
+    if raster is not None:
+        if not raster.is_file():
+            raise FileNotFoundError(f"{raster}: no such image file")
+        try:
+            with _quiet_open(raster) as src:
+                size = (int(src.width), int(src.height))
+        except Exception as err:  # rasterio's RasterioIOError and GDAL's messages
+            raise ImageError(f"{raster}: not a raster GDAL can read ({err})") from None
+        frame = pixel_frame(raster)
+    if origin is not None:
+        origin = (float(origin[0]), float(origin[1]))
+        if frame != (0.0, 0.0) and not np.allclose(frame, origin):
+            raise ImageError(
+                f"{raster}: --image-origin {origin[0]:g} {origin[1]:g} conflicts with the crop "
+                f"origin {frame[0]:g} {frame[1]:g} in its geotransform"
+            )
+        frame = origin
+    model_path = None
+    if isinstance(model, AbstractSensorModel):
+        source_model = model
+    else:
+        model_path = pathlib.Path(model) if model is not None else raster
+        try:
+            source_model = read_rpc(model_path)
+        except FileNotFoundError:
+            raise
+        except ValueError as err:
+            if model is None:
+                raise ImageError(
+                    f"{raster}: no sensor model in the image (RPC tags or an .RPB/_RPC.TXT "
+                    f"sidecar) ({_first_line(err)}); give its model file"
+                ) from None
+            raise
+    stem = name or (raster or model_path or pathlib.Path("image")).stem
+    return SensorImage(
+        name=stem,
+        model=_shifted(source_model, frame),
+        origin=frame,
+        path=raster,
+        size=size,
+        model_path=model_path if model_path != raster else None,
+        source_model=source_model,
+    )
+
+
+def _first_line(err: BaseException) -> str:
+    return " ".join(str(err).split())[:200]
+
+
+def outside_domain(image: SensorImage, xy: np.ndarray, margin_px: float = 0.0) -> np.ndarray:
+    """``(n,)`` bool: which of the ``(n, 2)`` raster-frame points ``xy`` lie outside the image's
+    :meth:`~SensorImage.domain` by more than ``margin_px``."""
+    x0, y0, x1, y1 = image.domain()
+    xy = np.asarray(xy, dtype=float).reshape(-1, 2)
+    return (
+        (xy[:, 0] < x0 - margin_px)
+        | (xy[:, 0] > x1 + margin_px)
+        | (xy[:, 1] < y0 - margin_px)
+        | (xy[:, 1] > y1 + margin_px)
+        | ~np.all(np.isfinite(xy), axis=1)
+    )
