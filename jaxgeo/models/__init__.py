@@ -7,6 +7,7 @@ from ._base import AbstractSensorModel as AbstractSensorModel
 from ._base import nothing as nothing
 from ._bias import BIAS_KINDS as BIAS_KINDS
 from ._bias import AbstractBias as AbstractBias
+from ._bias import AbstractLinearBias as AbstractLinearBias
 from ._bias import AffineBias as AffineBias
 from ._bias import Biased as Biased
 from ._bias import ShiftBias as ShiftBias
@@ -17,6 +18,7 @@ from ._dem import DEMStatus as DEMStatus
 from ._dem import localize_on_dem as localize_on_dem
 from ._ephemeris import EphemerisModel as EphemerisModel
 from ._ephemeris import gmst_rad as gmst_rad
+from ._jitter import JitterBias as JitterBias
 from ._kepler import KeplerCamera as KeplerCamera
 from ._kepler import KeplerImage as KeplerImage
 from ._kepler import KeplerSequence as KeplerSequence

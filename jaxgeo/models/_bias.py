@@ -30,35 +30,59 @@ from ._rpc import RPC
 
 
 class AbstractBias(eqx.Module):
-    """An image-space correction ``to_model(image) = image + a0 + M @ image`` (eq. 2)."""
+    """An image-space correction between measured image coordinates and the uncorrected
+    model's: ``to_model(image)`` and its inverse ``from_model``."""
 
     @abc.abstractmethod
     def coefficients(self) -> tuple[Float[Array, "2"], Float[Array, "2 2"]]:
-        """``(a0, M)``: the shift ``(B0, A0)`` and the matrix ``[[B2, B1], [A2, A1]]``."""
+        """``(a0, M)`` of the affine part: the shift ``(B0, A0)`` and the matrix
+        ``[[B2, B1], [A2, A1]]``."""
 
     @property
     @abc.abstractmethod
     def n_params(self) -> int:
-        """Number of bias parameters (the minimum number of GCP observations per image / 2)."""
+        """Number of bias parameters GCPs must determine (the minimum number of GCP
+        observations per image / 2); parameters a prior holds are not counted."""
 
+    @abc.abstractmethod
     def to_model(self, image: Float[ArrayLike, "*batch 2"]) -> Float[Array, "*batch 2"]:
         """Measured image coordinates -> the uncorrected model's image coordinates."""
+
+    @abc.abstractmethod
+    def from_model(self, model_image: Float[ArrayLike, "*batch 2"]) -> Float[Array, "*batch 2"]:
+        """The uncorrected model's image coordinates -> measured image coordinates."""
+
+    @abc.abstractmethod
+    def prior_residuals(self) -> Float[Array, " n"]:
+        """Weighted soft constraints of the bias (none for the affine family)."""
+
+
+class AbstractLinearBias(AbstractBias):
+    """``to_model(image) = image + a0 + M @ image`` (eq. 2), inverted exactly (2x2 system)."""
+
+    def to_model(self, image: Float[ArrayLike, "*batch 2"]) -> Float[Array, "*batch 2"]:
         a0, m = self.coefficients()
         image = jnp.asarray(image, dtype=float)
         return image + a0 + jnp.einsum("ij,...j->...i", m, image)
 
     def from_model(self, model_image: Float[ArrayLike, "*batch 2"]) -> Float[Array, "*batch 2"]:
-        """The uncorrected model's image coordinates -> measured image coordinates."""
         a0, m = self.coefficients()
-        lhs = jnp.eye(2) + m
-        rhs = jnp.asarray(model_image, dtype=float) - a0
-        # explicit 2x2 inverse: cheap, exact, broadcasts and differentiates everywhere
-        det = lhs[0, 0] * lhs[1, 1] - lhs[0, 1] * lhs[1, 0]
-        inv = jnp.array([[lhs[1, 1], -lhs[0, 1]], [-lhs[1, 0], lhs[0, 0]]]) / det
-        return jnp.einsum("ij,...j->...i", inv, rhs)
+        return solve_affine(a0, m, jnp.asarray(model_image, dtype=float))
+
+    def prior_residuals(self) -> Float[Array, " n"]:
+        return jnp.zeros(0)
 
 
-class ShiftBias(AbstractBias):
+def solve_affine(a0: Float[Array, "2"], m: Float[Array, "2 2"], rhs: Float[Array, "*batch 2"]):
+    """``image`` with ``image + a0 + m @ image = rhs`` (explicit 2x2 inverse: cheap, exact,
+    broadcasts and differentiates everywhere)."""
+    lhs = jnp.eye(2) + m
+    det = lhs[0, 0] * lhs[1, 1] - lhs[0, 1] * lhs[1, 0]
+    inv = jnp.array([[lhs[1, 1], -lhs[0, 1]], [-lhs[1, 0], lhs[0, 0]]]) / det
+    return jnp.einsum("ij,...j->...i", inv, rhs - a0)
+
+
+class ShiftBias(AbstractLinearBias):
     """Shift only: ``shift_px = (B0, A0)`` in pixels (x, y)."""
 
     shift_px: Float[Array, "2"]
@@ -74,7 +98,7 @@ class ShiftBias(AbstractBias):
         return 2
 
 
-class ShiftDriftBias(AbstractBias):
+class ShiftDriftBias(AbstractLinearBias):
     """Shift plus drift in line: ``shift_px = (B0, A0)``, ``drift = (B1, A1)`` (px per line)."""
 
     shift_px: Float[Array, "2"]
@@ -97,7 +121,7 @@ class ShiftDriftBias(AbstractBias):
         return 4
 
 
-class AffineBias(AbstractBias):
+class AffineBias(AbstractLinearBias):
     """Full 2D affine: ``shift_px = (B0, A0)``, ``matrix = [[B2, B1], [A2, A1]]`` (per pixel)."""
 
     shift_px: Float[Array, "2"]
@@ -150,8 +174,8 @@ class Biased(AbstractSensorModel):
         return self.model.reference_ground()
 
     def prior_residuals(self) -> Float[Array, " n"]:
-        """The wrapped model's soft constraints (the bias itself has none)."""
-        return self.model.prior_residuals()
+        """The wrapped model's soft constraints, then the bias's (a jitter's smoothness)."""
+        return jnp.concatenate([self.model.prior_residuals(), self.bias.prior_residuals()])
 
     def adjustable_filter(self) -> PyTree[bool]:
         """The bias's floating-point leaves; the wrapped model stays fixed."""
@@ -175,6 +199,8 @@ class Biased(AbstractSensorModel):
         inner = self.model.exact_rpc()
         if inner is None:
             return None
+        if not isinstance(self.bias, AbstractLinearBias):
+            return None  # a correction that varies along the lines: the exporter refits
         a0, m = (np.asarray(x) for x in _coefficients(self.bias))
         if not (isinstance(self.bias, ShiftBias) or not np.any(m)):
             return None
