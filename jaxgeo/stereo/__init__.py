@@ -7,6 +7,16 @@ module: matching (``_matching``), rectification (``_rectification``), dense matc
 (``_dense``), triangulation (``_triangulation``), rasterisation (``_dsm``).
 """
 
+from ._coregister import Coregistration as Coregistration
+from ._coregister import CoregistrationError as CoregistrationError
+from ._coregister import CoregistrationWarning as CoregistrationWarning
+from ._coregister import NuthKaab as NuthKaab
+from ._coregister import nuth_kaab as nuth_kaab
+from ._coregister import shift_heights as shift_heights
+from ._coregister_files import coregister as coregister
+from ._coregister_stats import DHStats as DHStats
+from ._coregister_stats import dh_stats as dh_stats
+from ._coregister_stats import nmad as nmad
 from ._dense import SGMSettings as SGMSettings
 from ._dense import resample_epipolar as resample_epipolar
 from ._dense import sgm_disparity as sgm_disparity

@@ -1,0 +1,112 @@
+"""``jaxgeo coregister``: align a DSM onto a reference DEM (Nuth and Kääb 2011).
+
+    jaxgeo coregister DSM REF -o OUT [--mask MASK] [--min-slope DEG] [--max-slope DEG]
+                      [--nmad-k K] [--max-iterations N] [--tolerance M] [--json] [--quiet]
+                      [--overwrite]
+
+Parse -> :func:`jaxgeo.stereo.coregister` -> print (the human summary, or ``--json``); what
+it does is ``DESCRIPTION`` (the ``--help`` text) and docs/coregister.md.
+"""
+
+from __future__ import annotations
+
+import argparse
+import sys
+
+DESCRIPTION = (
+    "Align DSM onto REF: the horizontal shift by Nuth and Kääb's slope/aspect method (iterated "
+    "until the increment is below --tolerance) and the vertical bias (median of DSM - REF after "
+    "it); print the statistics of DSM - REF before and after (mean, median, NMAD, RMSE, LE90 = "
+    "90th percentile of |dh|, cells used; metres) and write the shifted DSM to OUT on the DSM's "
+    "own grid. shift_m = (dx east, dy north, dz up) is what was added to the DSM. The DSM must "
+    "be in a projected CRS in metres; REF and MASK may be in any CRS and resolution (REF is "
+    "resampled onto the DSM grid, bilinear). OUT is never one of the inputs."
+)
+EXTRA_CODES = {1: "the iterations did not converge (OUT written with the last shift, reported)"}
+
+
+def register(sub) -> None:
+    from ._common import add_command, add_json, add_out, add_quiet
+
+    parser = add_command(
+        sub,
+        "coregister",
+        help="align a DSM onto a reference DEM (Nuth and Kääb), statistics before/after",
+        doc=DESCRIPTION,
+        extra_codes=EXTRA_CODES,
+    )
+    parser.add_argument("dsm", metavar="DSM", help="DSM to align (band 1; projected CRS, m)")
+    parser.add_argument("ref", metavar="REF", help="reference DEM (band 1; any CRS, heights m)")
+    add_out(parser, "OUT", "the shifted DSM (GeoTIFF, float32, on the DSM's grid)")
+    parser.add_argument("--mask", metavar="MASK",
+                        help="raster of stable terrain (non-zero = stable, any CRS); only those "
+                        "cells are used, for the fit and the statistics")  # fmt: skip
+    parser.add_argument("--min-slope", type=float, default=3.0, metavar="DEG",
+                        help="flatter cells are left out of the horizontal fit "
+                        "(default 3)")  # fmt: skip
+    parser.add_argument("--max-slope", type=float, default=70.0, metavar="DEG",
+                        help="steeper cells are left out of the horizontal fit "
+                        "(default 70)")  # fmt: skip
+    parser.add_argument("--nmad-k", type=float, default=3.0, metavar="K",
+                        help="cells with |dh - median| > K NMAD are outliers, left out of the "
+                        "fit (default 3)")  # fmt: skip
+    parser.add_argument("--max-iterations", type=int, default=20, metavar="N",
+                        help="at most N iterations (default 20)")  # fmt: skip
+    parser.add_argument("--tolerance", type=float, default=0.01, metavar="M",
+                        help="stop when the horizontal increment is below M metres "
+                        "(default 0.01)")  # fmt: skip
+    add_json(parser)
+    add_quiet(parser)
+    parser.set_defaults(func=run)
+
+
+def _table(result) -> str:
+    head = f"{'':8}{'cells':>10}{'mean':>9}{'median':>9}{'NMAD':>9}{'RMSE':>9}{'LE90':>9}  (m)"
+    lines = [head]
+    for name, s in (("before", result.before), ("after", result.after)):
+        lines.append(f"{name:8}{s.cells:>10d}{s.mean_m:>9.3f}{s.median_m:>9.3f}"
+                     f"{s.nmad_m:>9.3f}{s.rmse_m:>9.3f}{s.le90_m:>9.3f}")  # fmt: skip
+    return "\n".join(lines)
+
+
+def run(args: argparse.Namespace) -> int:
+    import warnings
+
+    from ..stereo import CoregistrationWarning, NuthKaab, coregister
+    from ._common import EXIT_NOT_CONVERGED, EXIT_OK, guard_outputs, note, print_json
+
+    inputs = [args.dsm, args.ref] + ([args.mask] if args.mask else [])
+    guard_outputs([args.out], inputs, args.overwrite)
+    settings = NuthKaab(
+        max_iterations=args.max_iterations,
+        tolerance_m=args.tolerance,
+        min_slope_deg=args.min_slope,
+        max_slope_deg=args.max_slope,
+        nmad_k=args.nmad_k,
+    )
+
+    def progress(it, increment, shift):
+        note(f"iteration {it}: increment ({increment[0]:+.3f}, {increment[1]:+.3f}) m, "
+             f"shift ({shift[0]:+.3f}, {shift[1]:+.3f}) m", args.quiet)  # fmt: skip
+
+    with warnings.catch_warnings(record=True) as caught:
+        warnings.simplefilter("always", CoregistrationWarning)
+        result = coregister(
+            args.dsm, args.ref, args.out, mask=args.mask, settings=settings,
+            overwrite=args.overwrite, callback=progress,
+        )  # fmt: skip
+    for w in caught:
+        print(f"jaxgeo coregister: warning: {w.message}", file=sys.stderr)
+    dx, dy, dz = result.shift_m
+    if args.json:
+        print_json({"dsm": args.dsm, "ref": args.ref, "mask": args.mask, **result.as_dict()})
+    else:
+        state = "converged" if result.converged else "NOT converged"
+        print(f"shift added to the DSM: dx {dx:+.3f} m (east), dy {dy:+.3f} m (north), "
+              f"dz {dz:+.3f} m (up); {result.iterations} iterations, {state}; "
+              f"{result.fit_cells} cells in the last fit")  # fmt: skip
+        if result.grid_step > 1:
+            print(f"estimated on the DSM grid decimated by {result.grid_step}")
+        print(_table(result))
+        print(f"wrote {result.output}")
+    return EXIT_OK if result.converged else EXIT_NOT_CONVERGED

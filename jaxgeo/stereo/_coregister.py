@@ -1,0 +1,354 @@
+"""DEM co-registration on arrays: Nuth and Kääb (2011) horizontal shift plus vertical bias.
+
+Nuth, C. and Kääb, A. (2011), *Co-registration and bias corrections of satellite elevation data
+sets for quantifying glacier thickness change*, The Cryosphere 5, 271-290. A DSM displaced
+horizontally by ``t`` (east, north, m) from the reference terrain ``T`` differs from it by
+``dh = -grad(T) . t`` (first order); with the slope ``alpha`` and the aspect ``psi`` (downslope
+direction, clockwise from north) of the reference this is their equation 3,
+
+    dh / tan(alpha) = |t| cos(b - psi) + c  =  t_east sin(psi) + t_north cos(psi) + c,
+
+linear in ``(t_east, t_north, c)``. Each iteration resamples the DSM by the shift found so far,
+takes the median of ``(dh - median(dh)) / tan(alpha)`` in aspect bins (robust, every aspect
+weighted alike), fits the cosine to the bin medians and moves the DSM by the opposite of the
+displacement found; it stops when that increment is below the tolerance. The iterations run
+coarse to fine: first on the grids averaged over 4 x 4 and 2 x 2 blocks (a pyramid: short
+texture makes the first-order relation underestimate shifts of several cells, so on the full
+grid alone the iterations creep), then on the full grid. The vertical shift is
+the opposite of the median ``dh`` after the horizontal one. Cells take part where they are
+stable (the caller's mask), their slope is within limits and ``dh`` is within ``nmad_k`` NMAD
+of its median (outliers: clouds, changes, blunders).
+
+Geometry: arrays are north-up rasters of one grid; ``step_m = (a, e)`` are the signed map
+displacements of one column and one row (the geotransform's ``a`` and ``e``: ``(0.5, -0.5)``
+for a usual 0.5 m grid). Shifts are map metres: ``dx`` east, ``dy`` north, ``dz`` up.
+"""
+
+from __future__ import annotations
+
+import math
+import warnings
+from collections.abc import Callable
+from dataclasses import dataclass
+
+import numpy as np
+
+from ..errors import JaxgeoError, JaxgeoWarning
+from ._coregister_stats import DHStats, dh_stats, nmad
+
+
+class CoregistrationError(JaxgeoError, ValueError):
+    """A co-registration jaxgeo refuses: rasters that do not overlap, too few cells, a CRS
+    that is not metric, terrain whose aspects cannot determine a shift; the message names the
+    files (file-level calls) or the cause."""
+
+
+class CoregistrationWarning(JaxgeoWarning):
+    """The co-registration did not converge, or left the heights further apart than before."""
+
+
+@dataclass(frozen=True)
+class NuthKaab:
+    """Settings of the Nuth and Kääb co-registration (module docstring).
+
+    ``max_iterations`` and ``tolerance_m`` (stop when the horizontal increment is shorter);
+    cells with slope outside ``[min_slope_deg, max_slope_deg]`` do not enter the horizontal fit
+    (flat cells carry no horizontal information, cliffs are unreliable); ``nmad_k``: cells with
+    ``|dh - median| > nmad_k * NMAD`` are outliers (re-evaluated every iteration);
+    ``aspect_bins`` bins of aspect, each used when it holds ``min_bin_cells`` cells; fewer than
+    ``min_cells`` usable cells is an error. ``pyramid``: the grids averaged over blocks of these
+    factors are co-registered first, coarse to fine, each starting the next (texture shorter than
+    the block no longer hides a shift of many cells; ``()``: the full grid only, which then
+    converges slowly for shifts of several cells over rough terrain).
+    """
+
+    max_iterations: int = 20
+    tolerance_m: float = 0.01
+    min_slope_deg: float = 3.0
+    max_slope_deg: float = 70.0
+    nmad_k: float = 3.0
+    aspect_bins: int = 36
+    min_bin_cells: int = 10
+    min_cells: int = 500
+    pyramid: tuple[int, ...] = (4, 2)
+
+    def __post_init__(self):
+        if self.max_iterations < 1:
+            raise CoregistrationError(f"max_iterations {self.max_iterations}: expected >= 1")
+        if not self.tolerance_m > 0:
+            raise CoregistrationError(f"tolerance_m {self.tolerance_m}: expected > 0")
+        if not 0 <= self.min_slope_deg < self.max_slope_deg <= 90:
+            raise CoregistrationError(
+                f"slope limits [{self.min_slope_deg}, {self.max_slope_deg}] deg: expected "
+                "0 <= min < max <= 90"
+            )
+        if not self.nmad_k > 0:
+            raise CoregistrationError(f"nmad_k {self.nmad_k}: expected > 0")
+        if any(f < 2 for f in self.pyramid):
+            raise CoregistrationError(f"pyramid {self.pyramid}: expected factors >= 2")
+        if self.aspect_bins < 8 or self.min_bin_cells < 1 or self.min_cells < 10:
+            raise CoregistrationError(
+                "aspect_bins >= 8, min_bin_cells >= 1 and min_cells >= 10 expected"
+            )
+
+
+@dataclass(frozen=True)
+class Coregistration:
+    """Result of a co-registration.
+
+    ``shift_m = (dx, dy, dz)``: what was added to the DSM to align it onto the reference (dx
+    east, dy north: the DSM's content moved by them; dz up), metres. ``before`` / ``after``:
+    statistics of ``DSM - REF`` over the stable cells (the mask only: no slope or outlier
+    filter). ``iterations``: all iterations run, at every level of the pyramid; ``increments_m``:
+    the horizontal increments applied (those of a coarse level are dropped when its result does
+    not bring the full grids closer); ``fit_cells``: cells in the last fit. File-level calls
+    add ``output`` (the path written, if any) and ``grid_step`` (1, or the decimation of the
+    grid the estimate was made on).
+    """
+
+    shift_m: tuple[float, float, float]
+    before: DHStats
+    after: DHStats
+    iterations: int
+    converged: bool
+    fit_cells: int
+    increments_m: tuple[tuple[float, float], ...]
+    output: str | None = None
+    grid_step: int = 1
+
+    def as_dict(self) -> dict:
+        """JSON-ready dict: ``shift_m``, ``before``, ``after`` and the other fields."""
+        return {
+            "shift_m": list(self.shift_m),
+            "before": self.before.as_dict(),
+            "after": self.after.as_dict(),
+            "iterations": self.iterations,
+            "converged": self.converged,
+            "fit_cells": self.fit_cells,
+            "increments_m": [list(i) for i in self.increments_m],
+            "output": self.output,
+            "grid_step": self.grid_step,
+        }
+
+
+def _take(z: np.ndarray, di: int, dj: int) -> np.ndarray:
+    """``out[r, c] = z[r + di, c + dj]``, NaN where that falls outside ``z``."""
+    rows, cols = z.shape
+    out = np.full(z.shape, np.nan, dtype=np.float64)
+    r0, r1 = max(0, -di), min(rows, rows - di)
+    c0, c1 = max(0, -dj), min(cols, cols - dj)
+    if r0 < r1 and c0 < c1:
+        out[r0:r1, c0:c1] = z[r0 + di : r1 + di, c0 + dj : c1 + dj]
+    return out
+
+
+def shift_heights(
+    z: np.ndarray, shift_m: tuple[float, float, float], step_m: tuple[float, float]
+) -> np.ndarray:
+    """The raster ``z`` (NaN = no data) moved by ``shift_m = (dx, dy, dz)`` on its own grid:
+    ``out(p) = z(p - (dx, dy)) + dz`` with bilinear interpolation (float64). A cell is NaN where
+    a neighbour with a non-zero weight is NaN or off the grid."""
+    dx, dy, dz = (float(v) for v in shift_m)
+    drow, dcol = -dy / step_m[1], -dx / step_m[0]  # source position minus target position
+    i0, j0 = math.floor(drow), math.floor(dcol)
+    fr, fc = drow - i0, dcol - j0
+    z = np.asarray(z, dtype=np.float64)
+    out = np.zeros(z.shape, dtype=np.float64)
+    for di, wr in ((0, 1.0 - fr), (1, fr)):
+        for dj, wc in ((0, 1.0 - fc), (1, fc)):
+            if wr * wc > 0.0:
+                out += wr * wc * _take(z, i0 + di, j0 + dj)
+    return out + dz
+
+
+def slope_aspect(ref: np.ndarray, step_m: tuple[float, float]) -> tuple[np.ndarray, np.ndarray]:
+    """``(tan(slope), aspect_rad)`` of a height raster: central differences (NaN next to no
+    data); aspect = downslope direction, clockwise from north, in ``(-pi, pi]``."""
+    d_row, d_col = np.gradient(np.asarray(ref, dtype=np.float64))
+    g_east, g_north = d_col / step_m[0], d_row / step_m[1]
+    return np.hypot(g_east, g_north), np.arctan2(-g_east, -g_north)
+
+
+def _fit_displacement(
+    dh: np.ndarray, tan_slope: np.ndarray, aspect: np.ndarray, settings: NuthKaab
+) -> tuple[float, float]:
+    """Displacement ``(t_east, t_north)`` of the DSM from the cosine fit of the aspect-bin
+    medians of ``dh / tan(slope)`` (``dh`` centred on its median)."""
+    nb = settings.aspect_bins
+    y = dh / tan_slope
+    idx = np.minimum(((aspect + np.pi) / (2 * np.pi) * nb).astype(np.int64), nb - 1)
+    order = np.argsort(idx, kind="stable")
+    idx, y, aspect = idx[order], y[order], aspect[order]
+    bounds = np.searchsorted(idx, np.arange(nb + 1))
+    rows, rhs = [], []
+    for b in range(nb):
+        lo, hi = bounds[b], bounds[b + 1]
+        if hi - lo < settings.min_bin_cells:
+            continue
+        psi = aspect[lo:hi]
+        rows.append((np.mean(np.sin(psi)), np.mean(np.cos(psi)), 1.0))
+        rhs.append(np.median(y[lo:hi]))
+    a = np.asarray(rows, dtype=np.float64).reshape(-1, 3)
+    sv = np.linalg.svd(a, compute_uv=False) if a.shape[0] >= 3 else np.zeros(1)
+    if a.shape[0] < 3 or sv[-1] < 1e-3 * sv[0]:
+        raise CoregistrationError(
+            f"the stable terrain's aspects cannot determine a horizontal shift ({a.shape[0]} "
+            f"of {nb} aspect bins hold >= {settings.min_bin_cells} cells with slope "
+            f"{settings.min_slope_deg}-{settings.max_slope_deg} deg; terrain too flat or too "
+            "uniform)"
+        )
+    (t_east, t_north, _), *_ = np.linalg.lstsq(a, np.asarray(rhs), rcond=None)
+    return float(t_east), float(t_north)
+
+
+def _inliers(dh: np.ndarray, usable: np.ndarray, nmad_k: float) -> tuple[np.ndarray, float]:
+    """Cells of ``usable`` within ``nmad_k`` NMAD of the median ``dh``, and that median."""
+    med = float(np.median(dh[usable]))
+    spread = nmad(dh[usable])
+    return usable & (np.abs(dh - med) <= nmad_k * spread + 1e-9), med
+
+
+def _block_mean(z: np.ndarray, factor: int) -> np.ndarray:
+    """Means of ``factor x factor`` blocks of the finite values (NaN where fewer than half of a
+    block's cells are finite); the last partial blocks are dropped."""
+    rows, cols = (n // factor for n in z.shape)
+    z = np.asarray(z, dtype=np.float64)[: rows * factor, : cols * factor]
+    z = z.reshape(rows, factor, cols, factor)
+    finite = np.isfinite(z)
+    count = finite.sum(axis=(1, 3))
+    total = np.where(finite, z, 0.0).sum(axis=(1, 3))
+    return np.where(2 * count >= factor * factor, total / np.maximum(count, 1), np.nan)
+
+
+def _spread(dsm, ref, stable, shift, step_m) -> float:
+    """NMAD of ``DSM - REF`` over the stable cells with the DSM moved by ``shift`` (east, north);
+    infinite where fewer than 10 cells are left."""
+    dh = shift_heights(dsm, (shift[0], shift[1], 0.0), step_m) - ref
+    dh = dh[stable & np.isfinite(dh)]
+    return nmad(dh) if dh.size >= 10 else math.inf
+
+
+def _iterate(dsm, ref, step_m, stable, settings, shift, tolerance_m, callback, done):
+    """Nuth and Kääb iterations on one grid from ``shift`` (east, north): the new shift, the
+    increments, whether the last one was below ``tolerance_m``, the cells of the last fit."""
+    tan_slope, aspect = slope_aspect(ref, step_m)
+    lo, hi = (math.tan(math.radians(d)) for d in (settings.min_slope_deg, settings.max_slope_deg))
+    sloped = stable & (tan_slope >= max(lo, 1e-6)) & (tan_slope <= hi)
+    shift = np.array(shift, dtype=np.float64)
+    increments: list[tuple[float, float]] = []
+    converged, fit_cells = False, 0
+    for it in range(1, settings.max_iterations + 1):
+        dh = shift_heights(dsm, (shift[0], shift[1], 0.0), step_m) - ref
+        usable = stable & np.isfinite(dh)
+        if int(usable.sum()) < settings.min_cells:
+            raise CoregistrationError(
+                f"only {int(usable.sum())} stable cells left after shifting the DSM by "
+                f"({shift[0]:.2f}, {shift[1]:.2f}) m (need >= {settings.min_cells})"
+            )
+        inlier, med = _inliers(dh, usable, settings.nmad_k)
+        fit = inlier & sloped
+        fit_cells = int(fit.sum())
+        if fit_cells < settings.min_cells:
+            raise CoregistrationError(
+                f"only {fit_cells} stable cells with slope {settings.min_slope_deg}-"
+                f"{settings.max_slope_deg} deg and dh within {settings.nmad_k} NMAD (need "
+                f">= {settings.min_cells})"
+            )
+        t = _fit_displacement(dh[fit] - med, tan_slope[fit], aspect[fit], settings)
+        shift -= t
+        increments.append((-t[0], -t[1]))
+        if callback is not None:
+            callback(done + it, (-t[0], -t[1]), (float(shift[0]), float(shift[1])))
+        if math.hypot(*t) < tolerance_m:
+            converged = True
+            break
+    return shift, increments, converged, fit_cells
+
+
+def nuth_kaab(
+    dsm: np.ndarray,
+    ref: np.ndarray,
+    step_m: tuple[float, float],
+    stable: np.ndarray | None = None,
+    settings: NuthKaab | None = None,
+    callback: Callable[..., object] | None = None,
+) -> Coregistration:
+    """Co-register ``dsm`` onto ``ref`` (two height rasters of one grid, m, NaN = no data).
+
+    ``stable`` (bool, same shape): cells of stable terrain (default: all); ``settings`` default
+    ``NuthKaab()``. ``callback(i, increment_m, shift_m)`` is called after each iteration (of
+    every level of the pyramid; ``i`` counts them all). Warns
+    (:class:`CoregistrationWarning`) when the iterations do not converge or the result fits
+    worse than the input. Raises :class:`CoregistrationError` for too few cells or terrain that
+    cannot determine the shift.
+    """
+    settings = NuthKaab() if settings is None else settings
+    dsm = np.asarray(dsm, dtype=np.float64)
+    ref = np.asarray(ref, dtype=np.float64)
+    if dsm.shape != ref.shape or dsm.ndim != 2:
+        raise CoregistrationError(f"DSM {dsm.shape} and REF {ref.shape}: expected one 2-D grid")
+    stable = np.ones(dsm.shape, bool) if stable is None else np.asarray(stable, dtype=bool)
+    if stable.shape != dsm.shape:
+        raise CoregistrationError(f"stable mask {stable.shape}: expected {dsm.shape}")
+    stable = stable & np.isfinite(ref)
+    both = stable & np.isfinite(dsm)
+    if int(both.sum()) < settings.min_cells:
+        raise CoregistrationError(
+            f"only {int(both.sum())} stable cells have heights in both rasters (need "
+            f">= {settings.min_cells})"
+        )
+    before = dh_stats(dsm[both] - ref[both])
+    shift, increments, ran = np.zeros(2), [], 0
+    for factor in settings.pyramid:
+        coarse = [_block_mean(v, factor) for v in (dsm, ref, stable)]
+        if min(coarse[0].shape) < 8:
+            continue
+        try:  # a coarse level only starts the next one; the full grid decides what fails
+            start, steps, _, _ = _iterate(
+                coarse[0], coarse[1], (step_m[0] * factor, step_m[1] * factor), coarse[2] >= 0.5,
+                settings, shift, factor * settings.tolerance_m, callback, ran,
+            )  # fmt: skip
+        except CoregistrationError:
+            continue
+        ran += len(steps)
+        # kept only if it brings the full grids closer (a coarse level cannot lead astray)
+        if _spread(dsm, ref, stable, start, step_m) <= _spread(dsm, ref, stable, shift, step_m):
+            shift = start
+            increments += steps
+    shift, steps, converged, fit_cells = _iterate(
+        dsm, ref, step_m, stable, settings, shift, settings.tolerance_m, callback, ran
+    )
+    increments += steps
+    ran += len(steps)
+
+    dh = shift_heights(dsm, (shift[0], shift[1], 0.0), step_m) - ref
+    usable = stable & np.isfinite(dh)
+    inlier, _ = _inliers(dh, usable, settings.nmad_k)
+    dz = -float(np.median(dh[inlier]))
+    after = dh_stats(dh[usable] + dz)
+    result = Coregistration(
+        shift_m=(float(shift[0]), float(shift[1]), dz),
+        before=before,
+        after=after,
+        iterations=ran,
+        converged=converged,
+        fit_cells=fit_cells,
+        increments_m=tuple(increments),
+    )
+    if not converged:
+        last = math.hypot(*increments[-1])
+        warnings.warn(
+            f"co-registration did not converge in {settings.max_iterations} iterations on the "
+            f"full grid (last "
+            f"increment {last:.3f} m > {settings.tolerance_m} m); the last shift is reported",
+            CoregistrationWarning,
+            stacklevel=2,
+        )
+    if after.nmad_m > 1.05 * before.nmad_m + 1e-3:
+        warnings.warn(
+            f"co-registration left the heights further apart (NMAD {before.nmad_m:.3f} m before, "
+            f"{after.nmad_m:.3f} m after): check that DSM and REF show the same terrain",
+            CoregistrationWarning,
+            stacklevel=2,
+        )
+    return result

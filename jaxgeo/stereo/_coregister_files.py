@@ -1,0 +1,235 @@
+"""DEM co-registration of raster files: read, resample the reference onto the DSM grid, run
+:func:`nuth_kaab`, write the shifted DSM (same grid as the input, atomically, block by block).
+
+The DSM must be in a projected CRS in metres (shifts and slopes are metric); REF and the
+stable-terrain mask may be in any CRS and resolution: REF is warped onto the DSM grid (GDAL,
+bilinear), the mask with nearest neighbour. Heights are metres in both, in one vertical datum.
+The estimate is made on the DSM grid when it has at most ``max_cells`` cells, else on a grid
+decimated by an integer step (DSM averaged, REF warped onto it); the output is always written
+on the full DSM grid, by bands of rows, so its memory does not grow with the raster.
+"""
+
+from __future__ import annotations
+
+import math
+import os
+import pathlib
+from collections.abc import Callable
+from dataclasses import replace
+
+import numpy as np
+
+from ..io import atomic_output, refuse_existing
+from ._coregister import Coregistration, CoregistrationError, NuthKaab, nuth_kaab, shift_heights
+
+MAX_CELLS = 8_000_000
+"""Cells of the grid the shift is estimated on (more: the DSM grid decimated by a step)."""
+WRITE_ROWS = 256
+
+
+def _same_file(a: pathlib.Path, b: pathlib.Path) -> bool:
+    if a.exists() and b.exists():
+        return os.path.samefile(a, b)
+    return os.path.realpath(a) == os.path.realpath(b)
+
+
+def _open(path: pathlib.Path, role: str):
+    import rasterio
+    from rasterio.errors import RasterioIOError
+
+    if not path.exists():
+        raise FileNotFoundError(f"{path}: no such file ({role})")
+    try:
+        return rasterio.open(path)
+    except RasterioIOError as err:
+        raise CoregistrationError(f"{path}: cannot read it as a raster ({role}): {err}") from None
+
+
+def _check_dsm_grid(path: pathlib.Path, ds) -> None:
+    """A metric projected CRS and a north-up geotransform without rotation."""
+    crs = ds.crs
+    if crs is None:
+        raise CoregistrationError(f"{path}: the DSM has no CRS (a projected CRS in metres needed)")
+    if crs.is_geographic:
+        raise CoregistrationError(
+            f"{path}: the DSM's CRS ({crs.to_string()}) is geographic (degrees); shifts and "
+            "slopes need metres: reproject it to a projected CRS first (e.g. gdalwarp -t_srs "
+            "EPSG:326xx -r bilinear, the local UTM zone)"
+        )
+    unit, factor = crs.linear_units_factor
+    if not math.isclose(factor, 1.0):
+        raise CoregistrationError(
+            f"{path}: the DSM's CRS has {unit} units; co-registration needs a CRS in metres"
+        )
+    t = ds.transform
+    if t.b != 0 or t.d != 0 or t.a == 0 or t.e == 0:
+        raise CoregistrationError(
+            f"{path}: rotated or sheared geotransform ({tuple(t)[:6]}); expected north-up"
+        )
+
+
+def _read_estimation_grid(ds, max_cells: int):
+    """Band 1 as float64 (NaN = no data) on the grid the estimate uses: the DSM grid, or the
+    grid decimated by the smallest integer step that leaves ``max_cells`` cells or fewer."""
+    from affine import Affine
+    from rasterio.enums import Resampling
+
+    step = max(1, math.ceil(math.sqrt(ds.width * ds.height / max_cells)))
+    shape = (math.ceil(ds.height / step), math.ceil(ds.width / step))
+    z = ds.read(1, out_shape=shape, masked=True, resampling=Resampling.average)
+    z = np.ma.filled(z.astype(np.float64), np.nan)
+    t = ds.transform  # north-up (checked): the decimated grid keeps the corner
+    transform = Affine(t.a * ds.width / shape[1], 0.0, t.c, 0.0, t.e * ds.height / shape[0], t.f)
+    return z, transform, step
+
+
+def _warp_onto(ds, shape, transform, crs, resampling: str, fill: float, dtype) -> np.ndarray:
+    """Band 1 of ``ds`` warped onto a grid (its no data and the cells it does not cover:
+    ``fill``)."""
+    import rasterio
+    from rasterio.enums import Resampling
+    from rasterio.warp import reproject
+
+    src_nodata = ds.nodata
+    if src_nodata is None and np.issubdtype(np.dtype(ds.dtypes[0]), np.floating):
+        src_nodata = np.nan
+    out = np.full(shape, fill, dtype=dtype)
+    reproject(
+        source=rasterio.band(ds, 1), destination=out, src_nodata=src_nodata,
+        dst_transform=transform, dst_crs=crs, dst_nodata=fill,
+        resampling=getattr(Resampling, resampling),
+    )  # fmt: skip
+    return out
+
+
+def _check_overlap(dsm_path, ref_path, dsm, ref) -> None:
+    from rasterio.warp import transform_bounds
+
+    if ref.crs is None:
+        raise CoregistrationError(f"{ref_path}: the reference has no CRS")
+    try:
+        w, s, e, n = transform_bounds(ref.crs, dsm.crs, *ref.bounds, densify_pts=21)
+    except Exception as err:  # noqa: BLE001 - PROJ errors have no common base
+        raise CoregistrationError(
+            f"{ref_path}: its bounds cannot be transformed into the DSM's CRS ({err})"
+        ) from None
+    b = dsm.bounds
+    if not (w < b.right and e > b.left and s < b.top and n > b.bottom):
+        raise CoregistrationError(
+            f"{dsm_path} and {ref_path} do not overlap (DSM bounds {tuple(round(v, 3) for v in b)}"
+            f", REF bounds in the DSM's CRS {tuple(round(v, 3) for v in (w, s, e, n))})"
+        )
+
+
+def _stable_mask(mask_path, dsm, shape, transform) -> np.ndarray:
+    """Stable cells from a mask raster (non-zero = stable; no data and outside = not stable)."""
+    with _open(mask_path, "stable-terrain mask") as m:
+        if m.crs is None:
+            if (m.height, m.width) != (dsm.height, dsm.width):
+                raise CoregistrationError(
+                    f"{mask_path}: the mask has no CRS and a shape {(m.height, m.width)} other "
+                    f"than the DSM's {(dsm.height, dsm.width)}"
+                )
+            from rasterio.enums import Resampling
+
+            values = m.read(1, out_shape=shape, masked=True, resampling=Resampling.nearest)
+            return np.ma.filled(values != 0, False)
+        values = _warp_onto(m, shape, transform, dsm.crs, "nearest", 0.0, np.float32)
+        return np.isfinite(values) & (values != 0)
+
+
+def _read_rows(ds, start: int, stop: int, nodata) -> np.ndarray:
+    """Rows ``start:stop`` of band 1 (float64, NaN = no data), NaN rows beyond the raster."""
+    from rasterio.windows import Window
+
+    out = np.full((stop - start, ds.width), np.nan)
+    r0, r1 = max(start, 0), min(stop, ds.height)
+    if r0 < r1:
+        z = ds.read(1, window=Window(0, r0, ds.width, r1 - r0), masked=True)
+        out[r0 - start : r1 - start] = np.ma.filled(z.astype(np.float64), np.nan)
+    return out
+
+
+def _write_shifted(dsm_path, ds, out, shift_m, overwrite, ref_name) -> None:
+    """The DSM moved by ``shift_m`` on its own grid, float32, written band of rows by band."""
+    import rasterio
+
+    t = ds.transform
+    step_m = (t.a, t.e)
+    margin = int(abs(math.floor(-shift_m[1] / t.e))) + 2
+    nodata = ds.nodata
+    fill = np.nan if nodata is None or not np.isfinite(nodata) else float(nodata)
+    profile = dict(
+        driver="GTiff", width=ds.width, height=ds.height, count=1, dtype="float32",
+        crs=ds.crs, transform=t, nodata=fill, tiled=True, blockxsize=256, blockysize=256,
+        compress="deflate", predictor=3, BIGTIFF="IF_SAFER",
+    )  # fmt: skip
+    dx, dy, dz = shift_m
+    sink = atomic_output(out, overwrite=overwrite, suffix=".tif", leftovers=(".aux.xml",))
+    with sink as tmp, rasterio.open(tmp, "w", **profile) as dst:
+        for start in range(0, ds.height, WRITE_ROWS):
+            stop = min(start + WRITE_ROWS, ds.height)
+            block = _read_rows(ds, start - margin, stop + margin, nodata)
+            z = shift_heights(block, shift_m, step_m)[margin : margin + stop - start]
+            z = np.where(np.isfinite(z), z, fill).astype(np.float32)
+            dst.write(z, 1, window=rasterio.windows.Window(0, start, ds.width, stop - start))
+        dst.set_band_description(1, f"height (m), co-registered onto {ref_name}")
+        dst.update_tags(
+            COREGISTRATION_SHIFT_M=f"{dx:.4f} {dy:.4f} {dz:.4f}",
+            COREGISTRATION_METHOD="Nuth and Kaab (2011), jaxgeo",
+            COREGISTRATION_REFERENCE=ref_name,
+            COREGISTRATION_SOURCE=pathlib.Path(dsm_path).name,
+        )
+
+
+def coregister(
+    dsm: str | os.PathLike,
+    ref: str | os.PathLike,
+    out: str | os.PathLike | None = None,
+    *,
+    mask: str | os.PathLike | None = None,
+    settings: NuthKaab | None = None,
+    overwrite: bool = False,
+    max_cells: int = MAX_CELLS,
+    callback: Callable[..., object] | None = None,
+) -> Coregistration:
+    """Co-register the DSM file ``dsm`` onto the reference DEM ``ref`` (Nuth and Kääb).
+
+    ``mask``: a raster of stable terrain (non-zero = stable, any CRS); ``settings``: the
+    method's (default ``NuthKaab()``). ``out``: where the
+    shifted DSM goes (GeoTIFF, float32, same grid as ``dsm``; atomic; an existing file only
+    with ``overwrite``; never one of the inputs). Returns :class:`Coregistration` (``shift_m``
+    is what was added to the DSM). Bad input raises :class:`CoregistrationError` (a
+    ``ValueError``) naming the file.
+    """
+    settings = NuthKaab() if settings is None else settings
+    dsm_path, ref_path = pathlib.Path(dsm), pathlib.Path(ref)
+    mask_path = None if mask is None else pathlib.Path(mask)
+    if out is not None:
+        out = pathlib.Path(out)
+        for name, given in (("DSM", dsm_path), ("REF", ref_path), ("mask", mask_path)):
+            if given is not None and _same_file(out, given):
+                raise CoregistrationError(f"{out}: is the input {name}; write elsewhere")
+        refuse_existing(out, overwrite)
+    if max_cells < 1000:
+        raise CoregistrationError(f"max_cells {max_cells}: expected >= 1000")
+    with _open(dsm_path, "DSM") as d, _open(ref_path, "reference DEM") as r:
+        _check_dsm_grid(dsm_path, d)
+        _check_overlap(dsm_path, ref_path, d, r)
+        z, transform, step = _read_estimation_grid(d, max_cells)
+        zref = _warp_onto(r, z.shape, transform, d.crs, "bilinear", np.nan, np.float64)
+        stable = None if mask_path is None else _stable_mask(mask_path, d, z.shape, transform)
+        if not np.any(np.isfinite(z) & np.isfinite(zref)):
+            raise CoregistrationError(
+                f"{dsm_path} and {ref_path}: no cell has heights in both (their data do not "
+                "overlap)"
+            )
+        try:
+            result = nuth_kaab(z, zref, (transform.a, transform.e), stable, settings, callback)
+        except CoregistrationError as err:
+            raise CoregistrationError(f"{dsm_path} vs {ref_path}: {err}") from None
+        result = replace(result, grid_step=step)
+        if out is not None:
+            _write_shifted(dsm_path, d, out, result.shift_m, overwrite, ref_path.name)
+            result = replace(result, output=str(out))
+    return result

@@ -1,0 +1,109 @@
+"""``jaxgeo coregister``: the JSON report, the human summary, the refusals (one line, exit 2,
+the file named, nothing written)."""
+
+import hashlib
+import json
+
+import numpy as np
+import pytest
+import rasterio
+from affine import Affine
+
+from jaxgeo.cli import build_parser, main
+from tests.stereo.test_coregister import CELL_M, SHIFT, X0, Y0, shifted_pair, write_raster
+
+STAT_KEYS = {"mean_m", "median_m", "nmad_m", "rmse_m", "le90_m", "cells"}
+
+
+@pytest.fixture(scope="module")
+def pair(tmp_path_factory):
+    folder = tmp_path_factory.mktemp("coregister")
+    dsm, ref = shifted_pair(seed=7)
+    return write_raster(folder / "dsm.tif", dsm), write_raster(folder / "ref.tif", ref)
+
+
+def digest(path) -> str:
+    return hashlib.sha256(path.read_bytes()).hexdigest()
+
+
+def test_json_report(pair, tmp_path, capsys):
+    dsm, ref = pair
+    out = tmp_path / "aligned.tif"
+    assert main(["coregister", str(dsm), str(ref), "-o", str(out), "--json", "--quiet"]) == 0
+    captured = capsys.readouterr()
+    report = json.loads(captured.out)
+    assert captured.err == ""  # --quiet: no iteration lines
+    assert {"shift_m", "before", "after", "iterations", "converged", "output", "dsm", "ref"} <= set(
+        report
+    )
+    assert set(report["before"]) == STAT_KEYS and set(report["after"]) == STAT_KEYS
+    assert len(report["shift_m"]) == 3 and report["converged"] is True
+    assert np.all(np.abs(np.add(report["shift_m"], SHIFT)) < 0.3)  # what was added: -SHIFT
+    assert report["after"]["nmad_m"] < report["before"]["nmad_m"]
+    assert report["output"] == str(out) and out.is_file()
+    with rasterio.open(out) as f:
+        assert f.tags()["COREGISTRATION_SHIFT_M"].split()[0] == f"{report['shift_m'][0]:.4f}"
+
+
+def test_human_summary_and_iteration_lines(pair, tmp_path, capsys):
+    dsm, ref = pair
+    out = tmp_path / "aligned.tif"
+    assert main(["coregister", str(dsm), str(ref), "-o", str(out)]) == 0
+    captured = capsys.readouterr()
+    lines = captured.out.splitlines()
+    assert lines[0].startswith("shift added to the DSM: dx -3.") and "converged" in lines[0]
+    assert lines[2].startswith("before") and lines[3].startswith("after")
+    assert lines[-1] == f"wrote {out}"
+    assert captured.err.startswith("iteration 1: increment")
+
+
+@pytest.mark.parametrize("which", ["dsm", "ref", "mask"])
+def test_output_equal_to_an_input_is_refused_even_with_overwrite(pair, which, tmp_path, capsys):
+    dsm, ref = pair
+    mask = write_raster(tmp_path / "mask.tif", np.ones((8, 8)), nodata=None, dtype="uint8")
+    target = {"dsm": dsm, "ref": ref, "mask": mask}[which]
+    before = digest(target)
+    argv = ["coregister", str(dsm), str(ref), "--mask", str(mask), "-o", str(target)]
+    assert main([*argv, "--overwrite"]) == 2
+    err = capsys.readouterr().err
+    assert err.count("\n") == 1 and str(target) in err and "input" in err
+    assert digest(target) == before
+
+
+def test_bad_inputs_one_line_exit_2(pair, tmp_path, capsys):
+    dsm, ref = pair
+    _, z = shifted_pair(seed=8)
+    far = write_raster(tmp_path / "far.tif", z, Affine(CELL_M, 0, X0 + 5000, 0, -CELL_M, Y0))
+    geo = write_raster(tmp_path / "geo.tif", z, Affine(1e-5, 0, 3.0, 0, -1e-5, 43.0), "EPSG:4326")
+    (tmp_path / "exists.tif").write_bytes(b"")
+    cases = [
+        ([str(dsm), str(far)], "do not overlap", "far.tif"),
+        ([str(geo), str(ref)], "geographic (degrees)", "geo.tif"),
+        ([str(tmp_path / "none.tif"), str(ref)], "no such file", "none.tif"),
+    ]
+    for inputs, what, name in cases:
+        out = tmp_path / "out.tif"
+        assert main(["coregister", *inputs, "-o", str(out), "--quiet"]) == 2, what
+        err = capsys.readouterr().err
+        assert err.count("\n") == 1 and what in err and name in err, err
+        assert "Traceback" not in err and not out.exists()
+    assert main(["coregister", str(dsm), str(ref), "-o", str(tmp_path / "exists.tif")]) == 2
+    assert "exists" in capsys.readouterr().err
+
+
+def test_help_lists_exit_codes():
+    sub = build_parser("coregister")._subparsers._group_actions[0].choices["coregister"]
+    epilog = sub.epilog
+    for code in ("0", "1", "2", "130"):
+        assert f"  {code}  " in epilog
+    assert all(a.help for a in sub._actions)
+
+
+def test_not_converged_exit_1_with_a_warning(pair, tmp_path, capsys):
+    dsm, ref = pair
+    out = tmp_path / "aligned.tif"
+    argv = ["coregister", str(dsm), str(ref), "-o", str(out), "--quiet"]
+    assert main([*argv, "--max-iterations", "1", "--tolerance", "1e-6"]) == 1
+    captured = capsys.readouterr()
+    assert "NOT converged" in captured.out and out.is_file()  # the last shift, written
+    assert captured.err.startswith("jaxgeo coregister: warning: co-registration did not converge")
