@@ -1,96 +1,234 @@
-"""``jaxgeo match``: tie points between images by SIFT matching guided by their sensor models.
+"""``jaxgeo match``: verified tie points between images, by SIFT matching guided by their models.
 
-    jaxgeo match IMG1 IMG2 [IMG3 ...] [--model IMG=RPCFILE ...] [--roi X Y W H]
-                 [--heights HMIN HMAX] [--tol PX] [--sigma PX] -o observations.csv [--overwrite]
+    jaxgeo match IMG1 IMG2 [IMG3 ...] -o TIES.csv [--dem DEM [--dem-height H] [--geoid G]]
+                 [--heights HMIN HMAX] [--roi X Y W H] [--tol PX] [--sigma PX]
+                 [--model IMG=FILE] [--image-origin IMG=COL,ROW] [--overwrite] [--quiet] [--json]
 
-Every pair of images is matched (keypoints of the earlier image searched within ``--tol`` px of
-the epipolar curve its model predicts in the later one, between heights HMIN and HMAX; default
-the RPC's validity range); outliers across the epipolar direction are rejected. Output: the
-observations CSV ``jaxgeo adjust`` reads (``id,image,x,y,sigma_px``, image = file stem, pixel
-centres at integers). ``--roi`` restricts the keypoints of the first image (pixels).
+Every pair of images is matched (:func:`jaxgeo.stereo.tie_points`): keypoints of the earlier
+image are searched within ``--tol`` px of the epipolar curve its model predicts in the later one,
+over a height range that is ``--heights`` if given, else the DEM's heights over the footprint
+(``--dem``), else found by a first coarse matching over the models' validity range; every tie is
+then verified (duplicates, one-to-one, offset across the epipolar curves, triangulated height,
+reprojection residual, height against its neighbours). A summary per pair says how many ties
+were kept and why the others were rejected. Ties of several pairs that share a keypoint are
+joined into one point seen in all those images (:func:`jaxgeo.stereo.join_ties`), which ties the
+pairs' heights together in ``jaxgeo adjust``. Output: the observations CSV ``jaxgeo adjust``
+reads (``id,image,x,y,sigma_px``; image = file stem; pixels of the rasters given, integer =
+pixel centre). ``--roi`` restricts the keypoints of the first image.
 """
 
 from __future__ import annotations
 
 import argparse
+import math
 import pathlib
+
+from ._common import (
+    add_command,
+    add_image_options,
+    add_json,
+    add_out,
+    add_quiet,
+    guard_outputs,
+    note,
+    open_images,
+    print_json,
+)
+
+FEW_TIES = 20
+"""Fewer ties than this in a pair: a warning (too few to adjust the pair reliably)."""
+CHECK_NAMES = {
+    "duplicate": "duplicate",
+    "ambiguous": "ambiguous",
+    "across_epipolar": "across the epipolar curve",
+    "triangulation": "not triangulated",
+    "height_range": "height outside the range",
+    "residual": "reprojection residual",
+    "height_neighbours": "height unlike its neighbours'",
+}
 
 
 def register(sub) -> None:
-    parser = sub.add_parser(
-        "match",
-        help="tie points by SIFT matching guided by the sensor models",
-        description=__doc__.split("\n\n")[0],
+    parser = add_command(
+        sub, "match", "verified tie points by SIFT matching guided by the sensor models", __doc__
     )
-    parser.add_argument("images", nargs="+", metavar="IMG", help="images (two or more)")
-    parser.add_argument(
-        "--model",
-        action="append",
-        default=[],
-        metavar="IMG=RPCFILE",
-        help="the RPC file of an image (default: the RPC in the image itself)",
-    )
-    parser.add_argument("--roi", type=int, nargs=4, metavar=("X", "Y", "W", "H"))
-    parser.add_argument("--heights", type=float, nargs=2, metavar=("HMIN", "HMAX"))
-    parser.add_argument("--tol", type=float, default=10.0, help="epipolar tolerance, px")
-    parser.add_argument("--sigma", type=float, default=0.5, help="a priori sigma, px")
-    parser.add_argument("-o", "--output", required=True, metavar="OBS.csv")
-    parser.add_argument("--overwrite", action="store_true")
+    parser.add_argument("images", nargs="+", metavar="IMG",
+                        help="images (two or more rasters; each pair is matched)")  # fmt: skip
+    add_image_options(parser)
+    add_out(parser, "TIES.csv", "the tie points CSV (id,image,x,y,sigma_px) jaxgeo adjust reads")
+    parser.add_argument("--dem", default=None, metavar="DEM",
+                        help="DEM raster (any CRS) whose heights over the footprint, +-50 m, give "
+                        "the height range (default: a first coarse matching finds it)")  # fmt: skip
+    parser.add_argument("--dem-height", choices=("ellipsoidal", "orthometric"), default=None,
+                        help="height reference of the DEM values (default: the file's vertical "
+                        "CRS if it declares EGM96/EGM2008, else ellipsoidal)")  # fmt: skip
+    parser.add_argument("--geoid", default=None,
+                        help="egm96, egm2008 (PROJ grids) or a geoid grid file, for orthometric "
+                        "DEMs (implies --dem-height orthometric)")  # fmt: skip
+    parser.add_argument("--heights", type=float, nargs=2, default=None, metavar=("HMIN", "HMAX"),
+                        help="height range to search, ellipsoidal m (default: from --dem, else "
+                        "from a coarse matching)")  # fmt: skip
+    parser.add_argument("--roi", type=int, nargs=4, default=None, metavar=("X", "Y", "W", "H"),
+                        help="search only this window of the first image (column, row, width, "
+                        "height, px)")  # fmt: skip
+    parser.add_argument("--tol", type=float, default=10.0, metavar="PX",
+                        help="how far from the models' epipolar curves a match may lie (the "
+                        "models' relative bias), px (default 10)")  # fmt: skip
+    parser.add_argument("--sigma", type=float, default=0.5, metavar="PX",
+                        help="a priori sigma of the tie points written to the CSV, px "
+                        "(default 0.5)")  # fmt: skip
+    add_quiet(parser)
+    add_json(parser)
     parser.set_defaults(func=run)
 
 
-def models_of(images: list[str], specs: list[str]):
-    """Model per image: ``--model IMG=FILE`` or the RPC read from the image."""
-    from ..io import read_rpc
-    from . import CommandError
-
-    given = {}
-    for spec in specs:
-        img, sep, path = spec.partition("=")
-        if not sep or img not in images:
-            raise CommandError(f"--model {spec!r}: expected IMG=RPCFILE with IMG one of the images")
-        given[img] = path
-    return [read_rpc(given.get(img, img)) for img in images]
-
-
-def run(args: argparse.Namespace) -> int:
-    import numpy as np
-
-    from ..io import Observations, refuse_existing, write_observations
-    from ..stereo import guided_matches, los_heights, sift_features_raster
+def _check_options(args) -> None:
+    """Values the parser cannot check, before any file is read."""
     from . import CommandError
 
     if len(args.images) < 2:
         raise CommandError("give at least two images")
-    refuse_existing(args.output, args.overwrite)  # before any work
-    models = models_of(args.images, args.model)
-    names = [pathlib.Path(p).stem for p in args.images]
-    if len(set(names)) != len(names):
-        raise CommandError("image file names (stems) must differ: they name the images")
-    feats = [
-        sift_features_raster(p, args.roi if i == 0 else None) for i, p in enumerate(args.images)
+    if args.heights is not None:
+        lo, hi = args.heights
+        if not (math.isfinite(lo) and math.isfinite(hi) and lo < hi):
+            raise CommandError(f"--heights {lo:g} {hi:g}: need finite HMIN < HMAX (metres)")
+    for name in ("tol", "sigma"):
+        value = getattr(args, name)
+        if not (math.isfinite(value) and value > 0):
+            raise CommandError(f"--{name} {value:g}: must be a number > 0 (px)")
+    if args.geoid is not None and args.dem is None:
+        raise CommandError("--geoid applies to a DEM: give --dem too")
+    if args.dem_height is not None and args.dem is None:
+        raise CommandError("--dem-height applies to a DEM: give --dem too")
+
+
+def _check_roi(roi, image) -> None:
+    from . import CommandError
+
+    x, y, w, h = roi
+    width, height = image.size
+    if x < 0 or y < 0 or w <= 0 or h <= 0 or x + w > width or y + h > height:
+        raise CommandError(
+            f"--roi {x} {y} {w} {h}: not inside {image.path} ({width} x {height} px; need "
+            "X, Y >= 0, W, H > 0, X + W <= width, Y + H <= height)"
+        )
+
+
+def _inputs(images, args) -> list[pathlib.Path]:
+    files = [p for im in images for p in im.inputs]
+    if args.dem is not None:
+        files.append(pathlib.Path(args.dem))
+    if args.geoid is not None and pathlib.Path(args.geoid).exists():
+        files.append(pathlib.Path(args.geoid))
+    return files
+
+
+def summary(names, report) -> list[str]:
+    """The human lines of one pair's :class:`~jaxgeo.stereo.TieReport`."""
+    a, b = names
+    rejected = ", ".join(f"{n} {CHECK_NAMES.get(k, k)}" for k, n in report.rejected.items() if n)
+    lo, hi = report.height_range_m
+    v0, v1 = report.validity_m
+    lines = [
+        f"{a} - {b}: {report.n_kept} ties kept of {report.n_candidates} candidates"
+        + (f" (rejected: {rejected})" if rejected else "")
     ]
-    ids, imgs, xy = [], [], []
-    for i in range(len(args.images)):
-        for j in range(i + 1, len(args.images)):
-            h_range = args.heights or los_heights(models[i])
-            m = guided_matches(models[i], models[j], *feats[i], *feats[j], h_range, args.tol)
-            print(
-                f"{names[i]} - {names[j]}: {len(m)} matches ({m.n_candidates} before outlier "
-                f"rejection), offset across the epipolar curve {np.median(m.across_px):+.3f} px"
-                if len(m)
-                else f"{names[i]} - {names[j]}: no match"
-            )
-            for k in range(len(m)):
-                pid = f"{names[i]}_{names[j]}_{k}"
-                ids += [pid, pid]
-                imgs += [names[i], names[j]]
-                xy += [m.xy1[k], m.xy2[k]]
-    if not ids:
-        raise CommandError("no tie point found")
-    obs = Observations(
-        tuple(ids), tuple(imgs), np.array(xy, dtype=float), np.full(len(ids), args.sigma)
+    source = report.height_source
+    if report.n_coarse is not None:
+        source += f", {report.n_coarse} coarse ties"
+    lines.append(
+        f"  heights searched {lo:.0f}..{hi:.0f} m ({source}; models valid {v0:.0f}..{v1:.0f} m)"
     )
-    write_observations(obs, args.output, overwrite=args.overwrite)
-    print(f"wrote {len(ids) // 2} tie points to {args.output}")
+    if report.n_kept:
+        p5, p50, p95 = report.heights_m
+        lines.append(
+            f"  tie heights p5/p50/p95 {p5:.1f} / {p50:.1f} / {p95:.1f} m; offset across the "
+            f"epipolar curves {report.across_px:+.2f} px (sigma {report.across_sigma_px:.2f} px)"
+        )
+    return lines
+
+
+def _warnings(caught, prefix: str = "") -> None:
+    """jaxgeo's own warnings as ``jaxgeo match: warning:`` lines (other libraries' notices are
+    not the user's business)."""
+    import sys
+
+    from ..errors import JaxgeoWarning
+
+    for w in caught:
+        if issubclass(w.category, JaxgeoWarning):
+            print(f"jaxgeo match: warning: {prefix}{w.message}", file=sys.stderr)
+
+
+def run(args: argparse.Namespace) -> int:
+    import sys
+    import warnings
+
+    import numpy as np
+
+    from ..io import Observations, read_dem, write_observations
+    from ..stereo import join_ties, sift_features_raster, tie_points
+    from . import CommandError
+
+    _check_options(args)
+    images = open_images(args.images, args)
+    out = guard_outputs([args.out], _inputs(images, args), args.overwrite)[0]  # before any work
+    if args.roi is not None:
+        _check_roi(args.roi, images[0])
+    dem = None
+    if args.dem is not None:
+        with warnings.catch_warnings(record=True) as caught:
+            warnings.simplefilter("always")
+            dem = read_dem(args.dem, height=args.dem_height, geoid=args.geoid)
+        _warnings(caught)
+        geoid = " (the geoid's undulation added)" if dem.geoid is not None else ""
+        note(f"DEM {args.dem}: {dem.height_reference} heights{geoid}", args.quiet)
+    features = []
+    for k, im in enumerate(images):
+        note(f"SIFT keypoints of {im.name} ({k + 1}/{len(images)})", args.quiet)
+        features.append(sift_features_raster(im.path, args.roi if k == 0 else None))
+    found, pairs = [], []
+    for i in range(len(images)):
+        for j in range(i + 1, len(images)):
+            a, b = images[i], images[j]
+            note(f"matching {a.name} - {b.name}", args.quiet)
+            with warnings.catch_warnings(record=True) as caught:
+                warnings.simplefilter("always")
+                ties = tie_points(
+                    a.model, b.model, a.path, b.path, roi=args.roi if i == 0 else None, dem=dem,
+                    height_range_m=args.heights, epipolar_tol_px=args.tol,
+                    features1=features[i], features2=features[j],
+                )  # fmt: skip
+            _warnings(caught, f"{a.name} - {b.name}: ")
+            if len(ties) < FEW_TIES:
+                print(f"jaxgeo match: warning: {a.name} - {b.name}: only {len(ties)} ties (do the "
+                      "images overlap? are the models right? a larger --tol for a large relative "
+                      "bias?)", file=sys.stderr)  # fmt: skip
+            pairs.append({"images": [a.name, b.name], **ties.report.as_dict()})
+            if not args.json:
+                print("\n".join(summary((a.name, b.name), ties.report)), flush=True)
+            found.append((i, j, ties.xy1, ties.xy2))
+    joined = join_ties(found)
+    if len(joined.point) == 0:
+        raise CommandError("no tie point survived the checks in any pair (see the summary)")
+    names = [im.name for im in images]
+    width = len(str(len(joined.n_views) - 1))
+    obs = Observations(
+        tuple(f"tie{k:0{width}d}" for k in joined.point),
+        tuple(names[k] for k in joined.image),
+        joined.xy,
+        np.full(len(joined.point), args.sigma),
+    )
+    write_observations(obs, out, overwrite=args.overwrite)
+    views = {int(v): int(n) for v, n in enumerate(np.bincount(joined.n_views)) if n}
+    if args.json:
+        print_json({"out": str(out), "n_points": len(joined.n_views),
+                    "n_observations": len(obs), "points_by_views": views,
+                    "n_conflicting_dropped": joined.n_conflicting, "pairs": pairs})  # fmt: skip
+    else:
+        seen = ", ".join(f"{n} in {v} images" for v, n in views.items())
+        dropped = (f"; {joined.n_conflicting} groups of ties reaching two points of one image "
+                   "dropped") if joined.n_conflicting else ""  # fmt: skip
+        print(f"wrote {len(joined.n_views)} tie points ({seen}; ties sharing a keypoint joined"
+              f"{dropped}), {len(obs)} observations, to {out}")  # fmt: skip
     return 0

@@ -115,6 +115,153 @@ def _epipolar_segments(m1, m2, xy, h_lo, h_hi):
 
 
 @dataclass(frozen=True)
+class Candidates:
+    """Epipolar-guided matches before any geometric check: keypoint indices ``i1``, ``i2``
+    ``(n,)``, ``across_px`` ``(n,)`` signed distance of the image-2 keypoint from the epipolar
+    segment of the image-1 keypoint, ``distance`` ``(n,)`` SIFT descriptor distance (unit
+    descriptors, 0..2) and ``ratio`` ``(n,)`` best / second-best distance (0 when every other
+    candidate sits at the same location); ``n_searched`` image-1 keypoints whose segment is
+    defined."""
+
+    i1: np.ndarray
+    i2: np.ndarray
+    across_px: np.ndarray
+    distance: np.ndarray
+    ratio: np.ndarray
+    n_searched: int
+
+    def __len__(self) -> int:
+        return self.i1.shape[0]
+
+    def take(self, keep: np.ndarray) -> Candidates:
+        """The candidates selected by ``keep`` (a boolean mask or indices)."""
+        return Candidates(
+            self.i1[keep],
+            self.i2[keep],
+            self.across_px[keep],
+            self.distance[keep],
+            self.ratio[keep],
+            self.n_searched,
+        )
+
+
+CANDIDATE_CHUNK = 512
+"""Image-1 keypoints searched at once (bounds the memory of the vectorised search)."""
+
+
+def _unit(desc):
+    desc = np.asarray(desc, dtype=np.float32)
+    return desc / np.maximum(np.linalg.norm(desc, axis=1, keepdims=True), 1e-12)
+
+
+def epipolar_candidates(
+    model1: AbstractSensorModel,
+    model2: AbstractSensorModel,
+    xy1: np.ndarray,
+    desc1: np.ndarray,
+    xy2: np.ndarray,
+    desc2: np.ndarray,
+    height_range_m: Sequence[float],
+    epipolar_tol_px: float = 10.0,
+    ratio: float = 0.8,
+) -> Candidates:
+    """For each keypoint of image 1, its nearest descriptor among the image-2 keypoints within
+    ``epipolar_tol_px`` of its epipolar segment (heights ``height_range_m``), kept when it
+    passes Lowe's ratio test ``ratio``. The second-best is taken among candidates at another
+    location than the best: SIFT gives one keypoint several orientations (one descriptor
+    each), which are not rival matches."""
+    xy1, xy2 = np.asarray(xy1, dtype=float), np.asarray(xy2, dtype=float)
+    empty = Candidates(*(np.zeros(0, int),) * 2, *(np.zeros(0),) * 3, 0)
+    if len(xy1) == 0 or len(xy2) == 0:
+        return empty
+    h_lo, h_hi = map(float, height_range_m)
+    a, b = (np.asarray(v) for v in _epipolar_segments(model1, model2, xy1, h_lo, h_hi))
+    ok1 = np.all(np.isfinite(a), axis=1) & np.all(np.isfinite(b), axis=1)
+    if not ok1.any():  # no keypoint's ray reaches image 2
+        return empty
+    half = np.linalg.norm(b - a, axis=1) / 2
+    u = (b - a) / np.maximum(2 * half, 1e-12)[:, None]
+    index = _SegmentIndex(xy2, a, b, float(epipolar_tol_px))  # NaN segments never queried
+    d1n, d2n = _unit(desc1), _unit(desc2)
+    parts = []
+    searched = np.flatnonzero(ok1)
+    tol = float(epipolar_tol_px)
+    for s in range(0, len(searched), CANDIDATE_CHUNK):
+        idx = searched[s : s + CANDIDATE_CHUNK]
+        rows, cols = index.query(idx)
+        if rows.size == 0:
+            continue
+        rows = idx[rows]
+        rel = xy2[cols] - a[rows]
+        along = np.einsum("ij,ij->i", rel, u[rows])
+        perp = rel[:, 0] * -u[rows, 1] + rel[:, 1] * u[rows, 0]
+        inside = (np.abs(perp) <= tol) & (along >= -tol) & (along <= 2 * half[rows] + tol)
+        rows, cols, perp = rows[inside], cols[inside], perp[inside]
+        cos = np.einsum("ij,ij->i", d1n[rows], d2n[cols]).astype(float)
+        dist = np.sqrt(np.maximum(2 - 2 * cos, 0))  # SIFT L2 between unit descriptors
+        parts.append(_best_per_keypoint(rows, cols, perp, dist, xy2, ratio))
+    if not parts:
+        return Candidates(
+            empty.i1, empty.i2, empty.across_px, empty.distance, empty.ratio, len(searched)
+        )
+    cat = [np.concatenate(p) for p in zip(*parts, strict=True)]
+    return Candidates(*cat, len(searched))
+
+
+class _SegmentIndex:
+    """Image-2 points indexed for "which points lie near segment i" queries: in a frame turned
+    to the mean epipolar direction and scaled by the typical segment's half-extent, the
+    bounding box of each segment (widened by ``sqrt(2) tol``) is nearly a square, found by one
+    Chebyshev-ball query (far fewer candidates than a Euclidean ball around a long segment)."""
+
+    def __init__(self, xy2, a, b, tol):
+        from scipy.spatial import cKDTree
+
+        d = np.nanmean(b - a, axis=0)
+        u0 = d / max(float(np.linalg.norm(d)), 1e-12) if np.all(np.isfinite(d)) else np.eye(2)[0]
+        self.rot = np.array([u0, [-u0[1], u0[0]]]).T  # columns: along, across
+        ra, rb = a @ self.rot, b @ self.rot
+        pad = np.sqrt(2.0) * tol
+        self.lo = np.minimum(ra, rb) - pad
+        self.hi = np.maximum(ra, rb) + pad
+        half = (self.hi - self.lo) / 2
+        self.scale = np.maximum(np.nanmedian(half, axis=0), 1e-6)
+        self.tree = cKDTree((xy2 @ self.rot) / self.scale)
+
+    def query(self, idx):
+        """``(rows, cols)``: the image-2 points in the box of segment ``idx[row]``."""
+        centre = (self.lo[idx] + self.hi[idx]) / 2 / self.scale
+        radius = np.max((self.hi[idx] - self.lo[idx]) / 2 / self.scale, axis=1)
+        balls = self.tree.query_ball_point(centre, radius, p=np.inf, return_sorted=False)
+        counts = np.fromiter((len(c) for c in balls), int, len(balls))
+        if counts.sum() == 0:
+            return np.zeros(0, int), np.zeros(0, int)
+        cols = np.concatenate([np.asarray(c, dtype=int) for c in balls])
+        return np.repeat(np.arange(len(idx)), counts), cols
+
+
+def _best_per_keypoint(rows, cols, perp, dist, xy2, ratio):
+    """Best candidate of each image-1 keypoint (``rows``) and its ratio to the best candidate
+    at another image-2 location; those failing the ratio test are dropped."""
+    if rows.size == 0:
+        return np.zeros(0, int), np.zeros(0, int), np.zeros(0), np.zeros(0), np.zeros(0)
+    order = np.lexsort((dist, rows))
+    rows, cols, perp, dist = rows[order], cols[order], perp[order], dist[order]
+    keys, first, inverse = np.unique(rows, return_index=True, return_inverse=True)
+    best = first[inverse]  # position of each candidate's group best
+    other = np.any(xy2[cols] != xy2[cols[best]], axis=1)
+    second = np.full(keys.size, np.inf)
+    if other.any():
+        k2, f2 = np.unique(rows[other], return_index=True)
+        second[np.searchsorted(keys, k2)] = dist[np.flatnonzero(other)[f2]]
+    d_best = dist[first]
+    with np.errstate(divide="ignore", invalid="ignore"):
+        r = np.where(np.isfinite(second), d_best / np.maximum(second, 1e-12), 0.0)
+    keep = r < ratio
+    return keys[keep], cols[first][keep], perp[first][keep], d_best[keep], r[keep]
+
+
+@dataclass(frozen=True)
 class Matches:
     """Matched points ``xy1``, ``xy2`` ``(n, 2)`` px; ``across_px`` ``(n,)`` signed distance of
     ``xy2`` from the models' epipolar curve of ``xy1`` (the relative bias shows as its median);
@@ -141,53 +288,27 @@ def guided_matches(
     ratio: float = 0.8,
 ) -> Matches:
     """Match keypoints of image 1 to image 2 within ``epipolar_tol_px`` of the predicted epipolar
-    segment (heights ``height_range_m``), Lowe ratio ``ratio``, then reject outliers across the
-    epipolar direction (module docstring)."""
-    from scipy.spatial import cKDTree
-
+    segment (heights ``height_range_m``), Lowe ratio ``ratio``
+    (:func:`epipolar_candidates`), then reject outliers across the epipolar direction (module
+    docstring). No check of the heights: :func:`~jaxgeo.stereo.tie_points` verifies every tie
+    (heights, duplicates, one-to-one) and finds the height range itself."""
     empty = Matches(np.zeros((0, 2)), np.zeros((0, 2)), np.zeros(0), 0)
     if len(xy1) == 0 or len(xy2) < 2:
         return empty
-    h_lo, h_hi = map(float, height_range_m)
-    a, b = (np.asarray(v) for v in _epipolar_segments(model1, model2, xy1, h_lo, h_hi))
-    ok1 = np.all(np.isfinite(a), axis=1) & np.all(np.isfinite(b), axis=1)
-    mid, half = (a + b) / 2, np.linalg.norm(b - a, axis=1) / 2
-    u = (b - a) / np.maximum(2 * half, 1e-12)[:, None]
-    tree = cKDTree(xy2)
-    pairs, across = [], []
-    d1n = desc1 / np.maximum(np.linalg.norm(desc1, axis=1, keepdims=True), 1e-12)
-    d2n = desc2 / np.maximum(np.linalg.norm(desc2, axis=1, keepdims=True), 1e-12)
-    for i in np.flatnonzero(ok1):
-        cand = np.asarray(tree.query_ball_point(mid[i], half[i] + epipolar_tol_px), dtype=int)
-        if cand.size < 1:
-            continue
-        rel = xy2[cand] - a[i]
-        perp = rel[:, 0] * -u[i, 1] + rel[:, 1] * u[i, 0]
-        along = rel @ u[i]
-        inside = (np.abs(perp) <= epipolar_tol_px) & (along >= -epipolar_tol_px)
-        inside &= along <= 2 * half[i] + epipolar_tol_px
-        cand, perp = cand[inside], perp[inside]
-        if cand.size < 1:
-            continue
-        dist = np.sqrt(np.maximum(2 - 2 * d2n[cand] @ d1n[i], 0))  # SIFT L2 on unit vectors
-        order = np.argsort(dist)
-        if cand.size > 1 and dist[order[0]] > ratio * dist[order[1]]:
-            continue
-        pairs.append((i, cand[order[0]]))
-        across.append(perp[order[0]])
-    if not pairs:
+    c = epipolar_candidates(
+        model1, model2, xy1, desc1, xy2, desc2, height_range_m, epipolar_tol_px, ratio
+    )
+    if len(c) == 0:
         return empty
-    pairs = np.array(pairs)
-    across = np.array(across)
     # one keypoint of image 2 matched twice: keep neither (ambiguous)
-    _, inv, counts = np.unique(pairs[:, 1], return_inverse=True, return_counts=True)
-    single = counts[inv] == 1
-    pairs, across = pairs[single], across[single]
-    n_cand = len(pairs)
+    _, inv, counts = np.unique(c.i2, return_inverse=True, return_counts=True)
+    c = c.take(counts[inv] == 1)
+    across = c.across_px
+    n_cand = len(c)
     med = np.median(across) if n_cand else 0.0
     sigma = 1.4826 * np.median(np.abs(across - med)) if n_cand else 0.0
     keep = np.abs(across - med) <= max(3.5 * sigma, 0.5)
-    return Matches(xy1[pairs[keep, 0]], xy2[pairs[keep, 1]], across[keep], n_cand)
+    return Matches(xy1[c.i1[keep]], xy2[c.i2[keep]], across[keep], n_cand)
 
 
 def epipolar_offsets(

@@ -1,0 +1,513 @@
+"""Tie points that are true by default: guided SIFT matches, each one verified geometrically.
+
+:func:`tie_points` matches two images whose models work in their rasters' pixels
+(:func:`jaxgeo.io.open_image` gives such models, crops included):
+
+1. **Height range**, the search range along the epipolar curves and a check on every tie, from
+   (``TieReport.height_source``): ``"given"`` (``height_range_m``); ``"dem"``: the DEM's
+   heights over the footprint of the ROI (its corners and edges localised on the DEM,
+   iterated), +- ``margin_m``, within the models' RPC validity range; ``"coarse matching"``: a
+   sparse subset of keypoints matched over the whole validity range with a strict ratio test,
+   verified as below, their heights' 1st-99th percentiles widened by ``max(30 m, 25 %)``;
+   ``"rpc validity"`` when that finds too few ties.
+2. **Matching** within ``epipolar_tol_px`` of the epipolar segments over that range, Lowe's ratio
+   test (:func:`~jaxgeo.stereo.epipolar_candidates`).
+3. **Checks**, each counted in ``TieReport.rejected``: ``duplicate`` (one SIFT keypoint with
+   several orientations matched more than once: collapsed to one tie); ``ambiguous`` (a
+   location of one image matched to several locations of the other: the best kept if it passes
+   the ratio test against the next, else none; matches are one to one); ``across_epipolar``
+   (the offset across the epipolar curves is the pair's relative bias, one smooth value: a tie
+   farther than ``max(3.5 sigma, 0.5 px)`` from its robust affine trend over image 1 is
+   dropped); ``triangulation`` (no converged intersection); ``height_range`` (triangulated
+   height outside the range); ``residual`` (reprojection residual, each image's median
+   removed, above ``max(4 sigma, 0.5 px)``); ``height_neighbours`` (height farther from the
+   median of its 8 nearest ties than ``max(20 m, 5 sigma, 3x`` the neighbours' own spread``)``:
+   a gross mismatch along the epipolar curve).
+
+Heights are triangulated with :func:`jaxgeo.stereo.triangulate` (the models' relative bias left
+in: a pair's uncorrected pointing shifts them by metres). Image coordinates are pixels of the
+rasters (integer = pixel centre); heights ellipsoidal metres.
+"""
+
+from __future__ import annotations
+
+import os
+import warnings
+from collections.abc import Sequence
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from ..errors import JaxgeoError, JaxgeoWarning
+from ..models import AbstractSensorModel
+from ._matching import Candidates, epipolar_candidates, sift_features_raster
+from ._rectification import _batched, _loc, _transfer
+from ._triangulation import triangulate
+
+CHECKS = ("duplicate", "ambiguous", "across_epipolar", "triangulation", "height_range",
+          "residual", "height_neighbours")  # fmt: skip
+"""The checks of a tie, in the order they run (keys of ``TieReport.rejected``)."""
+COARSE_KEYPOINTS = 2000
+COARSE_RATIO = 0.6
+COARSE_MIN_TIES = 20
+COARSE_MARGIN_M = 30.0
+COARSE_MARGIN_FRACTION = 0.25
+DEM_MARGIN_M = 50.0
+NON_RPC_HALF_RANGE_M = 1000.0
+ACROSS_K, ACROSS_FLOOR_PX = 3.5, 0.5
+RESIDUAL_K, RESIDUAL_FLOOR_PX = 4.0, 0.5
+NEIGHBOURS, NEIGHBOUR_K, NEIGHBOUR_FLOOR_M = 8, 5.0, 20.0
+TRIANGULATION_BLOCK = 1024
+"""Ties per triangulation call (NaN-padded): one compiled shape whatever the count."""
+
+
+class TieError(JaxgeoError, ValueError):
+    """Tie points cannot be searched as asked (an ROI outside the image, a height range that is
+    empty or outside the models' validity, a DEM of another place)."""
+
+
+class TieWarning(JaxgeoWarning):
+    """Tie points were found, but under an assumption the user should know about."""
+
+
+@dataclass(frozen=True)
+class TieReport:
+    """What :func:`tie_points` did: ``n_keypoints`` per image, ``n_candidates`` matches passing
+    the ratio test, ``n_kept`` ties, ``rejected`` per check (:data:`CHECKS`),
+    ``height_range_m`` searched and its ``height_source`` (``"given"``, ``"dem"``,
+    ``"coarse matching"``, ``"rpc validity"``), ``validity_m`` (the models' common RPC height
+    range), ``n_coarse`` ties of the coarse matching (``None`` when not run), ``heights_m``
+    p5/p50/p95 of the kept ties, ``across_px`` median offset across the epipolar curves (the
+    relative bias) and ``across_sigma_px`` its robust spread about its trend."""
+
+    n_keypoints: tuple[int, int]
+    n_candidates: int
+    n_kept: int
+    rejected: dict[str, int]
+    height_range_m: tuple[float, float]
+    height_source: str
+    validity_m: tuple[float, float]
+    n_coarse: int | None
+    heights_m: tuple[float, float, float]
+    across_px: float
+    across_sigma_px: float
+
+    def as_dict(self) -> dict:
+        """Plain JSON-able values (NaN as ``None``)."""
+
+        def clean(v):
+            if isinstance(v, dict):
+                return {k: clean(x) for k, x in v.items()}
+            if isinstance(v, tuple | list):
+                return [clean(x) for x in v]
+            if isinstance(v, float) and not np.isfinite(v):
+                return None
+            return v
+
+        return {k: clean(v) for k, v in self.__dict__.items()}
+
+
+@dataclass(frozen=True)
+class TiePoints:
+    """Verified ties: ``xy1``, ``xy2`` ``(n, 2)`` raster px, ``ground`` ``(n, 3)`` lon/lat/h of
+    their triangulation, ``across_px`` ``(n,)`` offset across the epipolar curve, ``report``."""
+
+    xy1: np.ndarray
+    xy2: np.ndarray
+    ground: np.ndarray
+    across_px: np.ndarray
+    report: TieReport = field(repr=False)
+
+    @property
+    def heights_m(self) -> np.ndarray:
+        return self.ground[:, 2]
+
+    def __len__(self) -> int:
+        return self.xy1.shape[0]
+
+
+def validity_heights(model: AbstractSensorModel) -> tuple[float, float]:
+    """The ellipsoidal heights (m) over which ``model`` is valid: its RPC's ground cube ``h_off
+    +- h_scale`` (the model's :meth:`base_rpc`), else its reference height +- 1000 m."""
+    rpc = model.base_rpc()
+    if rpc is not None:
+        h0, hs = float(rpc.ground_offset[2]), abs(float(rpc.ground_scale[2]))
+        return h0 - hs, h0 + hs
+    h0 = float(model.reference_ground()[2])
+    return h0 - NON_RPC_HALF_RANGE_M, h0 + NON_RPC_HALF_RANGE_M
+
+
+def _image_size(path) -> tuple[int, int]:
+    import rasterio
+    from rasterio.errors import NotGeoreferencedWarning
+
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore", NotGeoreferencedWarning)
+        with rasterio.open(path) as src:
+            return int(src.width), int(src.height)
+
+
+def _check_roi(roi, size, path) -> tuple[int, int, int, int]:
+    if roi is None:
+        return (0, 0, *size)
+    col, row, w, h = (int(v) for v in roi)
+    if col < 0 or row < 0 or w <= 0 or h <= 0 or col + w > size[0] or row + h > size[1]:
+        raise TieError(
+            f"ROI x={col} y={row} w={w} h={h} is not inside {path} ({size[0]} x {size[1]} px)"
+        )
+    return col, row, w, h
+
+
+def _roi_points(roi, n=5) -> np.ndarray:
+    col, row, w, h = roi
+    xs = np.linspace(col - 0.5, col + w - 0.5, n)
+    ys = np.linspace(row - 0.5, row + h - 0.5, n)
+    return np.stack(np.meshgrid(xs, ys), axis=-1).reshape(-1, 2)
+
+
+def dem_heights(
+    model: AbstractSensorModel, dem, roi: tuple[int, int, int, int], iterations: int = 8
+) -> tuple[float, float]:
+    """Lowest and highest DEM height (m) over the footprint of ``roi = (col, row, w, h)`` of an
+    image: a 5 x 5 grid of its pixels localised on the DEM (localisation at a height, the DEM
+    read there, repeated), then every DEM cell in the box they span. ``dem`` is a
+    :class:`jaxgeo.io.DEM` (:func:`jaxgeo.io.read_dem`); a DEM that does not cover the footprint
+    raises its ``ValueError`` naming the file."""
+    xy = _roi_points(roi)
+    lo, hi = validity_heights(model)
+    h = np.full(len(xy), (lo + hi) / 2)
+    for _ in range(iterations):
+        ground = _batched(_loc, (model,), xy, h)
+        if not np.all(np.isfinite(ground)):
+            raise TieError(f"{dem.path}: the image's corners cannot be localised on the DEM")
+        h_new = np.asarray(dem(ground[:, :2]), dtype=float)
+        done = np.max(np.abs(h_new - h)) < 0.5
+        h = h_new
+        if done:
+            break
+    ground = _batched(_loc, (model,), xy, h)
+    box = (*ground[:, :2].min(axis=0), *ground[:, :2].max(axis=0))
+    heights = np.asarray(dem.grid(box, margin_cells=1).heights_m)
+    heights = heights[np.isfinite(heights)]
+    if heights.size == 0:
+        raise TieError(f"{dem.path}: no DEM height over the image's footprint (all nodata)")
+    return float(min(heights.min(), h.min())), float(max(heights.max(), h.max()))
+
+
+def _intersect_ranges(a, b):
+    return max(a[0], b[0]), min(a[1], b[1])
+
+
+def _window2(model1, model2, roi1, size2, h_range, margin):
+    """The window ``(col, row, w, h)`` of image 2 that the ROI of image 1 sees over
+    ``h_range`` (its 5 x 5 grid carried over at both ends), widened by ``margin`` px."""
+    xy = _roi_points(roi1)
+    pts = np.concatenate([_batched(_transfer, (model1, model2), xy, z) for z in h_range])
+    pts = pts[np.all(np.isfinite(pts), axis=1)]
+    if len(pts) == 0:
+        return None
+    c0 = int(max(np.floor(pts[:, 0].min() - margin), 0))
+    r0 = int(max(np.floor(pts[:, 1].min() - margin), 0))
+    c1 = int(min(np.ceil(pts[:, 0].max() + margin), size2[0]))
+    r1 = int(min(np.ceil(pts[:, 1].max() + margin), size2[1]))
+    if c1 <= c0 or r1 <= r0:
+        return None
+    return c0, r0, c1 - c0, r1 - r0
+
+
+def _robust_sigma(r) -> float:
+    return float(1.4826 * np.median(np.abs(r))) if len(r) else 0.0
+
+
+def _across_residuals(xy1, across) -> tuple[np.ndarray, float]:
+    """``across`` minus its robust trend (constant, affine in image-1 coordinates when there are
+    30 ties or more: a bias with a drift), and the robust sigma of what is left."""
+    n = len(across)
+    if n == 0:
+        return across, 0.0
+    r = across - np.median(across)
+    if n < 30:
+        return r, _robust_sigma(r)
+    centre, scale = xy1.mean(axis=0), np.maximum(xy1.std(axis=0), 1.0)
+    design = np.column_stack([np.ones(n), (xy1 - centre) / scale])
+    for _ in range(5):
+        sigma = _robust_sigma(r)
+        inl = np.abs(r) <= max(ACROSS_K * sigma, ACROSS_FLOOR_PX)
+        if inl.sum() < 10:
+            break
+        coef, *_ = np.linalg.lstsq(design[inl], across[inl], rcond=None)
+        r = across - design @ coef
+    return r, _robust_sigma(r[np.abs(r) <= max(ACROSS_K * _robust_sigma(r), ACROSS_FLOOR_PX)])
+
+
+def _triangulate(model1, model2, xy1, xy2):
+    n = len(xy1)
+    pad = -n % TRIANGULATION_BLOCK
+    pts = np.concatenate([np.stack([xy1, xy2], axis=1), np.full((pad, 2, 2), np.nan)])
+    ground, res = triangulate([model1, model2], pts, chunk=TRIANGULATION_BLOCK)
+    ok = np.asarray(res.converged)[:n] & np.all(np.isfinite(ground[:n]), axis=1)
+    return ground[:n], np.asarray(res.residuals_px)[:n], ok
+
+
+def _neighbour_outliers(xy1, h) -> np.ndarray:
+    """Ties whose height is far from the median height of their nearest ties (image 1)."""
+    from scipy.spatial import cKDTree
+
+    n = len(h)
+    if n < 2 * NEIGHBOURS:
+        return np.zeros(n, bool)
+    _, idx = cKDTree(xy1).query(xy1, k=NEIGHBOURS + 1)
+    nb = h[idx[:, 1:]]
+    med = np.median(nb, axis=1)
+    spread = 1.4826 * np.median(np.abs(nb - med[:, None]), axis=1)
+    dh = h - med
+    tol = np.maximum(NEIGHBOUR_FLOOR_M, np.maximum(NEIGHBOUR_K * _robust_sigma(dh), 3 * spread))
+    return np.abs(dh) > tol
+
+
+def _collapse(xy1, xy2, c: Candidates, ratio, rejected):
+    """One tie per pair of locations (SIFT's several orientations of one keypoint), then one to
+    one: where a location is matched to several locations of the other image, the best match
+    is kept if it passes the ratio test against the next (``ratio``), none otherwise."""
+    c = c.take(np.argsort(c.distance, kind="stable"))  # best first in every group below
+    p1, p2 = np.round(xy1[c.i1], 3), np.round(xy2[c.i2], 3)
+    _, first = np.unique(np.hstack([p1, p2]), axis=0, return_index=True)
+    rejected["duplicate"] = len(c) - len(first)
+    c = c.take(np.sort(first))
+    keep = np.ones(len(c), bool)
+    for p in (np.round(xy1[c.i1], 3), np.round(xy2[c.i2], 3)):
+        _, first, inv, counts = np.unique(
+            p, axis=0, return_index=True, return_inverse=True, return_counts=True
+        )
+        inv = inv.reshape(-1)
+        shared = counts[inv] > 1
+        # the runner-up of each group: its smallest distance after the best's
+        runner = np.full(len(first), np.inf)
+        others = np.flatnonzero(shared & (np.arange(len(c)) != first[inv]))
+        np.minimum.at(runner, inv[others], c.distance[others])
+        is_best = np.arange(len(c)) == first[inv]
+        clear = c.distance < ratio * runner[inv]
+        keep &= ~shared | (is_best & clear)
+    rejected["ambiguous"] = int((~keep).sum())
+    return c.take(keep)
+
+
+def _verify(model1, model2, xy1, xy2, c: Candidates, h_range, ratio):
+    """The geometric checks (module docstring) of candidate matches: ``(xy1, xy2, ground,
+    across, rejected, across_sigma)`` of the ties kept."""
+    rejected = dict.fromkeys(CHECKS, 0)
+    c = _collapse(xy1, xy2, c, ratio, rejected)
+    a1, a2 = xy1[c.i1], xy2[c.i2]
+    across = c.across_px
+    r, sigma = _across_residuals(a1, across)
+    keep = np.abs(r) <= max(ACROSS_K * sigma, ACROSS_FLOOR_PX)
+    rejected["across_epipolar"] = int((~keep).sum())
+    a1, a2, across = a1[keep], a2[keep], across[keep]
+    ground, res, ok = _triangulate(model1, model2, a1, a2) if len(a1) else (
+        np.zeros((0, 3)), np.zeros((0, 2, 2)), np.zeros(0, bool))  # fmt: skip
+    rejected["triangulation"] = int((~ok).sum())
+    h = ground[:, 2]
+    with np.errstate(invalid="ignore"):
+        inside = ok & (h >= h_range[0]) & (h <= h_range[1])
+    rejected["height_range"] = int((ok & ~inside).sum())
+    comps = res.reshape(len(res), 4)  # x, y residuals in both images
+    if inside.any():
+        comps = comps - np.median(comps[inside], axis=0)  # each image's common bias
+    bound = max(RESIDUAL_K * _robust_sigma(comps[inside].ravel()), RESIDUAL_FLOOR_PX)
+    small = inside & (np.max(np.abs(comps), axis=1) <= bound)
+    rejected["residual"] = int((inside & ~small).sum())
+    sel = np.flatnonzero(small)
+    gross = _neighbour_outliers(a1[sel], h[sel])
+    rejected["height_neighbours"] = int(gross.sum())
+    sel = sel[~gross]
+    return a1[sel], a2[sel], ground[sel], across[sel], rejected, sigma
+
+
+def _coarse_range(model1, model2, f1, f2, validity, tol):
+    """Height range from a coarse matching (module docstring), or ``None`` and the tie count."""
+    xy1, d1 = f1
+    if len(xy1) > COARSE_KEYPOINTS:
+        pick = np.sort(np.random.default_rng(0).choice(len(xy1), COARSE_KEYPOINTS, False))
+        xy1, d1 = xy1[pick], d1[pick]
+    c = epipolar_candidates(model1, model2, xy1, d1, *f2, validity, tol, COARSE_RATIO)
+    ties = _verify(model1, model2, xy1, f2[0], c, validity, COARSE_RATIO)
+    h = ties[2][:, 2]
+    if len(h) < COARSE_MIN_TIES:
+        return None, len(h)
+    lo, hi = np.percentile(h, [1, 99])
+    margin = max(COARSE_MARGIN_M, COARSE_MARGIN_FRACTION * (hi - lo))
+    return _intersect_ranges((lo - margin, hi + margin), validity), len(h)
+
+
+def _height_range(model1, model2, height_range_m, dem, roi1, margin_m, path1):
+    """``(range, source, validity)`` for the given range or the DEM; ``range`` ``None`` when
+    the coarse matching must find it."""
+    v1, v2 = validity_heights(model1), validity_heights(model2)
+    validity = _intersect_ranges(v1, v2)
+    if validity[0] >= validity[1]:
+        raise TieError(
+            f"the models' height validity ranges do not overlap ({v1[0]:.0f}..{v1[1]:.0f} m "
+            f"and {v2[0]:.0f}..{v2[1]:.0f} m): are they models of the same area?"
+        )
+    if height_range_m is not None:
+        lo, hi = (float(v) for v in height_range_m)
+        if not (np.isfinite(lo) and np.isfinite(hi) and lo < hi):
+            raise TieError(f"height range {lo:g} {hi:g}: need finite HMIN < HMAX (m)")
+        if lo < validity[0] or hi > validity[1]:
+            warnings.warn(
+                f"the height range {lo:.0f}..{hi:.0f} m reaches outside the models' validity "
+                f"range {validity[0]:.0f}..{validity[1]:.0f} m (the RPCs extrapolate there)",
+                TieWarning,
+                stacklevel=3,
+            )
+        return (lo, hi), "given", validity
+    if dem is not None:
+        lo, hi = dem_heights(model1, dem, roi1)
+        wanted = (lo - margin_m, hi + margin_m)
+        rng = _intersect_ranges(wanted, validity)
+        if rng[0] >= rng[1]:
+            raise TieError(
+                f"{dem.path}: its heights over the footprint of {path1} ({lo:.0f}..{hi:.0f} m) "
+                f"lie outside the models' validity range ({validity[0]:.0f}..{validity[1]:.0f} "
+                "m): a DEM of another place, or orthometric heights taken as ellipsoidal?"
+            )
+        if lo < validity[0] or hi > validity[1]:
+            warnings.warn(
+                f"{dem.path}: its heights over the footprint ({lo:.0f}..{hi:.0f} m) reach "
+                f"outside the models' validity range ({validity[0]:.0f}..{validity[1]:.0f} m); "
+                f"searching {rng[0]:.0f}..{rng[1]:.0f} m",
+                TieWarning,
+                stacklevel=3,
+            )
+        return rng, "dem", validity
+    return None, "coarse matching", validity
+
+
+@dataclass(frozen=True)
+class JoinedTies:
+    """Multi-image points from pairwise ties (:func:`join_ties`): per observation its
+    ``point`` index ``(m,)``, ``image`` index ``(m,)`` and ``xy`` ``(m, 2)`` px; ``n_views``
+    ``(n_points,)`` images per point; ``n_conflicting`` groups of ties dropped because they
+    reach two positions in one image."""
+
+    point: np.ndarray
+    image: np.ndarray
+    xy: np.ndarray
+    n_views: np.ndarray
+    n_conflicting: int
+
+
+def join_ties(pairs: Sequence[tuple[int, int, np.ndarray, np.ndarray]]) -> JoinedTies:
+    """Join the ties of several pairs ``(image_a, image_b, xy_a (n, 2), xy_b (n, 2))`` into
+    points: ties that share a keypoint (the same image and position, to 1e-3 px: the keypoints
+    of one detection per image) are one ground point seen in every image they reach, which
+    ties the pairs' heights together in an adjustment (pairwise points leave each pair's
+    height datum free). A group reaching two positions in one image is inconsistent: dropped.
+    """
+    keys: dict[tuple[int, float, float], int] = {}
+    edges = []
+    for ia, ib, xa, xb in pairs:
+        for pa, pb in zip(np.round(xa, 3), np.round(xb, 3), strict=True):
+            na = keys.setdefault((int(ia), float(pa[0]), float(pa[1])), len(keys))
+            nb = keys.setdefault((int(ib), float(pb[0]), float(pb[1])), len(keys))
+            edges.append((na, nb))
+    from scipy.sparse import coo_matrix
+    from scipy.sparse.csgraph import connected_components
+
+    n = len(keys)
+    if n == 0:
+        empty = np.zeros(0, int)
+        return JoinedTies(empty, empty, np.zeros((0, 2)), empty, 0)
+    e = np.asarray(edges, dtype=int).reshape(-1, 2)
+    graph = coo_matrix((np.ones(len(e)), (e[:, 0], e[:, 1])), shape=(n, n))
+    _, label = connected_components(graph, directed=False)
+    node = np.array([(k[0], k[1], k[2]) for k in keys])  # insertion order = node index
+    image = node[:, 0].astype(int)
+    # a group is consistent when no image appears twice in it
+    per_image = np.unique(np.column_stack([label, image]), axis=0)
+    size = np.bincount(label)
+    views = np.bincount(per_image[:, 0], minlength=size.size)
+    good = views == size
+    keep = good[label]
+    _, point = np.unique(label[keep], return_inverse=True)
+    order = np.lexsort((image[keep], point))
+    return JoinedTies(
+        point=point[order],
+        image=image[keep][order],
+        xy=node[keep][order, 1:],
+        n_views=size[good],
+        n_conflicting=int((~good).sum()),
+    )
+
+
+def tie_points(
+    model1: AbstractSensorModel,
+    model2: AbstractSensorModel,
+    path1: str | os.PathLike,
+    path2: str | os.PathLike,
+    roi: Sequence[int] | None = None,
+    dem=None,
+    height_range_m: Sequence[float] | None = None,
+    epipolar_tol_px: float = 10.0,
+    ratio: float = 0.8,
+    margin_m: float = DEM_MARGIN_M,
+    features1: tuple[np.ndarray, np.ndarray] | None = None,
+    features2: tuple[np.ndarray, np.ndarray] | None = None,
+) -> TiePoints:
+    """Verified tie points between two images (module docstring).
+
+    ``model1``, ``model2`` work in the pixels of the rasters ``path1``, ``path2`` (see
+    :func:`jaxgeo.io.open_image`); ``roi = (col, row, width, height)`` restricts image 1's
+    keypoints (px; inside the image, else :class:`TieError`). The height range is
+    ``height_range_m`` (m, ellipsoidal) if given, else from ``dem`` (a :class:`jaxgeo.io.DEM`,
+    +- ``margin_m``), else from a coarse matching. ``features1``/``features2``: SIFT keypoints
+    and descriptors already detected (:func:`~jaxgeo.stereo.sift_features_raster`, raster px)
+    to reuse; by default they are detected over the ROI and the part of image 2 it sees.
+    """
+    tol = float(epipolar_tol_px)
+    if not (np.isfinite(tol) and tol > 0):
+        raise TieError(f"epipolar tolerance {tol:g} px: must be > 0")
+    size1, size2 = _image_size(path1), _image_size(path2)
+    roi1 = _check_roi(roi, size1, path1)
+    h_range, source, validity = _height_range(
+        model1, model2, height_range_m, dem, roi1, float(margin_m), path1
+    )
+    if features1 is None:
+        features1 = sift_features_raster(path1, roi1 if roi is not None else None)
+    else:
+        col, row, w, h = roi1
+        xy = np.asarray(features1[0], dtype=float)
+        inside = (xy[:, 0] >= col - 0.5) & (xy[:, 0] < col + w - 0.5)
+        inside &= (xy[:, 1] >= row - 0.5) & (xy[:, 1] < row + h - 0.5)
+        features1 = (xy[inside], np.asarray(features1[1])[inside])
+    if features2 is None:
+        win2 = _window2(model1, model2, roi1, size2, h_range or validity, tol + 16)
+        if win2 is None:
+            raise TieError(f"the ROI of {path1} is not seen in {path2}")
+        features2 = sift_features_raster(path2, win2 if win2 != (0, 0, *size2) else None)
+    features2 = (np.asarray(features2[0], dtype=float), np.asarray(features2[1]))
+    n_coarse = None
+    if h_range is None:
+        h_range, n_coarse = _coarse_range(model1, model2, features1, features2, validity, tol)
+        if h_range is None:
+            h_range, source = validity, "rpc validity"
+    xy1, xy2 = features1[0], features2[0]
+    c = epipolar_candidates(model1, model2, *features1, *features2, h_range, tol, ratio)
+    k1, k2, ground, across, rejected, sigma = _verify(model1, model2, xy1, xy2, c, h_range, ratio)
+    h = ground[:, 2]
+    report = TieReport(
+        n_keypoints=(len(xy1), len(xy2)),
+        n_candidates=len(c),
+        n_kept=len(k1),
+        rejected=rejected,
+        height_range_m=(float(h_range[0]), float(h_range[1])),
+        height_source=source,
+        validity_m=(float(validity[0]), float(validity[1])),
+        n_coarse=n_coarse,
+        heights_m=tuple(float(v) for v in np.percentile(h, [5, 50, 95]))
+        if len(h)
+        else (np.nan,) * 3,
+        across_px=float(np.median(across)) if len(across) else np.nan,
+        across_sigma_px=float(sigma),
+    )
+    return TiePoints(k1, k2, ground, across, report)
