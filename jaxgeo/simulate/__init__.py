@@ -1,4 +1,6 @@
-"""Physically based synthetic scenes: Cartosat-1 stereo pairs and Carto-2S strips.
+"""Physically based synthetic scenes: Cartosat-1 stereo pairs, Carto-2S strips, and rendered
+Pleiades-like stereo scenes of any size (:func:`stereo_scene`: images with vendor RPCs in their
+GeoTIFF tags, a truth DSM and the true models, streamed to disk).
 
 Each simulation is deterministic in its ``seed`` and returns a dataclass holding the truth
 (rigorous :class:`~jaxgeo.models.EphemerisModel` s), the "vendor" RPCs fitted to a perturbed copy
@@ -20,4 +22,12 @@ from ._orbit import CircularOrbit as CircularOrbit
 from ._orbit import ephemeris_from_orbit as ephemeris_from_orbit
 from ._scene import VendorErrors as VendorErrors
 from ._scene import check_writable as check_writable
+from ._stereo_scene import SimulationError as SimulationError
+from ._stereo_scene import StereoSceneTruth as StereoSceneTruth
+from ._stereo_scene import read_stereo_scene as read_stereo_scene
+from ._stereo_scene import stereo_scene as stereo_scene
+from ._stereo_scene import stereo_scene_files as stereo_scene_files
+from ._stereo_scene import stereo_scene_truth as stereo_scene_truth
+from ._stereo_scene import write_stereo_scene as write_stereo_scene
+from ._stereo_scene_models import JitteredModel as JitteredModel
 from ._terrain import Terrain as Terrain

@@ -40,3 +40,26 @@ def test_bad_arguments(tmp_path, capsys):
     (tmp_path / "file").write_text("x")
     assert main(["simulate", "cartosat1", "--out", str(tmp_path / "file")]) == 2
     assert "not a directory" in capsys.readouterr().err
+
+
+def test_stereo_scene_writes_refuses_and_names_bad_options(tmp_path, capsys):
+    out = tmp_path / "scene"
+    argv = ["simulate", "stereo-scene", "--size", "64", "--seed", "2", "--out", str(out)]
+    assert main([*argv, "--exact-rpc", "--jitter-px", "0.5", "--quiet", "--json"]) == 0
+    captured = capsys.readouterr()
+    assert captured.err == ""  # --quiet: no progress
+    summary = json.loads(captured.out)
+    assert sorted(summary["files"]) == sorted(p.name for p in out.iterdir())
+    assert sorted(summary["files"]) == ["left.tif", "right.tif", "truth.json", "truth_dsm.tif"]
+    assert max(summary["rpc_vs_truth_rms_px"].values()) < 0.05  # exact RPCs, jitter-free truth
+    assert min(summary["rpc_vs_jittered_truth_rms_px"].values()) > 0.1  # the jitter they lack
+    truth = json.loads((out / "truth.json").read_text())
+    assert truth["params"]["jitter_px"] == 0.5 and truth["params"]["exact_rpc"] is True
+    before = {p.name: p.read_bytes() for p in out.iterdir()}
+    assert main(argv) == 2  # checked before any work
+    err = capsys.readouterr().err
+    assert "refusing to overwrite" in err and "left.tif" in err and "--overwrite" in err
+    assert {p.name: p.read_bytes() for p in out.iterdir()} == before
+    assert main(["simulate", "stereo-scene", "--size", "10", "-o", str(tmp_path / "x")]) == 2
+    assert "--size must be an integer >= 64" in capsys.readouterr().err
+    assert not (tmp_path / "x").exists()
