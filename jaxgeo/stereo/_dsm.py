@@ -1,9 +1,22 @@
-"""DSM rasterisation: one height per cell from the 3D points in it.
+"""DSM rasterisation: one height per cell from the 3D points, small holes interpolated.
 
-Points ``(lon_deg, lat_deg, h_m)`` are projected to a map CRS (local UTM by default), each
-falls in one cell of a north-up grid of ``res_m`` cells; a cell's height is the median of its
-points (ellipsoidal metres), with the point count and spread (standard deviation) as extra
-bands. Empty cells are NaN. The GeoTIFF is tiled (256 x 256), DEFLATE, written atomically.
+Points ``(lon_deg, lat_deg, h_m)`` are projected to a map CRS (local UTM by default) and binned
+into a north-up grid of ``res_m`` cells; a cell's height is the median of its points (ellipsoidal
+metres), with the point count and spread (standard deviation) as extra bands. Then:
+
+1. **Footprints.** Dense matching gives about one point per image pixel; when that spacing is
+   close to the cell size, the two lattices alias and a regular pattern of cells receives no
+   point (a lattice of single-cell pinholes, ~1 % of the cells on a Pleiades pair at 0.5 m). A
+   point stands for the ground around it up to the point spacing, so a cell holding no point
+   takes the median of the points within ``footprint_m`` of its centre (still a measurement:
+   ``filled`` 0; ``count`` says how many points).
+2. **Small holes.** A hole (a connected set of empty cells that does not reach the grid's edge)
+   at most ``max_hole_m`` across is interpolated from its rim (Laplace: the smoothest surface
+   through the rim), as s2p's and CARS's DSMs fill small gaps; the ``filled`` band marks these
+   cells. Larger voids (occlusions behind buildings, water, no texture) stay empty (NaN).
+
+The GeoTIFF is tiled (256 x 256), DEFLATE, written atomically; its bands are named
+(:data:`DSM_BANDS`, band descriptions ``height``, ``count``, ``spread``, ``filled``).
 """
 
 from __future__ import annotations
@@ -16,11 +29,25 @@ import numpy as np
 from ..geodesy import utm_epsg, utm_zone
 from ..io import atomic_output
 
+MAX_HOLE_M = 4.0
+"""Largest hole (m across) interpolated by default: a few cells of occlusion or of a failed
+match, never a void."""
+
+DSM_BANDS = {
+    "height": ("m", "height above the WGS84 ellipsoid (m): median of the cell's points"),
+    "count": ("", "number of points the height comes from (0: interpolated)"),
+    "spread": ("m", "standard deviation of those points' heights (m)"),
+    "filled": ("", "1: height interpolated from the rim of a small hole, 0: measured"),
+}
+"""The DSM's bands in file order: name -> (unit, meaning). A new band (e.g. ``height_sigma``) is
+a :class:`DSMGrid` field and an entry here."""
+
 
 @dataclass(frozen=True)
 class DSMGrid:
-    """A rasterised DSM: ``height``, ``count``, ``spread`` ``(rows, cols)``; ``x0, y0`` the map
-    coordinates of the upper-left corner of the first cell; ``res_m``; ``epsg``."""
+    """A rasterised DSM: ``height`` (NaN: no data), ``count``, ``spread``, ``filled`` (1 where
+    the height is interpolated) ``(rows, cols)``; ``x0, y0`` the map coordinates of the
+    upper-left corner of the first cell; ``res_m``; ``epsg``."""
 
     height: np.ndarray
     count: np.ndarray
@@ -29,12 +56,24 @@ class DSMGrid:
     y0: float
     res_m: float
     epsg: int
+    filled: np.ndarray | None = None
 
     @property
     def transform(self):
         from affine import Affine
 
         return Affine(self.res_m, 0.0, self.x0, 0.0, -self.res_m, self.y0)
+
+    def bands(self) -> dict[str, np.ndarray]:
+        """The bands of :data:`DSM_BANDS` by name, in file order, as float32 with NaN where the
+        height is NaN."""
+        empty = ~np.isfinite(self.height)
+        filled = self.filled if self.filled is not None else np.zeros(self.height.shape, np.uint8)
+        out = {}
+        for name in DSM_BANDS:
+            value = np.asarray(filled if name == "filled" else getattr(self, name), np.float32)
+            out[name] = np.where(empty, np.float32(np.nan), value)
+        return out
 
 
 def local_utm_epsg(lon_deg: float, lat_deg: float) -> int:
@@ -51,19 +90,134 @@ def to_map(points: np.ndarray, epsg: int) -> np.ndarray:
     return np.stack([np.asarray(x), np.asarray(y), points[:, 2]], axis=-1)
 
 
+def point_spacing(xy: np.ndarray, sample: int = 20000) -> float:
+    """Median distance (map units) from a point to its nearest neighbour (a sample of them)."""
+    from scipy.spatial import cKDTree
+
+    if xy.shape[0] < 2:
+        return 0.0
+    step = max(xy.shape[0] // sample, 1)
+    dist, _ = cKDTree(xy).query(xy[::step], k=2)
+    return float(np.median(dist[:, 1]))
+
+
+def _median_per_cell(cell, h, size):
+    """Median, count and standard deviation of ``h`` per cell index (NaN / 0 where empty)."""
+    order = np.lexsort((h, cell))
+    cell, h = cell[order], h[order]
+    count = np.bincount(cell, minlength=size)
+    start = np.concatenate([[0], np.cumsum(count)[:-1]])
+    has = count > 0
+    lo = start[has] + (count[has] - 1) // 2
+    hi = start[has] + count[has] // 2
+    median = np.full(size, np.nan)
+    median[has] = 0.5 * (h[lo] + h[hi])
+    total = np.bincount(cell, weights=h, minlength=size)
+    total2 = np.bincount(cell, weights=h * h, minlength=size)
+    spread = np.full(size, np.nan)
+    mean = total[has] / count[has]
+    spread[has] = np.sqrt(np.maximum(total2[has] / count[has] - mean**2, 0.0))
+    return median, count, spread
+
+
+def _footprint_fill(height, count, spread, xyh, x0, y0, res_m, radius_m, k=4):
+    """Empty cells within ``radius_m`` of points: median, count and spread of the (up to
+    ``k``) nearest points within that radius of the cell centre (in place)."""
+    from scipy import ndimage
+    from scipy.spatial import cKDTree
+
+    reach = int(np.ceil(radius_m / res_m))
+    near = ndimage.binary_dilation(np.isfinite(height), iterations=reach)
+    rows, cols = np.nonzero(near & ~np.isfinite(height))
+    if rows.size == 0:
+        return
+    centres = np.stack([x0 + (cols + 0.5) * res_m, y0 - (rows + 0.5) * res_m], axis=-1)
+    lo, hi = centres.min(axis=0) - radius_m, centres.max(axis=0) + radius_m
+    pts = xyh[np.all((xyh[:, :2] >= lo) & (xyh[:, :2] <= hi), axis=1)]
+    if pts.shape[0] == 0:
+        return
+    dist, idx = cKDTree(pts[:, :2]).query(centres, k=k, distance_upper_bound=radius_m)
+    found = np.isfinite(dist)
+    n = found.sum(axis=1)
+    some = n > 0
+    h = np.where(found, pts[np.minimum(idx, pts.shape[0] - 1), 2], np.nan)[some]
+    r, c = rows[some], cols[some]
+    height[r, c] = np.nanmedian(h, axis=1)
+    count[r, c] = n[some]
+    spread[r, c] = np.nanstd(h, axis=1)
+
+
+def small_holes(height: np.ndarray, max_cells: float) -> np.ndarray:
+    """Mask of the cells of holes in ``height``: connected sets of NaN cells (4-neighbours) not
+    reaching the grid's edge, each cell within ``max_cells / 2`` cells of a finite one (the hole
+    is at most ``max_cells`` across)."""
+    from scipy import ndimage
+
+    empty = ~np.isfinite(height)
+    if not empty.any() or max_cells < 1:
+        return np.zeros(height.shape, bool)
+    labels, n = ndimage.label(empty)
+    edge = np.unique(np.concatenate([labels[0], labels[-1], labels[:, 0], labels[:, -1]]))
+    depth = ndimage.distance_transform_edt(empty)  # cells to the nearest finite cell
+    deepest = ndimage.maximum(depth, labels, index=np.arange(1, n + 1))
+    small = np.zeros(n + 1, bool)
+    small[1:] = np.asarray(deepest) <= max_cells / 2 + 1e-9
+    small[edge] = False
+    return small[labels]
+
+
+def laplace_fill(height: np.ndarray, holes: np.ndarray) -> np.ndarray:
+    """``height`` with the ``holes`` cells replaced by the solution of Laplace's equation with
+    the surrounding finite cells as boundary values (every hole cell must have its 4
+    neighbours inside the grid and each hole a finite rim)."""
+    from scipy.sparse import coo_matrix
+    from scipy.sparse.linalg import spsolve
+
+    out = np.array(height, dtype=float)
+    rows, cols = np.nonzero(holes)
+    n = rows.size
+    if n == 0:
+        return out
+    index = np.full(height.shape, -1, np.int64)
+    index[rows, cols] = np.arange(n)
+    diag = np.zeros(n)
+    rhs = np.zeros(n)
+    ii, jj = [], []
+    for dr, dc in ((-1, 0), (1, 0), (0, -1), (0, 1)):
+        rr, cc = rows + dr, cols + dc
+        other = index[rr, cc]
+        unknown = other >= 0
+        value = out[rr, cc]
+        known = ~unknown & np.isfinite(value)
+        diag += unknown | known
+        rhs[known] += value[known]
+        ii.append(np.flatnonzero(unknown))
+        jj.append(other[unknown])
+    ii, jj = np.concatenate(ii), np.concatenate(jj)
+    a = coo_matrix((np.full(ii.size, -1.0), (ii, jj)), shape=(n, n)).tocsr()
+    a = a + coo_matrix((diag, (np.arange(n), np.arange(n))), shape=(n, n)).tocsr()
+    out[rows, cols] = spsolve(a.tocsc(), rhs)
+    return out
+
+
 def rasterize(
     points: np.ndarray,
     res_m: float,
     epsg: int | None = None,
     origin: tuple[float, float] | None = None,
     shape: tuple[int, int] | None = None,
+    footprint_m: float | None = None,
+    max_hole_m: float = MAX_HOLE_M,
 ) -> DSMGrid:
-    """Grid ``(n, 3)`` lon/lat/h points (NaN rows ignored) at ``res_m``.
+    """Grid ``(n, 3)`` lon/lat/h points (NaN rows ignored) at ``res_m`` (module docstring).
 
     ``epsg`` default: the local UTM zone of the points' median; ``origin`` (upper-left corner)
     and ``shape`` default to the points' extent snapped to multiples of ``res_m``.
+    ``footprint_m``: how far from a point an empty cell's centre may lie to take its height
+    (default: the points' median spacing; 0: each point in its own cell only).
+    ``max_hole_m``: the largest hole interpolated, metres across (0: none).
     """
-    if res_m <= 0:
+    if not res_m > 0:
         raise ValueError(f"rasterize: resolution must be positive, got {res_m}")
     points = np.asarray(points, dtype=float)
     points = points[np.all(np.isfinite(points), axis=1)]
@@ -88,43 +242,44 @@ def rasterize(
     col = np.floor((xyh[:, 0] - x0) / res_m).astype(np.int64)
     row = np.floor((y0 - xyh[:, 1]) / res_m).astype(np.int64)
     inside = (row >= 0) & (row < rows) & (col >= 0) & (col < cols)
-    cell, h = row[inside] * cols + col[inside], xyh[inside, 2]
-    order = np.lexsort((h, cell))
-    cell, h = cell[order], h[order]
-    count = np.bincount(cell, minlength=rows * cols)
-    start = np.concatenate([[0], np.cumsum(count)[:-1]])
-    filled = count > 0
-    lo = start[filled] + (count[filled] - 1) // 2
-    hi = start[filled] + count[filled] // 2
-    height = np.full(rows * cols, np.nan)
-    height[filled] = 0.5 * (h[lo] + h[hi])
-    total = np.bincount(cell, weights=h, minlength=rows * cols)
-    total2 = np.bincount(cell, weights=h * h, minlength=rows * cols)
-    spread = np.full(rows * cols, np.nan)
-    mean = total[filled] / count[filled]
-    spread[filled] = np.sqrt(np.maximum(total2[filled] / count[filled] - mean**2, 0.0))
+    median, count, spread = _median_per_cell(
+        row[inside] * cols + col[inside], xyh[inside, 2], rows * cols
+    )
+    height, count, spread = (a.reshape(shape) for a in (median, count, spread))
+    if footprint_m is None:
+        footprint_m = point_spacing(xyh[inside, :2])
+    if footprint_m > 0 and np.isfinite(height).any():
+        _footprint_fill(height, count, spread, xyh, x0, y0, res_m, float(footprint_m))
+    holes = small_holes(height, max_hole_m / res_m) if max_hole_m > 0 else None
+    filled = np.zeros(shape, np.uint8)
+    if holes is not None and holes.any():
+        height = laplace_fill(height, holes)
+        filled[holes] = 1
     return DSMGrid(
-        height=height.reshape(shape).astype(np.float32),
-        count=count.reshape(shape).astype(np.uint16 if count.max() < 65535 else np.uint32),
-        spread=spread.reshape(shape).astype(np.float32),
+        height=height.astype(np.float32),
+        count=count.astype(np.uint16 if count.max() < 65535 else np.uint32),
+        spread=spread.astype(np.float32),
         x0=float(x0),
         y0=float(y0),
         res_m=float(res_m),
         epsg=int(epsg),
+        filled=filled,
     )
 
 
 def write_dsm(dsm: DSMGrid, path: str | os.PathLike, overwrite: bool = False):
-    """Tiled GeoTIFF: band 1 height (float32, NaN nodata, ellipsoidal m), band 2 count, band 3
-    spread (m)."""
+    """Tiled GeoTIFF, float32, nodata NaN, one band per entry of :data:`DSM_BANDS` in that order
+    (band description = the name; ``units`` and a ``meaning`` tag per band): ``height``
+    (ellipsoidal m), ``count``, ``spread`` (m), ``filled`` (1 = interpolated, 0 = measured)."""
     import rasterio
 
+    bands = dsm.bands()
     rows, cols = dsm.height.shape
     profile = dict(
         driver="GTiff",
         width=cols,
         height=rows,
-        count=3,
+        count=len(bands),
         dtype="float32",
         crs=f"EPSG:{dsm.epsg}",
         transform=dsm.transform,
@@ -136,10 +291,10 @@ def write_dsm(dsm: DSMGrid, path: str | os.PathLike, overwrite: bool = False):
     )
     out = atomic_output(path, overwrite=overwrite, suffix=".tif", leftovers=(".aux.xml",))
     with out as tmp, rasterio.open(tmp, "w", **profile) as dst:
-        dst.write(dsm.height, 1)
-        dst.write(dsm.count.astype(np.float32), 2)
-        dst.write(dsm.spread, 3)
-        dst.set_band_description(1, "height above WGS84 ellipsoid (m), median")
-        dst.set_band_description(2, "number of points")
-        dst.set_band_description(3, "standard deviation of the points' heights (m)")
+        for i, (name, values) in enumerate(bands.items(), start=1):
+            dst.write(values, i)
+            dst.set_band_description(i, name)
+            dst.set_band_unit(i, DSM_BANDS[name][0])
+            dst.update_tags(i, meaning=DSM_BANDS[name][1])
+        dst.update_tags(heights="ellipsoidal (WGS84), m")
     return path

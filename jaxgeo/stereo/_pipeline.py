@@ -1,18 +1,25 @@
 """The stereo chain for one pair and for N images: ties -> rectification -> SGM -> points -> DSM.
 
-For a pair (reference image, secondary image) and a ROI of the reference image:
+For a pair (reference image, secondary image) and a ROI of the reference image (matched with
+``CONTEXT_PX`` of context around it; only the ROI's points are kept):
 
-1. SIFT tie points guided by the models (:mod:`._matching`); their heights (chord-midpoint
-   triangulation) give the reference elevation of the rectification (median) and, after
-   rectification, the disparity range.
+1. Verified tie points (:func:`~jaxgeo.stereo.tie_points`); their heights give the reference
+   elevation of the rectification (median); tie points outside the models' validity cube are
+   an error naming the images (the models do not fit them).
 2. Epipolar grids at that elevation (:mod:`._rectification`) and resampling of both images.
 3. The residual vertical disparity (the models' relative bias across the epipolar lines) is
    measured with SIFT matches on the rectified pair and removed by shifting the right sampling
-   (s2p's "relative pointing correction", a translation); it is reported before and after.
-4. Semi-global matching (:mod:`._dense`), masked where either epipolar image has no data.
-5. Triangulation of every valid disparity (:mod:`._triangulation`).
+   (s2p's "relative pointing correction": a translation, or an affine trend when the matches
+   determine one); it is reported before and after. The same matches give SGM's disparity
+   range (their 0.5-99.5 percentiles, widened).
+4. Semi-global matching over bands of epipolar rows (:mod:`._dense`), masked where either
+   epipolar image has no data, then a correlation refinement of the sub-pixel disparities.
+5. Triangulation of every valid disparity (:mod:`._triangulation`); points outside the models'
+   validity cube are dropped, and most of them outside is an error naming the images.
 
-The N-image DSM pools the points of the pairs (reference, i) and rasterises them (:mod:`._dsm`).
+The N-image DSM pools the points of the pairs (reference, i) and rasterises them (:mod:`._dsm`:
+point footprints against the aliasing of the point lattice and the cells, small holes
+interpolated and flagged).
 """
 
 from __future__ import annotations
@@ -27,18 +34,34 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from ..models import AbstractSensorModel
-from ._dense import DEFAULT_SGM, SGMSettings, resample_epipolar, sgm_disparity
-from ._dsm import DSMGrid, rasterize
-from ._matching import guided_matches, sift_features, stretch_limits, to_uint8
+from ._dense import (
+    DEFAULT_SGM,
+    BandMatcher,
+    SGMSettings,
+    disparity_range,
+    epipolar_matches,
+    resample_epipolar,
+    robust_inliers,
+    vertical_disparity,
+    y_shift_at,
+)
+from ._dsm import MAX_HOLE_M, DSMGrid, local_utm_epsg, point_spacing, rasterize, to_map
+from ._matching import sift_features, stretch_limits, to_uint8
 from ._rectification import EpipolarGrids, epipolar_grids
-from ._triangulation import los_heights, triangulate
+from ._ties import tie_points
+from ._triangulation import (
+    StereoError,
+    check_ties,
+    drop_outside_validity,
+    los_heights,
+    triangulate,
+)
 
-DISPARITY_MARGIN_PX = 8.0
 MIN_TIE_POINTS = 10
+CONTEXT_PX = 16
+"""Reference-image pixels matched around the ROI (context at its edges; not in the output)."""
 BAND_ROWS = 512
 """Epipolar rows per band of dense matching (memory grows with the band, not the image)."""
-BAND_OVERLAP_ROWS = 32
-BAND_MARGIN_PX = 8
 TRIANGULATION_CHUNK = 65536
 
 
@@ -81,43 +104,51 @@ class PairProducts:
     intermediates: dict = field(default_factory=dict)
 
 
-def _sec_window(ref, sec, roi, h_range, size, margin=64):
-    col, row, w, h = roi
+def _check_roi(roi, size, path) -> tuple[int, int, int, int]:
+    if roi is None:
+        return (0, 0, *size)
+    col, row, w, h = map(int, roi)
+    if col < 0 or row < 0 or w <= 0 or h <= 0 or col + w > size[0] or row + h > size[1]:
+        raise StereoError(f"stereo: ROI {tuple(roi)} is not inside {path} ({size[0]} x {size[1]})")
+    return col, row, w, h
+
+
+def _clip(window, size) -> tuple[int, int, int, int]:
+    col, row, w, h = window
+    c0, r0 = max(col, 0), max(row, 0)
+    return c0, r0, min(col + w, size[0]) - c0, min(row + h, size[1]) - r0
+
+
+def _sec_window(ref, sec, window, h_range, size, paths, margin=64):
+    col, row, w, h = window
     xs = np.linspace(col, col + w - 1, 5)
     ys = np.linspace(row, row + h - 1, 5)
     xy = np.stack(np.meshgrid(xs, ys), axis=-1).reshape(-1, 2)
-    pts = [np.asarray(sec.project(ref.localize(xy, z))) for z in h_range]
-    pts = np.concatenate(pts)
+    pts = np.concatenate([np.asarray(sec.project(ref.localize(xy, z))) for z in h_range])
+    ref_path, sec_path = paths
     if not np.all(np.isfinite(pts)):
-        raise ValueError("stereo: the ROI does not project into the secondary image")
+        raise StereoError(
+            f"stereo: the models do not carry the ROI of {ref_path} into {sec_path} (NaN)"
+        )
     c0 = int(max(np.floor(pts[:, 0].min()) - margin, 0))
     r0 = int(max(np.floor(pts[:, 1].min()) - margin, 0))
     c1 = int(min(np.ceil(pts[:, 0].max()) + margin, size[0]))
     r1 = int(min(np.ceil(pts[:, 1].max()) + margin, size[1]))
     if c1 <= c0 or r1 <= r0:
-        raise ValueError("stereo: the ROI's footprint misses the secondary image")
+        raise StereoError(
+            f"stereo: according to the models, {sec_path} does not see the ROI of {ref_path} "
+            "(a model of another scene?)"
+        )
     return c0, r0, c1 - c0, r1 - r0
 
 
-def _epipolar_sift(left8, right8, ratio=0.8):
-    """SIFT matches between the rectified images: ``(n, 2)`` left and right epipolar xy."""
-    import cv2
-
-    xl, dl = sift_features(left8)
-    xr, dr = sift_features(right8)
-    if len(xl) < 2 or len(xr) < 2:
-        return np.zeros((0, 2)), np.zeros((0, 2))
-    knn = cv2.BFMatcher(cv2.NORM_L2).knnMatch(dl, dr, k=2)
-    good = [m[0] for m in knn if len(m) == 2 and m[0].distance < ratio * m[1].distance]
-    a = np.array([xl[m.queryIdx] for m in good]).reshape(-1, 2)
-    b = np.array([xr[m.trainIdx] for m in good]).reshape(-1, 2)
-    return a, b
-
-
-def _robust(values, k=3.5, floor=0.5):
-    med = np.median(values)
-    sigma = 1.4826 * np.median(np.abs(values - med))
-    return np.abs(values - med) <= max(k * sigma, floor)
+def _in_window(xy, window):
+    """``(n,)`` True where pixel ``xy`` falls in ``window = (col, row, w, h)`` (pixel edges)."""
+    col, row, w, h = window
+    return (
+        (xy[:, 0] >= col - 0.5) & (xy[:, 0] < col + w - 0.5)
+        & (xy[:, 1] >= row - 0.5) & (xy[:, 1] < row + h - 0.5)
+    )  # fmt: skip
 
 
 def stereo_pair(
@@ -134,16 +165,27 @@ def stereo_pair(
     band_rows: int | None = BAND_ROWS,
     on_band: Callable[[int, int], None] | None = None,
     epipolar_tol_px: float = 10.0,
+    dem=None,
+    height_range_m: tuple[float, float] | None = None,
 ) -> PairProducts:
     """3D points of a pair over ``roi = (col, row, width, height)`` of the reference image
     (whole image by default); ``method`` the triangulation (``intersect`` or
     ``los_midpoint``).
 
-    Dense matching and triangulation run over bands of ``band_rows`` epipolar rows (``None``:
-    one band), each resampled from the sensor pixels it needs; ``on_band(done, total)`` is
-    called after each band (progress). ``epipolar_tol_px``: how far from the models' epipolar
-    curves tie points may lie (the models' relative bias across the epipolar lines; the
-    rectified pair's vertical disparity is then measured and removed, whatever its size)."""
+    The epipolar images cover the ROI and ``CONTEXT_PX`` around it (the image pixels there,
+    where there are some, are context for matching at the ROI's edges); the points kept are
+    those whose reference pixel lies in the ROI. Dense matching and triangulation run over
+    bands of ``band_rows`` epipolar rows (``None``: one band), each resampled from the sensor
+    pixels it needs; ``on_band(done, total)`` is called after each band (progress).
+    Tie points: :func:`~jaxgeo.stereo.tie_points` (verified; their height range from
+    ``height_range_m`` (m, ellipsoidal), else ``dem`` (a :class:`jaxgeo.io.DEM`), else a coarse
+    matching); ``epipolar_tol_px``: how far from the models' epipolar curves they may lie (the
+    models' relative bias across the epipolar lines; the rectified pair's vertical disparity
+    is then measured and removed). Points far outside a model's RPC validity cube (by more than
+    ``BLUNDER_MARGIN`` of its half-width) are dropped (NaN). :class:`StereoError` (naming the
+    images) when the models do not fit the images: the ROI not seen by the secondary image, too
+    few verified tie points, tie points or most 3D points outside a model's validity cube, a
+    vertical disparity over ``epipolar_tol_px``."""
     log = log or (lambda _: None)
     clock = [time.perf_counter()]
 
@@ -152,69 +194,62 @@ def stereo_pair(
         stats[f"time_{name}_s"] = round(now - clock[0], 2)
         clock[0] = now
 
+    paths = (ref_path, sec_path)
     ref_size, sec_size = image_size(ref_path), image_size(sec_path)
-    if roi is None:
-        roi = (0, 0, *ref_size)
-    col, row, w, h = map(int, roi)
-    if col < 0 or row < 0 or w <= 0 or h <= 0 or col + w > ref_size[0] or row + h > ref_size[1]:
-        raise ValueError(
-            f"stereo: ROI {roi} is not inside {ref_path} ({ref_size[0]} x {ref_size[1]})"
-        )
-    roi = (col, row, w, h)
+    roi = _check_roi(roi, ref_size, ref_path)
+    col, row, w, h = roi
+    grid_win = (col - CONTEXT_PX, row - CONTEXT_PX, w + 2 * CONTEXT_PX, h + 2 * CONTEXT_PX)
+    data_win = _clip(grid_win, ref_size)
     stats: dict = {}
     h_valid = los_heights(ref)
-    win2 = _sec_window(ref, sec, roi, h_valid, sec_size)
-    img1, img2 = read_window(ref_path, roi), read_window(sec_path, win2)
+    win2 = _sec_window(ref, sec, data_win, h_valid, sec_size, paths)
+    img1, img2 = read_window(ref_path, data_win), read_window(sec_path, win2)
     log("tie points")
-    x1, d1 = sift_features(to_uint8(img1))
-    x2, d2 = sift_features(to_uint8(img2))
-    ties = guided_matches(
-        ref, sec, x1 + roi[:2], d1, x2 + win2[:2], d2, h_valid, epipolar_tol_px=epipolar_tol_px
-    )
+    ties = tie_points(
+        ref, sec, ref_path, sec_path, roi=data_win, dem=dem, height_range_m=height_range_m,
+        epipolar_tol_px=epipolar_tol_px,
+    )  # fmt: skip
     if len(ties) < MIN_TIE_POINTS:
-        raise ValueError(
-            f"stereo: only {len(ties)} tie points between {ref_path} and {sec_path} "
-            f"(need {MIN_TIE_POINTS}); check the models and the ROI"
+        raise StereoError(
+            f"stereo: only {len(ties)} verified tie points between {ref_path} and {sec_path} "
+            f"(need {MIN_TIE_POINTS}): the models do not fit the images (a model of another "
+            "image or scene?), or the ROI holds too little texture"
         )
-    ground, _ = triangulate([ref, sec], np.stack([ties.xy1, ties.xy2], axis=1), "los_midpoint")
-    heights = ground[:, 2][np.isfinite(ground[:, 2])]
-    h0 = float(np.median(heights))
-    stats.update(n_ties=len(ties), ties_across_px=float(np.median(ties.across_px)), h_ref_m=h0)
+    check_ties(ties.ground, (ref, sec), paths, MIN_TIE_POINTS)
+    h0 = float(np.nanmedian(ties.ground[:, 2]))
+    stats.update(
+        n_ties=len(ties), ties_across_px=ties.report.across_px, h_ref_m=h0,
+        ties=ties.report.as_dict(),
+    )  # fmt: skip
     lap("ties")
     log(f"{len(ties)} tie points, reference height {h0:.1f} m; rectification")
-    grids = epipolar_grids(ref, sec, roi, elevation=h0, epi_step=epi_step)
-    left = resample_epipolar(img1, grids, "left", origin_xy=roi[:2])
+    grids = epipolar_grids(ref, sec, grid_win, elevation=h0, epi_step=epi_step)
+    left = resample_epipolar(img1, grids, "left", origin_xy=data_win[:2])
     right = resample_epipolar(img2, grids, "right", origin_xy=win2[:2])
     lap("rectification")
-    a, b = _epipolar_sift(to_uint8(left), to_uint8(right))
-    dy = b[:, 1] - a[:, 1]
-    centre = np.nanmedian(dy) if len(dy) else 0.0  # the models' relative bias, if any
-    ok = (np.abs(dy - centre) < 10.0) & np.isfinite(dy)
-    ok[ok] = _robust(dy[ok])
-    if ok.sum() < MIN_TIE_POINTS:
-        raise ValueError(f"stereo: only {ok.sum()} matches on the rectified pair")
-    dy_med = float(np.median(dy[ok]))
-    dx = (b[:, 0] - a[:, 0])[ok]
-    ok_dx = _robust(dx, k=5.0, floor=3.0)
-    dmin = float(dx[ok_dx].min() - DISPARITY_MARGIN_PX)
-    dmax = float(dx[ok_dx].max() + DISPARITY_MARGIN_PX)
+    left8 = to_uint8(left)
+    left_features = sift_features(left8)
+    shift, vstats, dx = vertical_disparity(
+        left8, to_uint8(right), left_features, paths, epipolar_tol_px
+    )
+    dmin, dmax = disparity_range(dx)
     stats.update(
-        vertical_disparity_px=dy_med,
-        vertical_disparity_std_px=float(np.std(dy[ok])),
-        n_epipolar_matches=int(ok.sum()),
+        vstats,
         disparity_range_px=(dmin, dmax),
         mean_baseline_ratio_px_per_m=grids.mean_baseline_ratio,
         epipolar_shape=grids.epipolar_shape,
     )
-    right = resample_epipolar(img2, grids, "right", origin_xy=win2[:2], y_shift_px=dy_med)
-    a2, b2 = _epipolar_sift(to_uint8(left), to_uint8(right))
+    right = resample_epipolar(img2, grids, "right", origin_xy=win2[:2], y_shift_px=shift)
+    a2, b2 = epipolar_matches(left8, to_uint8(right), left_features=left_features)
     dy2 = b2[:, 1] - a2[:, 1]
-    ok2 = np.abs(dy2) < 10.0
-    ok2[ok2] = _robust(dy2[ok2])
+    ok2 = np.abs(dy2) < epipolar_tol_px
+    if ok2.any():
+        ok2[ok2] = robust_inliers(dy2[ok2])
     stats["vertical_disparity_after_px"] = float(np.median(dy2[ok2])) if ok2.any() else np.nan
     stats["vertical_disparity_after_std_px"] = float(np.std(dy2[ok2])) if ok2.any() else np.nan
     lap("vertical_disparity")
-    log(f"vertical disparity {dy_med:+.2f} px removed; SGM over [{dmin:.0f}, {dmax:.0f}] px")
+    log(f"vertical disparity {vstats['vertical_disparity_px']:+.2f} px removed; "
+        f"SGM over [{dmin:.0f}, {dmax:.0f}] px")  # fmt: skip
     # widen the epipolar images by the disparity range: the right matches of the left image's
     # edge columns lie outside its own epipolar extent
     rows_e, cols_e = grids.epipolar_shape
@@ -223,19 +258,24 @@ def stereo_pair(
     del left, right
     band = rows_e if band_rows is None else max(int(band_rows), 1)
     starts = list(range(0, rows_e, band))
-    dense = _Dense(img1, img2, roi[:2], win2[:2], grids, dy_med, (x0, x1), lims, (dmin, dmax), sgm)
+    dense = BandMatcher(
+        (img1, img2), (data_win[:2], win2[:2]), grids, shift, (x0, x1), lims, (dmin, dmax), sgm
+    )
     matches, kept, n_valid, n_disp = [], [], 0, 0
     points, sigma_h = [], []
     for k, r0 in enumerate(starts):
         r1 = min(r0 + band, rows_e)
         disp, valid_l, images = dense.band(r0, r1, keep)
-        n_valid += int(valid_l.sum())
         ye, xe = np.mgrid[r0:r1, x0:x1].astype(float)
-        sel = np.isfinite(disp)
+        xl = grids.to_sensor("left", np.stack([xe, ye], axis=-1))
+        in_roi = valid_l & _in_window(xl.reshape(-1, 2), roi).reshape(xe.shape)
+        n_valid += int(in_roi.sum())
+        sel = np.isfinite(disp) & in_roi
         n_disp += int(sel.sum())
-        xl = grids.to_sensor("left", np.stack([xe[sel], ye[sel]], axis=-1))
-        xr = grids.to_sensor("right", np.stack([xe[sel] + disp[sel], ye[sel] + dy_med], axis=-1))
-        matches.append(np.stack([xl, xr], axis=1))
+        xr_e = xe[sel] + disp[sel]
+        yr_e = ye[sel] + y_shift_at(shift, xr_e, ye[sel])
+        xr = grids.to_sensor("right", np.stack([xr_e, yr_e], axis=-1))
+        matches.append(np.stack([xl[sel], xr], axis=1))
         if keep:
             kept.append((disp, *images))
         pending = sum(len(m) for m in matches)
@@ -251,6 +291,7 @@ def stereo_pair(
     lap("sgm_triangulation")
     points = np.concatenate(points)
     sigma_h = np.concatenate(sigma_h)
+    stats.update(drop_outside_validity(points, (ref, sec), paths))
     if method == "intersect" and np.isfinite(sigma_h).any():
         stats["median_sigma_h_m"] = float(np.nanmedian(sigma_h))
     log(f"{len(points)} points ({method})")
@@ -267,66 +308,6 @@ def stereo_pair(
             ties_xy2=ties.xy2,
         )
     return products
-
-
-class _Dense:
-    """SGM over bands of epipolar rows: each band is resampled from the sensor pixels it needs,
-    with ``BAND_OVERLAP_ROWS`` of context above and below (SGM's vertical paths) dropped after
-    matching, so the result matches one pass over the whole image up to those paths' reach."""
-
-    def __init__(self, img1, img2, origin1, origin2, grids, dy, x_range, lims, drange, sgm):
-        self.img = {"left": img1, "right": img2}
-        self.origin = {"left": np.asarray(origin1, float), "right": np.asarray(origin2, float)}
-        self.shift = {"left": 0.0, "right": dy}
-        self.grids, self.x_range, self.lims, self.drange, self.sgm = (
-            grids, x_range, lims, drange, sgm
-        )  # fmt: skip
-
-    def _resample(self, side, ra, rb):
-        """Epipolar rows ``[ra, rb)`` of ``side`` from the part of the image they sample."""
-        x0, x1 = self.x_range
-        border = np.concatenate([
-            np.stack([np.arange(x0, x1 + 1, 8.0), np.full_like(np.arange(x0, x1 + 1, 8.0), y)], -1)
-            for y in (ra, rb)
-        ] + [np.stack([np.full_like(np.arange(ra, rb + 1, 8.0), x), np.arange(ra, rb + 1, 8.0)],
-                      -1) for x in (x0, x1)])  # fmt: skip
-        border[:, 1] += self.shift[side]
-        sensor = self.grids.to_sensor(side, border) - self.origin[side]
-        image = self.img[side]
-        h, w = image.shape
-        c0 = int(np.clip(np.floor(sensor[:, 0].min()) - BAND_MARGIN_PX, 0, w))
-        c1 = int(np.clip(np.ceil(sensor[:, 0].max()) + BAND_MARGIN_PX + 1, c0, w))
-        r0 = int(np.clip(np.floor(sensor[:, 1].min()) - BAND_MARGIN_PX, 0, h))
-        r1 = int(np.clip(np.ceil(sensor[:, 1].max()) + BAND_MARGIN_PX + 1, r0, h))
-        if c1 <= c0 or r1 <= r0:
-            return np.full((rb - ra, x1 - x0), np.nan, np.float32)
-        return resample_epipolar(
-            image[r0:r1, c0:c1], self.grids, side,
-            origin_xy=tuple(float(v) for v in self.origin[side] + (c0, r0)),
-            y_shift_px=self.shift[side], x_range=self.x_range, y_range=(ra, rb),
-        )  # fmt: skip
-
-    def band(self, r0, r1, keep=False):
-        """Disparity ``(r1 - r0, width)`` of epipolar rows ``[r0, r1)`` (NaN = none), the left
-        image's valid mask there, and (``keep``) both epipolar images of the band."""
-        rows_e = self.grids.epipolar_shape[0]
-        ra, rb = max(r0 - BAND_OVERLAP_ROWS, 0), min(r1 + BAND_OVERLAP_ROWS, rows_e)
-        left, right = self._resample("left", ra, rb), self._resample("right", ra, rb)
-        valid_l, valid_r = np.isfinite(left), np.isfinite(right)
-        disp = sgm_disparity(
-            to_uint8(left, self.lims[0]), to_uint8(right, self.lims[1]), *self.drange, self.sgm,
-            valid=valid_l,
-        )  # fmt: skip
-        x0, x1 = self.x_range
-        ye, xe = np.mgrid[0 : rb - ra, x0:x1]
-        xr = np.rint(xe + np.nan_to_num(disp)).astype(np.int64) - x0
-        in_r = (xr >= 0) & (xr < x1 - x0)
-        ok_r = np.zeros_like(valid_l)
-        ok_r[in_r] = valid_r[ye[in_r], xr[in_r]]
-        disp = np.where(ok_r, disp, np.nan)
-        core = slice(r0 - ra, r1 - ra)
-        images = (left[core], right[core]) if keep else ()
-        return disp[core], valid_l[core], images
 
 
 def _triangulate(ref, sec, matches, method):
@@ -356,9 +337,15 @@ def dsm_from_images(
     progress: bool = False,
     register: bool = True,
     band_rows: int | None = BAND_ROWS,
+    dem=None,
+    height_range_m: tuple[float, float] | None = None,
+    max_hole_m: float = MAX_HOLE_M,
 ) -> tuple[DSMGrid, list[dict]]:
     """DSM of ``roi`` of the first image from the pairs (first, i): pooled points, median per
-    cell. Returns the grid and each pair's stats.
+    cell (:func:`rasterize`: each point also stands for the cells its footprint covers, the
+    pairs' point spacing; holes up to ``max_hole_m`` across interpolated and flagged in the
+    ``filled`` band). Returns the grid and each pair's stats. ``dem`` / ``height_range_m``: the
+    tie points' height range (:func:`stereo_pair`).
 
     ``register``: with three or more images, remove each pair's height offset relative to the
     per-cell median of the pairs before pooling. One pair cannot observe the component of the
@@ -371,7 +358,10 @@ def dsm_from_images(
     ``band_rows``: epipolar rows per band of dense matching (:func:`stereo_pair`); ``progress``:
     a progress bar per pair (tqdm, on stderr)."""
     if len(models) != len(paths) or len(paths) < 2:
-        raise ValueError("dsm: give at least two images, each with its model")
+        raise StereoError(
+            f"dsm: give at least two images, each with its model ({len(paths)} images, "
+            f"{len(models)} models)"
+        )
     all_points, all_stats = [], []
     n = len(paths) - 1
     for i in range(1, len(paths)):
@@ -380,6 +370,7 @@ def dsm_from_images(
             pair = stereo_pair(
                 models[0], models[i], paths[0], paths[i], roi, method=method,
                 keep=keep_dir is not None, log=bar.log, band_rows=band_rows, on_band=bar.band,
+                dem=dem, height_range_m=height_range_m,
             )  # fmt: skip
         finally:
             bar.close()
@@ -396,8 +387,23 @@ def dsm_from_images(
         for pts, st, off in zip(all_points, all_stats, offsets, strict=True):
             pts[:, 2] -= off
             st["height_offset_removed_m"] = float(off)
-    dsm = rasterize(np.concatenate(all_points), res_m, epsg=epsg, origin=origin, shape=shape)
+    # a point's footprint is its own pair's spacing (pooled pairs interleave their lattices)
+    footprint = max(_spacing(p, epsg) for p in all_points)
+    dsm = rasterize(
+        np.concatenate(all_points), res_m, epsg=epsg, origin=origin, shape=shape,
+        footprint_m=footprint, max_hole_m=max_hole_m,
+    )  # fmt: skip
     return dsm, all_stats
+
+
+def _spacing(points, epsg):
+    """Median distance (m) between neighbouring points of one pair (0 for too few points)."""
+    points = points[np.all(np.isfinite(points), axis=1)]
+    if len(points) < 2:
+        return 0.0
+    if epsg is None:
+        epsg = local_utm_epsg(*(float(v) for v in np.median(points[:, :2], axis=0)))
+    return point_spacing(to_map(points, epsg)[:, :2])
 
 
 class _Progress:
@@ -430,9 +436,17 @@ def _height_offsets(all_points, res_m, epsg):
     """Per pair, the median over shared cells of its height minus the per-cell median of all
     pairs: the pairs' relative height offsets (zero-sum for two pairs)."""
     pooled = np.concatenate(all_points)
-    base = rasterize(pooled, res_m, epsg=epsg)
+    measured = dict(footprint_m=0.0, max_hole_m=0.0)  # the cells' own points only
+    base = rasterize(pooled, res_m, epsg=epsg, **measured)
     maps = [
-        rasterize(p, res_m, epsg=base.epsg, origin=(base.x0, base.y0), shape=base.height.shape)
+        rasterize(
+            p,
+            res_m,
+            epsg=base.epsg,
+            origin=(base.x0, base.y0),
+            shape=base.height.shape,
+            **measured,
+        )  # fmt: skip
         for p in all_points
     ]
     stack = np.stack([m.height for m in maps])

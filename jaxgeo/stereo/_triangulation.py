@@ -22,10 +22,101 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
+from ..errors import JaxgeoError
 from ..geodesy import ecef_to_geodetic, geodetic_to_ecef
 from ..intersect import IntersectResult, intersect
 from ..models import AbstractSensorModel
 from ._rectification import EpipolarGrids
+
+VALIDITY_MARGIN = 0.1
+"""How far past its RPC's validity cube a 3D point still counts as inside, in cube half-widths
+(most points outside: the model does not fit the images)."""
+BLUNDER_MARGIN = 0.5
+"""How far past the validity cube a single 3D point is dropped as a blunder (half-widths)."""
+
+
+class StereoError(JaxgeoError, ValueError):
+    """A stereo pair jaxgeo refuses: the message names the images and what does not fit (an ROI
+    the other image does not see, tie points or 3D points outside the models' validity, an
+    offset across the epipolar lines larger than any relative bias)."""
+
+
+def outside_validity(
+    points: np.ndarray, model: AbstractSensorModel, margin: float = VALIDITY_MARGIN
+) -> np.ndarray:
+    """``(n,)`` True where a finite lon/lat/h point lies outside ``model``'s RPC validity cube
+    widened by ``margin`` half-widths (never for a model without an RPC)."""
+    points = np.asarray(points, dtype=float)
+    rpc = model.base_rpc()
+    finite = np.all(np.isfinite(points), axis=-1)
+    if rpc is None:
+        return np.zeros(points.shape[:-1], bool)
+    offset = np.asarray(rpc.ground_offset, dtype=float)
+    scale = np.abs(np.asarray(rpc.ground_scale, dtype=float))
+    normalised = np.abs(points - offset) / scale
+    return finite & np.any(normalised > 1.0 + margin, axis=-1)
+
+
+def describe_validity(model: AbstractSensorModel) -> str:
+    """The RPC validity cube of ``model`` in words (lon, lat, h ranges)."""
+    rpc = model.base_rpc()
+    if rpc is None:
+        return "no RPC validity cube"
+    lo, hi = np.asarray(rpc.validity_cube(), dtype=float)
+    return (
+        f"lon {lo[0]:.4f}..{hi[0]:.4f} deg, lat {lo[1]:.4f}..{hi[1]:.4f} deg, "
+        f"h {lo[2]:.0f}..{hi[2]:.0f} m"
+    )
+
+
+def _refuse_outside(points, models, paths, what):
+    """:class:`StereoError` when most of the finite ``points`` lie outside the validity cube of
+    one or both models (named with their images)."""
+    finite = np.all(np.isfinite(points), axis=1)
+    n = int(finite.sum())
+    counts = [int(outside_validity(points, m).sum()) for m in models]
+    bad = [i for i, c in enumerate(counts) if n and c > 0.5 * n]
+    if bad:
+        h = points[finite, 2]
+        whose = " and ".join(f"of {paths[i]} ({describe_validity(models[i])})" for i in bad)
+        raise StereoError(
+            f"stereo: {max(counts[i] for i in bad)} of the {n} {what} of {paths[0]} and "
+            f"{paths[1]} lie outside the validity of the model{'s' * (len(bad) > 1)} {whose}, "
+            f"at heights {np.percentile(h, 5):.0f}..{np.percentile(h, 95):.0f} m: the models "
+            "do not fit the images (a model of another image or scene?)"
+        )
+
+
+def check_ties(
+    ground: np.ndarray,
+    models: Sequence[AbstractSensorModel],
+    paths: Sequence,
+    min_ties: int = 10,
+) -> None:
+    """:class:`StereoError` naming the images when fewer than ``min_ties`` of the tie points
+    ``ground`` ``(n, 3)`` triangulate, or most of them lie outside a model's validity cube: the
+    models do not fit the images (``paths``: the images of ``models``)."""
+    finite = np.all(np.isfinite(ground), axis=1)
+    if finite.sum() < min_ties:
+        raise StereoError(
+            f"stereo: only {finite.sum()} of the {len(ground)} tie points between {paths[0]} "
+            f"and {paths[1]} triangulate: the models do not fit the images"
+        )
+    _refuse_outside(ground, models, paths, "tie points")
+
+
+def drop_outside_validity(
+    points: np.ndarray, models: Sequence[AbstractSensorModel], paths: Sequence
+) -> dict:
+    """Most of the 3D points ``(n, 3)`` outside a model's validity cube: :class:`StereoError`
+    naming the images whose models they leave. Otherwise the points farther than
+    ``BLUNDER_MARGIN`` outside a cube are set to NaN (in place: gross mismatches); returns
+    ``n_points`` (kept) and ``n_points_outside_validity`` (dropped)."""
+    n = int(np.all(np.isfinite(points), axis=1).sum())
+    _refuse_outside(points, models, paths, "3D points")
+    outside = np.logical_or.reduce([outside_validity(points, m, BLUNDER_MARGIN) for m in models])
+    points[outside] = np.nan
+    return dict(n_points=n - int(outside.sum()), n_points_outside_validity=int(outside.sum()))
 
 
 def disparity_to_matches(

@@ -27,7 +27,7 @@ def test_dsm_cli_pair_against_s2p(shared_data, tmp_path, capsys):
     with rasterio.open(folder / "expected_dsm.tif") as f:
         ref, ref_transform, ref_crs = f.read(1), f.transform, f.crs
     with rasterio.open(out) as f:
-        assert f.count == 3 and f.profile["tiled"]
+        assert f.count == 4 and f.profile["tiled"]
         ours = np.full(ref.shape, np.nan, np.float32)
         reproject(
             f.read(1), ours, src_transform=f.transform, src_crs=f.crs, dst_transform=ref_transform,
