@@ -87,6 +87,86 @@ def add_image_options(parser: argparse.ArgumentParser) -> None:
     )
 
 
+def add_dem_options(parser: argparse.ArgumentParser, use: str) -> None:
+    """``--dem``, ``--dem-height``, ``--geoid`` (``use``: what the DEM is for, in the help)."""
+    parser.add_argument("--dem", default=None, metavar="DEM", help=f"DEM raster (any CRS): {use}")
+    parser.add_argument(
+        "--dem-height",
+        choices=("ellipsoidal", "orthometric"),
+        default=None,
+        help="height reference of the DEM values (default: the file's vertical CRS if it "
+        "declares EGM96/EGM2008, else ellipsoidal)",
+    )
+    parser.add_argument(
+        "--geoid",
+        default=None,
+        help="egm96, egm2008 (PROJ grids) or a geoid grid file, for orthometric DEMs (implies "
+        "--dem-height orthometric)",
+    )
+
+
+def add_heights(parser: argparse.ArgumentParser) -> None:
+    parser.add_argument(
+        "--heights",
+        type=float,
+        nargs=2,
+        default=None,
+        metavar=("HMIN", "HMAX"),
+        help="height range of the terrain, ellipsoidal m (default: from --dem, else from a "
+        "first coarse matching)",
+    )
+
+
+def check_dem_options(args: argparse.Namespace) -> None:
+    """``--heights`` finite and ordered; ``--geoid`` / ``--dem-height`` only with ``--dem``."""
+    import math
+
+    from . import CommandError
+
+    if getattr(args, "heights", None) is not None:
+        lo, hi = args.heights
+        if not (math.isfinite(lo) and math.isfinite(hi) and lo < hi):
+            raise CommandError(f"--heights {lo:g} {hi:g}: need finite HMIN < HMAX (metres)")
+    if args.geoid is not None and args.dem is None:
+        raise CommandError("--geoid applies to a DEM: give --dem too")
+    if args.dem_height is not None and args.dem is None:
+        raise CommandError("--dem-height applies to a DEM: give --dem too")
+
+
+def dem_inputs(args: argparse.Namespace) -> list[pathlib.Path]:
+    """The DEM and geoid files among a command's inputs."""
+    files = [pathlib.Path(args.dem)] if args.dem is not None else []
+    if args.geoid is not None and pathlib.Path(args.geoid).exists():
+        files.append(pathlib.Path(args.geoid))
+    return files
+
+
+def open_dem(args: argparse.Namespace):
+    """The :class:`~jaxgeo.io.DEM` of ``--dem`` (``None`` without one); its height reference
+    is printed on stderr unless ``--quiet``."""
+    if args.dem is None:
+        return None
+    from ..io import read_dem
+
+    dem = read_dem(args.dem, height=args.dem_height, geoid=args.geoid)
+    note(dem.describe(), getattr(args, "quiet", False))
+    return dem
+
+
+def check_roi(roi, image) -> tuple[int, int, int, int]:
+    """``--roi X Y W H`` inside the raster of ``image``, else a named error."""
+    from . import CommandError
+
+    x, y, w, h = roi
+    width, height = image.size
+    if x < 0 or y < 0 or w <= 0 or h <= 0 or x + w > width or y + h > height:
+        raise CommandError(
+            f"--roi {x} {y} {w} {h}: not inside {image.path} ({width} x {height} px; need "
+            "X, Y >= 0, W, H > 0, X + W <= width, Y + H <= height)"
+        )
+    return (x, y, w, h)
+
+
 def _by_image(specs: Sequence[str], images: Sequence[str], option: str) -> dict[str, str]:
     """``{image path: value}`` from ``IMG=VALUE`` specs; IMG is the path as given, its file name
     or its stem; a spec without ``IMG=`` is allowed when there is one image."""

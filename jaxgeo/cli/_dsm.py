@@ -22,11 +22,17 @@ import math
 
 from ._common import (
     add_command,
+    add_dem_options,
+    add_heights,
     add_image_options,
     add_json,
     add_out,
     add_quiet,
+    check_dem_options,
+    check_roi,
+    dem_inputs,
     guard_outputs,
+    open_dem,
     open_images,
     print_json,
 )
@@ -67,6 +73,16 @@ def register(sub) -> None:
         default=512,
         metavar="N",
         help="epipolar rows per band of dense matching (default 512; memory follows it)",
+    )
+    add_dem_options(parser, "its heights over the footprint, +-50 m, give the tie points' range")
+    add_heights(parser)
+    parser.add_argument(
+        "--max-hole",
+        type=float,
+        default=4.0,
+        metavar="M",
+        help="interpolate holes up to M metres across (flagged in the 'filled' band; default 4, "
+        "0: none)",
     )
     parser.add_argument("--keep", metavar="DIR", help="write intermediate products to this folder")
     parser.add_argument(
@@ -110,21 +126,6 @@ def output_epsg(crs: str | None) -> int | None:
     return int(code)
 
 
-def check_roi(roi, image) -> tuple[int, int, int, int] | None:
-    """``--roi`` inside the reference image, else a named error."""
-    from . import CommandError
-
-    if roi is None:
-        return None
-    x, y, w, h = roi
-    width, height = image.size
-    if w <= 0 or h <= 0 or x < 0 or y < 0 or x + w > width or y + h > height:
-        raise CommandError(
-            f"--roi {x} {y} {w} {h}: not inside {image.path} ({width} x {height} px)"
-        )
-    return (x, y, w, h)
-
-
 def footprint_cells(image, roi, res_m: float, epsg: int | None) -> tuple[float, float]:
     """Approximate DSM size (rows, cols) of ``roi`` of ``image`` at ``res_m``: its corners
     localised at the model's reference height, in the output CRS."""
@@ -158,13 +159,16 @@ def run(args: argparse.Namespace) -> int:
         raise CommandError(f"--band-rows {args.band_rows}: expected a positive number of rows")
     if not (math.isfinite(args.res) and args.res > 0):
         raise CommandError(f"--res {args.res:g}: expected a positive cell size in metres")
+    if not (math.isfinite(args.max_hole) and args.max_hole >= 0):
+        raise CommandError(f"--max-hole {args.max_hole:g}: expected metres >= 0")
+    check_dem_options(args)
     epsg = output_epsg(args.crs)
     images = open_images(args.images, args)
-    inputs = [p for im in images for p in im.inputs]
+    inputs = [p for im in images for p in im.inputs] + dem_inputs(args)
     guard_outputs([args.out], inputs, args.overwrite)
     if args.keep is not None:
         guard_outputs([], inputs, True)  # the folder is created; its files are new names
-    roi = check_roi(args.roi, images[0])
+    roi = check_roi(args.roi, images[0]) if args.roi is not None else None
     rows, cols = footprint_cells(images[0], roi, args.res, epsg)
     if math.isfinite(rows) and rows * cols > args.max_cells:
         raise CommandError(
@@ -187,15 +191,20 @@ def run(args: argparse.Namespace) -> int:
         progress=not args.quiet,
         register=not args.no_register,
         band_rows=args.band_rows,
+        dem=open_dem(args),
+        height_range_m=tuple(args.heights) if args.heights else None,
+        max_hole_m=args.max_hole,
     )
     write_dsm(dsm, args.out, overwrite=args.overwrite)
     filled = float(np.isfinite(dsm.height).mean())
+    interpolated = float((dsm.filled == 1).mean())
     result = {
         "output": str(args.out),
         "epsg": dsm.epsg,
         "res_m": dsm.res_m,
         "shape": list(dsm.height.shape),
         "filled": round(filled, 4),
+        "interpolated": round(interpolated, 4),
         "pairs": [
             {"images": [images[0].name, images[i + 1].name], **st} for i, st in enumerate(stats)
         ],
@@ -205,10 +214,14 @@ def run(args: argparse.Namespace) -> int:
         return 0
     rows, cols = dsm.height.shape
     print(f"wrote {args.out}: {cols} x {rows} cells of {dsm.res_m:g} m, EPSG:{dsm.epsg}, "
-          f"{100 * filled:.1f}% with a height (ellipsoidal, m)")  # fmt: skip
+          f"{100 * filled:.1f}% with a height (ellipsoidal, m), {100 * interpolated:.1f}% "
+          "of them interpolated (band 'filled')")  # fmt: skip
     for pair in result["pairs"]:
         a, b = pair["images"]
         parts = [f"{pair.get('n_ties', '?')} ties"]
+        if pair.get("n_points_outside_validity"):
+            parts.append(f"{pair['n_points_outside_validity']} points outside the models' "
+                         "validity cube dropped")  # fmt: skip
         if "vertical_disparity_px" in pair:
             parts.append(f"vertical disparity {pair['vertical_disparity_px']:+.2f} px removed")
         if "disparity_fill" in pair:

@@ -21,16 +21,21 @@ from __future__ import annotations
 
 import argparse
 import math
-import pathlib
 
 from ._common import (
     add_command,
+    add_dem_options,
+    add_heights,
     add_image_options,
     add_json,
     add_out,
     add_quiet,
+    check_dem_options,
+    check_roi,
+    dem_inputs,
     guard_outputs,
     note,
+    open_dem,
     open_images,
     print_json,
 )
@@ -56,18 +61,8 @@ def register(sub) -> None:
                         help="images (two or more rasters; each pair is matched)")  # fmt: skip
     add_image_options(parser)
     add_out(parser, "TIES.csv", "the tie points CSV (id,image,x,y,sigma_px) jaxgeo adjust reads")
-    parser.add_argument("--dem", default=None, metavar="DEM",
-                        help="DEM raster (any CRS) whose heights over the footprint, +-50 m, give "
-                        "the height range (default: a first coarse matching finds it)")  # fmt: skip
-    parser.add_argument("--dem-height", choices=("ellipsoidal", "orthometric"), default=None,
-                        help="height reference of the DEM values (default: the file's vertical "
-                        "CRS if it declares EGM96/EGM2008, else ellipsoidal)")  # fmt: skip
-    parser.add_argument("--geoid", default=None,
-                        help="egm96, egm2008 (PROJ grids) or a geoid grid file, for orthometric "
-                        "DEMs (implies --dem-height orthometric)")  # fmt: skip
-    parser.add_argument("--heights", type=float, nargs=2, default=None, metavar=("HMIN", "HMAX"),
-                        help="height range to search, ellipsoidal m (default: from --dem, else "
-                        "from a coarse matching)")  # fmt: skip
+    add_dem_options(parser, "its heights over the footprint, +-50 m, give the height range")
+    add_heights(parser)
     parser.add_argument("--roi", type=int, nargs=4, default=None, metavar=("X", "Y", "W", "H"),
                         help="search only this window of the first image (column, row, width, "
                         "height, px)")  # fmt: skip
@@ -88,39 +83,11 @@ def _check_options(args) -> None:
 
     if len(args.images) < 2:
         raise CommandError("give at least two images")
-    if args.heights is not None:
-        lo, hi = args.heights
-        if not (math.isfinite(lo) and math.isfinite(hi) and lo < hi):
-            raise CommandError(f"--heights {lo:g} {hi:g}: need finite HMIN < HMAX (metres)")
     for name in ("tol", "sigma"):
         value = getattr(args, name)
         if not (math.isfinite(value) and value > 0):
             raise CommandError(f"--{name} {value:g}: must be a number > 0 (px)")
-    if args.geoid is not None and args.dem is None:
-        raise CommandError("--geoid applies to a DEM: give --dem too")
-    if args.dem_height is not None and args.dem is None:
-        raise CommandError("--dem-height applies to a DEM: give --dem too")
-
-
-def _check_roi(roi, image) -> None:
-    from . import CommandError
-
-    x, y, w, h = roi
-    width, height = image.size
-    if x < 0 or y < 0 or w <= 0 or h <= 0 or x + w > width or y + h > height:
-        raise CommandError(
-            f"--roi {x} {y} {w} {h}: not inside {image.path} ({width} x {height} px; need "
-            "X, Y >= 0, W, H > 0, X + W <= width, Y + H <= height)"
-        )
-
-
-def _inputs(images, args) -> list[pathlib.Path]:
-    files = [p for im in images for p in im.inputs]
-    if args.dem is not None:
-        files.append(pathlib.Path(args.dem))
-    if args.geoid is not None and pathlib.Path(args.geoid).exists():
-        files.append(pathlib.Path(args.geoid))
-    return files
+    check_dem_options(args)
 
 
 def summary(names, report) -> list[str]:
@@ -166,23 +133,22 @@ def run(args: argparse.Namespace) -> int:
 
     import numpy as np
 
-    from ..io import Observations, read_dem, write_observations
+    from ..io import Observations, write_observations
     from ..stereo import join_ties, sift_features_raster, tie_points
     from . import CommandError
 
     _check_options(args)
     images = open_images(args.images, args)
-    out = guard_outputs([args.out], _inputs(images, args), args.overwrite)[0]  # before any work
+    inputs = [p for im in images for p in im.inputs] + dem_inputs(args)
+    out = guard_outputs([args.out], inputs, args.overwrite)[0]  # before any work
     if args.roi is not None:
-        _check_roi(args.roi, images[0])
+        check_roi(args.roi, images[0])
     dem = None
     if args.dem is not None:
         with warnings.catch_warnings(record=True) as caught:
             warnings.simplefilter("always")
-            dem = read_dem(args.dem, height=args.dem_height, geoid=args.geoid)
+            dem = open_dem(args)
         _warnings(caught)
-        geoid = " (the geoid's undulation added)" if dem.geoid is not None else ""
-        note(f"DEM {args.dem}: {dem.height_reference} heights{geoid}", args.quiet)
     features = []
     for k, im in enumerate(images):
         note(f"SIFT keypoints of {im.name} ({k + 1}/{len(images)})", args.quiet)
