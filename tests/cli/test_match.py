@@ -92,7 +92,7 @@ def test_ventoux_crops(ventoux_copy, tmp_path, capsys, use_dem):
     assert "offset across the epipolar curves -4.7" in captured.out
     assert ("(dem;" if use_dem else "(coarse matching,") in captured.out
     if use_dem:
-        assert "orthometric heights (the geoid's undulation added)" in captured.err
+        assert "orthometric heights + egm96_15_crop_lon3-8_lat42-47.gtx undulation" in captured.err
     obs = read_observations(out)
     assert_no_duplicates(obs)
     xy1, xy2 = pair_points(obs, "left_image", "right_image")
