@@ -42,7 +42,7 @@ from ._ties import TieError as TieError
 from ._ties import TiePoints as TiePoints
 from ._ties import TieReport as TieReport
 from ._ties import TieWarning as TieWarning
-from ._ties import dem_heights as dem_heights
+from ._ties import footprint_dem_heights as footprint_dem_heights
 from ._ties import join_ties as join_ties
 from ._ties import tie_points as tie_points
 from ._ties import validity_heights as validity_heights

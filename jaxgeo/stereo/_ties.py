@@ -165,7 +165,7 @@ def _roi_points(roi, n=5) -> np.ndarray:
     return np.stack(np.meshgrid(xs, ys), axis=-1).reshape(-1, 2)
 
 
-def dem_heights(
+def footprint_dem_heights(
     model: AbstractSensorModel, dem, roi: tuple[int, int, int, int], iterations: int = 8
 ) -> tuple[float, float]:
     """Lowest and highest DEM height (m) over the footprint of ``roi = (col, row, w, h)`` of an
@@ -362,7 +362,7 @@ def _height_range(model1, model2, height_range_m, dem, roi1, margin_m, path1):
             )
         return (lo, hi), "given", validity
     if dem is not None:
-        lo, hi = dem_heights(model1, dem, roi1)
+        lo, hi = footprint_dem_heights(model1, dem, roi1)
         wanted = (lo - margin_m, hi + margin_m)
         rng = _intersect_ranges(wanted, validity)
         if rng[0] >= rng[1]:
