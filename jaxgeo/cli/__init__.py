@@ -62,6 +62,13 @@ def build_parser(command: str | None = None) -> argparse.ArgumentParser:
                 continue  # sub-command not part of this build
             raise
         module.register(sub)
+        command_parser = sub.choices.get(name)
+        if command_parser is not None and not command_parser.epilog:
+            # every command documents its exit status: the shared codes by default
+            from ._common import exit_codes
+
+            command_parser.epilog = exit_codes()
+            command_parser.formatter_class = argparse.RawDescriptionHelpFormatter
     return parser
 
 
