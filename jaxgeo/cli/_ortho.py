@@ -31,7 +31,7 @@ def register(sub) -> None:
     parser.add_argument("--crs", default=None, help="output CRS, e.g. EPSG:32631 (default UTM)")
     parser.add_argument("--res", type=float, default=None, help="output pixel size (CRS units)")
     parser.add_argument("--resampling", choices=("nearest", "bilinear", "cubic"),
-                        default="bilinear")  # fmt: skip
+                        default="bilinear", help="image resampling (default bilinear)")  # fmt: skip
     parser.add_argument(
         "--bounds",
         nargs=4,
