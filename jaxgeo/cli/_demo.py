@@ -15,7 +15,6 @@ import dataclasses
 
 def register(sub) -> None:
     from ..models import BIAS_KINDS
-
     from ._common import add_command
 
     parser = add_command(
