@@ -25,6 +25,8 @@ from ._dsm import DSM_BANDS as DSM_BANDS
 from ._dsm import DSMGrid as DSMGrid
 from ._dsm import rasterize as rasterize
 from ._dsm import write_dsm as write_dsm
+from ._join import JoinedTies as JoinedTies
+from ._join import join_ties as join_ties
 from ._matching import Candidates as Candidates
 from ._matching import Matches as Matches
 from ._matching import epipolar_candidates as epipolar_candidates
@@ -37,13 +39,11 @@ from ._pipeline import dsm_from_images as dsm_from_images
 from ._pipeline import stereo_pair as stereo_pair
 from ._rectification import EpipolarGrids as EpipolarGrids
 from ._rectification import epipolar_grids as epipolar_grids
-from ._ties import JoinedTies as JoinedTies
 from ._ties import TieError as TieError
 from ._ties import TiePoints as TiePoints
 from ._ties import TieReport as TieReport
 from ._ties import TieWarning as TieWarning
 from ._ties import footprint_dem_heights as footprint_dem_heights
-from ._ties import join_ties as join_ties
 from ._ties import tie_points as tie_points
 from ._ties import validity_heights as validity_heights
 from ._triangulation import StereoError as StereoError
