@@ -19,7 +19,8 @@ with contextlib.redirect_stdout(out):
     except SystemExit as e:
         assert e.code == 0, e.code
 heavy = sorted(m for m in sys.modules if m == "jax" or m.startswith(("jax.", "jaxgeo.strip",
-               "jaxgeo.bundle", "jaxgeo.models", "jaxgeo.cli.")))
+               "jaxgeo.bundle", "jaxgeo.models", "jaxgeo.cli."))
+               and m != "jaxgeo.cli._common")  # the shared option helpers: no sub-command
 print(out.getvalue())
 print("HEAVY", heavy)
 """
