@@ -11,7 +11,7 @@ import pytest
 from jaxgeo.cli import main
 from jaxgeo.io import open_image, read_dem, read_observations
 from jaxgeo.stereo import triangulate
-from tests.stereo.test_ties import dsm_heights
+from tests.stereo.test_tie_points import dsm_heights
 
 
 def digests(paths):
