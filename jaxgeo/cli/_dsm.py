@@ -2,16 +2,22 @@
 
     jaxgeo dsm IMG1 IMG2 [IMG3 ...] [--model IMG=FILE ...] [--image-origin IMG=COL,ROW ...]
                [--roi X Y W H] [--res M] [--crs EPSG:n] [--triangulation {intersect,los_midpoint}]
-               [--no-register] [--band-rows N] [--keep DIR] [--quiet] [--json] -o dsm.tif
-               [--overwrite]
+               [--no-register] [--band-rows N] [--orientation adjusted_models.json]
+               [--keep DIR] [--quiet] [--json] -o dsm.tif [--overwrite]
 
 IMG1 is the reference: each pair (IMG1, IMGi) is rectified, matched densely (SGM) and
 triangulated; the points are pooled into one height per cell (median; bands: height above the
-WGS84 ellipsoid, count, spread, ...). ``--roi`` in pixels of IMG1 (default: all of it);
-``--res`` metres (default 0.5); CRS default the local UTM zone (a projected CRS in metres; a
-geographic CRS is refused). ``--keep DIR`` writes each pair's intermediate products. Dense
-matching runs over bands of ``--band-rows`` epipolar rows (default 512), so its memory follows
-the band, not the image. Everything given is checked before any computation: the images and
+WGS84 ellipsoid, count, spread, filled, height_sigma). ``height_sigma`` is the height's
+standard deviation per cell (m): the matching's (from each disparity's correlation peak) and,
+with ``--orientation DIR/adjusted_models.json`` (written by ``jaxgeo adjust --out DIR``, whose
+adjusted RPCs are the images' models), the adjusted models' posterior uncertainty, propagated
+through the intersection; without it the models' orientation error is not in the sigma (vendor
+RPCs carry a few pixels of bias that no sigma here describes). ``--roi`` in pixels of IMG1
+(default: all of it); ``--res`` metres (default 0.5); CRS default the local UTM zone (a
+projected CRS in metres; a geographic CRS is refused). ``--keep DIR`` writes each pair's
+intermediate products. Dense matching runs over bands of ``--band-rows`` epipolar rows (default
+512), so its memory follows the band, not the image.
+Everything given is checked before any computation: the images and
 their models, the ROI, the CRS, the output (never an input) and the DSM's size.
 """
 
@@ -73,6 +79,12 @@ def register(sub) -> None:
         default=512,
         metavar="N",
         help="epipolar rows per band of dense matching (default 512; memory follows it)",
+    )
+    parser.add_argument(
+        "--orientation",
+        metavar="JSON",
+        help="adjusted_models.json of `jaxgeo adjust --out` for these images: their posterior "
+        "bias sigmas enter the height_sigma band (default: matching only)",
     )
     add_dem_options(parser, "its heights over the footprint, +-50 m, give the tie points' range")
     add_heights(parser)
@@ -165,6 +177,15 @@ def run(args: argparse.Namespace) -> int:
     epsg = output_epsg(args.crs)
     images = open_images(args.images, args)
     inputs = [p for im in images for p in im.inputs] + dem_inputs(args)
+    orientation = None
+    if args.orientation is not None:
+        from ..stereo import OrientationError, orientation_covariances
+
+        inputs.append(args.orientation)
+        try:
+            orientation = orientation_covariances(args.orientation, [im.name for im in images])
+        except OrientationError as err:
+            raise CommandError(str(err)) from None
     guard_outputs([args.out], inputs, args.overwrite)
     if args.keep is not None:
         guard_outputs([], inputs, True)  # the folder is created; its files are new names
@@ -194,6 +215,7 @@ def run(args: argparse.Namespace) -> int:
         dem=open_dem(args),
         height_range_m=tuple(args.heights) if args.heights else None,
         max_hole_m=args.max_hole,
+        orientation=orientation,
     )
     write_dsm(dsm, args.out, overwrite=args.overwrite)
     filled = float(np.isfinite(dsm.height).mean())
@@ -205,6 +227,7 @@ def run(args: argparse.Namespace) -> int:
         "shape": list(dsm.height.shape),
         "filled": round(filled, 4),
         "interpolated": round(interpolated, 4),
+        "median_height_sigma_m": _median(dsm.height_sigma),
         "pairs": [
             {"images": [images[0].name, images[i + 1].name], **st} for i, st in enumerate(stats)
         ],
@@ -215,7 +238,8 @@ def run(args: argparse.Namespace) -> int:
     rows, cols = dsm.height.shape
     print(f"wrote {args.out}: {cols} x {rows} cells of {dsm.res_m:g} m, EPSG:{dsm.epsg}, "
           f"{100 * filled:.1f}% with a height (ellipsoidal, m), {100 * interpolated:.1f}% "
-          "of them interpolated (band 'filled')")  # fmt: skip
+          "of them interpolated (band 'filled'); median height_sigma "
+          f"{result['median_height_sigma_m'] or float('nan'):.2f} m")  # fmt: skip
     for pair in result["pairs"]:
         a, b = pair["images"]
         parts = [f"{pair.get('n_ties', '?')} ties"]
@@ -230,3 +254,11 @@ def run(args: argparse.Namespace) -> int:
             parts.append(f"height offset {pair['height_offset_removed_m']:+.2f} m removed")
         print(f"  {a} - {b}: " + ", ".join(parts))
     return 0
+
+
+def _median(values) -> float | None:
+    import numpy as np
+
+    if values is None or not np.isfinite(values).any():
+        return None
+    return round(float(np.nanmedian(values)), 4)

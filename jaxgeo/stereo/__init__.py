@@ -4,7 +4,8 @@ matching (OpenCV SGM), triangulation through the models and DSM rasterisation.
 Pipeline entry points: :func:`stereo_pair` (one pair -> 3D points) and :func:`dsm_from_images`
 (reference + secondaries -> one DSM grid); each stage's names are public here, from its private
 module: matching (``_matching``), rectification (``_rectification``), dense matching
-(``_dense``), triangulation (``_triangulation``), rasterisation (``_dsm``).
+(``_dense``), triangulation (``_triangulation``), rasterisation (``_dsm``), the height sigma
+(``_uncertainty``).
 """
 
 from ._coregister import Coregistration as Coregistration
@@ -18,7 +19,9 @@ from ._coregister_stats import DHStats as DHStats
 from ._coregister_stats import dh_stats as dh_stats
 from ._coregister_stats import nmad as nmad
 from ._dense import SGMSettings as SGMSettings
+from ._dense import correlation_sigma_px as correlation_sigma_px
 from ._dense import refine_disparity as refine_disparity
+from ._dense import refine_disparity_sigma as refine_disparity_sigma
 from ._dense import resample_epipolar as resample_epipolar
 from ._dense import sgm_disparity as sgm_disparity
 from ._dsm import DSM_BANDS as DSM_BANDS
@@ -50,3 +53,9 @@ from ._triangulation import StereoError as StereoError
 from ._triangulation import disparity_to_matches as disparity_to_matches
 from ._triangulation import los_heights as los_heights
 from ._triangulation import triangulate as triangulate
+from ._uncertainty import OrientationError as OrientationError
+from ._uncertainty import cell_sigma as cell_sigma
+from ._uncertainty import intersection_jacobian as intersection_jacobian
+from ._uncertainty import orientation_covariances as orientation_covariances
+from ._uncertainty import point_height_sigmas as point_height_sigmas
+from ._uncertainty import sigma_calibration as sigma_calibration

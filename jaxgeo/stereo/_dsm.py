@@ -16,7 +16,8 @@ metres), with the point count and spread (standard deviation) as extra bands. Th
    cells. Larger voids (occlusions behind buildings, water, no texture) stay empty (NaN).
 
 The GeoTIFF is tiled (256 x 256), DEFLATE, written atomically; its bands are named
-(:data:`DSM_BANDS`, band descriptions ``height``, ``count``, ``spread``, ``filled``).
+(:data:`DSM_BANDS`, band descriptions ``height``, ``count``, ``spread``, ``filled``,
+``height_sigma``: the height's standard deviation, :mod:`._uncertainty`).
 """
 
 from __future__ import annotations
@@ -28,6 +29,7 @@ import numpy as np
 
 from ..geodesy import utm_epsg, utm_zone
 from ..io import atomic_output
+from ._uncertainty import cell_sigma
 
 MAX_HOLE_M = 4.0
 """Largest hole (m across) interpolated by default: a few cells of occlusion or of a failed
@@ -38,6 +40,11 @@ DSM_BANDS = {
     "count": ("", "number of points the height comes from (0: interpolated)"),
     "spread": ("m", "standard deviation of those points' heights (m)"),
     "filled": ("", "1: height interpolated from the rim of a small hole, 0: measured"),
+    "height_sigma": (
+        "m",
+        "standard deviation of the height (m): matching and orientation, propagated through "
+        "the intersection, combined over the cell's points",
+    ),
 }
 """The DSM's bands in file order: name -> (unit, meaning). A new band (e.g. ``height_sigma``) is
 a :class:`DSMGrid` field and an entry here."""
@@ -46,8 +53,9 @@ a :class:`DSMGrid` field and an entry here."""
 @dataclass(frozen=True)
 class DSMGrid:
     """A rasterised DSM: ``height`` (NaN: no data), ``count``, ``spread``, ``filled`` (1 where
-    the height is interpolated) ``(rows, cols)``; ``x0, y0`` the map coordinates of the
-    upper-left corner of the first cell; ``res_m``; ``epsg``."""
+    the height is interpolated), ``height_sigma`` (m; NaN/``None``: unknown) ``(rows, cols)``;
+    ``x0, y0`` the map coordinates of the upper-left corner of the first cell; ``res_m``;
+    ``epsg``."""
 
     height: np.ndarray
     count: np.ndarray
@@ -57,6 +65,7 @@ class DSMGrid:
     res_m: float
     epsg: int
     filled: np.ndarray | None = None
+    height_sigma: np.ndarray | None = None
 
     @property
     def transform(self):
@@ -69,9 +78,11 @@ class DSMGrid:
         height is NaN."""
         empty = ~np.isfinite(self.height)
         filled = self.filled if self.filled is not None else np.zeros(self.height.shape, np.uint8)
+        nan = np.full(self.height.shape, np.nan, np.float32)
         out = {}
         for name in DSM_BANDS:
-            value = np.asarray(filled if name == "filled" else getattr(self, name), np.float32)
+            value = filled if name == "filled" else getattr(self, name)
+            value = nan if value is None else np.asarray(value, np.float32)
             out[name] = np.where(empty, np.float32(np.nan), value)
         return out
 
@@ -120,9 +131,10 @@ def _median_per_cell(cell, h, size):
     return median, count, spread
 
 
-def _footprint_fill(height, count, spread, xyh, x0, y0, res_m, radius_m, k=4):
+def _footprint_fill(height, count, spread, xyh, x0, y0, res_m, radius_m, k=4, extra=()):
     """Empty cells within ``radius_m`` of points: median, count and spread of the (up to
-    ``k``) nearest points within that radius of the cell centre (in place)."""
+    ``k``) nearest points within that radius of the cell centre (in place); each ``(grid,
+    values)`` of ``extra`` (per-point values) takes the mean of those points' values."""
     from scipy import ndimage
     from scipy.spatial import cKDTree
 
@@ -133,7 +145,8 @@ def _footprint_fill(height, count, spread, xyh, x0, y0, res_m, radius_m, k=4):
         return
     centres = np.stack([x0 + (cols + 0.5) * res_m, y0 - (rows + 0.5) * res_m], axis=-1)
     lo, hi = centres.min(axis=0) - radius_m, centres.max(axis=0) + radius_m
-    pts = xyh[np.all((xyh[:, :2] >= lo) & (xyh[:, :2] <= hi), axis=1)]
+    near_pts = np.all((xyh[:, :2] >= lo) & (xyh[:, :2] <= hi), axis=1)
+    pts = xyh[near_pts]
     if pts.shape[0] == 0:
         return
     dist, idx = cKDTree(pts[:, :2]).query(centres, k=k, distance_upper_bound=radius_m)
@@ -145,6 +158,10 @@ def _footprint_fill(height, count, spread, xyh, x0, y0, res_m, radius_m, k=4):
     height[r, c] = np.nanmedian(h, axis=1)
     count[r, c] = n[some]
     spread[r, c] = np.nanstd(h, axis=1)
+    safe = np.minimum(idx, pts.shape[0] - 1)[some]
+    for grid, values in extra:
+        v = np.where(found[some], values[near_pts][safe], np.nan)
+        grid[r, c] = np.nanmean(v, axis=1)
 
 
 def small_holes(height: np.ndarray, max_cells: float) -> np.ndarray:
@@ -208,6 +225,7 @@ def rasterize(
     shape: tuple[int, int] | None = None,
     footprint_m: float | None = None,
     max_hole_m: float = MAX_HOLE_M,
+    sigmas: tuple[np.ndarray, np.ndarray] | None = None,
 ) -> DSMGrid:
     """Grid ``(n, 3)`` lon/lat/h points (NaN rows ignored) at ``res_m`` (module docstring).
 
@@ -216,11 +234,18 @@ def rasterize(
     ``footprint_m``: how far from a point an empty cell's centre may lie to take its height
     (default: the points' median spacing; 0: each point in its own cell only).
     ``max_hole_m``: the largest hole interpolated, metres across (0: none).
+    ``sigmas``: each point's height sigma from the matching and from the orientation (m,
+    :mod:`._uncertainty`), combined per cell into ``height_sigma`` (:func:`cell_sigma`;
+    interpolated cells: the sigma interpolated like the height); ``None``: ``height_sigma``
+    unknown (NaN).
     """
     if not res_m > 0:
         raise ValueError(f"rasterize: resolution must be positive, got {res_m}")
     points = np.asarray(points, dtype=float)
-    points = points[np.all(np.isfinite(points), axis=1)]
+    good = np.all(np.isfinite(points), axis=1)
+    points = points[good]
+    if sigmas is not None:
+        sq = [np.nan_to_num(np.asarray(v, float)[good] ** 2, nan=np.inf) for v in sigmas]
     if points.shape[0] == 0:
         raise ValueError("rasterize: no valid 3D point")
     if epsg is None:
@@ -246,14 +271,29 @@ def rasterize(
         row[inside] * cols + col[inside], xyh[inside, 2], rows * cols
     )
     height, count, spread = (a.reshape(shape) for a in (median, count, spread))
+    extra = []
+    if sigmas is not None:
+        cell = row[inside] * cols + col[inside]
+        n = np.maximum(np.bincount(cell, minlength=rows * cols), 1)
+        for v in sq:
+            mean_sq = np.bincount(cell, v[inside], rows * cols) / n
+            extra.append((mean_sq.reshape(shape), v))
     if footprint_m is None:
         footprint_m = point_spacing(xyh[inside, :2])
     if footprint_m > 0 and np.isfinite(height).any():
-        _footprint_fill(height, count, spread, xyh, x0, y0, res_m, float(footprint_m))
+        _footprint_fill(
+            height, count, spread, xyh, x0, y0, res_m, float(footprint_m), extra=extra
+        )
+    sigma = None
+    if sigmas is not None:
+        sigma = cell_sigma(extra[0][0], extra[1][0], spread, count, height, res_m)
+        sigma = np.where(np.isfinite(height), sigma, np.nan)
     holes = small_holes(height, max_hole_m / res_m) if max_hole_m > 0 else None
     filled = np.zeros(shape, np.uint8)
     if holes is not None and holes.any():
         height = laplace_fill(height, holes)
+        if sigma is not None:
+            sigma = laplace_fill(sigma, holes)
         filled[holes] = 1
     return DSMGrid(
         height=height.astype(np.float32),
@@ -264,13 +304,15 @@ def rasterize(
         res_m=float(res_m),
         epsg=int(epsg),
         filled=filled,
+        height_sigma=None if sigma is None else sigma.astype(np.float32),
     )
 
 
 def write_dsm(dsm: DSMGrid, path: str | os.PathLike, overwrite: bool = False):
     """Tiled GeoTIFF, float32, nodata NaN, one band per entry of :data:`DSM_BANDS` in that order
     (band description = the name; ``units`` and a ``meaning`` tag per band): ``height``
-    (ellipsoidal m), ``count``, ``spread`` (m), ``filled`` (1 = interpolated, 0 = measured)."""
+    (ellipsoidal m), ``count``, ``spread`` (m), ``filled`` (1 = interpolated, 0 = measured),
+    ``height_sigma`` (m)."""
     import rasterio
 
     bands = dsm.bands()

@@ -56,6 +56,7 @@ from ._triangulation import (
     los_heights,
     triangulate,
 )
+from ._uncertainty import point_height_sigmas
 
 MIN_TIE_POINTS = 10
 CONTEXT_PX = 16
@@ -95,12 +96,16 @@ def image_size(path: str | os.PathLike) -> tuple[int, int]:
 @dataclass
 class PairProducts:
     """Result of :func:`stereo_pair`: ``points`` ``(n, 3)`` lon/lat/h, ``stats`` (numbers to
-    report) and, when kept, the intermediate products (grids, epipolar images, disparity,
-    tie points)."""
+    report), the points' height sigmas and, when kept, the intermediate products (grids,
+    epipolar images, disparity, tie points)."""
 
     points: np.ndarray
     stats: dict
     grids: EpipolarGrids | None = None
+    match_sigma_m: np.ndarray | None = None
+    """``(n,)`` height sigma of each point from the matching (m, :mod:`._uncertainty`)."""
+    orientation_sigma_m: np.ndarray | None = None
+    """``(n,)`` height sigma of each point from the models' orientation (m; 0: unknown)."""
     intermediates: dict = field(default_factory=dict)
 
 
@@ -167,6 +172,7 @@ def stereo_pair(
     epipolar_tol_px: float = 10.0,
     dem=None,
     height_range_m: tuple[float, float] | None = None,
+    orientation: Sequence[np.ndarray | None] | None = None,
 ) -> PairProducts:
     """3D points of a pair over ``roi = (col, row, width, height)`` of the reference image
     (whole image by default); ``method`` the triangulation (``intersect`` or
@@ -185,7 +191,11 @@ def stereo_pair(
     ``BLUNDER_MARGIN`` of its half-width) are dropped (NaN). :class:`StereoError` (naming the
     images) when the models do not fit the images: the ROI not seen by the secondary image, too
     few verified tie points, tie points or most 3D points outside a model's validity cube, a
-    vertical disparity over ``epipolar_tol_px``."""
+    vertical disparity over ``epipolar_tol_px``.
+
+    Each point's height sigma (:mod:`._uncertainty`): from its disparity's matching sigma, and
+    from ``orientation`` (the ``2 x 2`` shift covariance, px^2, of each model, or ``None``:
+    :func:`~jaxgeo.stereo.orientation_covariances`), propagated through the intersection."""
     log = log or (lambda _: None)
     clock = [time.perf_counter()]
 
@@ -262,10 +272,10 @@ def stereo_pair(
         (img1, img2), (data_win[:2], win2[:2]), grids, shift, (x0, x1), lims, (dmin, dmax), sgm
     )
     matches, kept, n_valid, n_disp = [], [], 0, 0
-    points, sigma_h = [], []
+    points, sigma_h, sigma_d, direction = [], [], [], []
     for k, r0 in enumerate(starts):
         r1 = min(r0 + band, rows_e)
-        disp, valid_l, images = dense.band(r0, r1, keep)
+        disp, disp_sigma, valid_l, images = dense.band(r0, r1, keep)
         ye, xe = np.mgrid[r0:r1, x0:x1].astype(float)
         xl = grids.to_sensor("left", np.stack([xe, ye], axis=-1))
         in_roi = valid_l & _in_window(xl.reshape(-1, 2), roi).reshape(xe.shape)
@@ -275,6 +285,9 @@ def stereo_pair(
         xr_e = xe[sel] + disp[sel]
         yr_e = ye[sel] + y_shift_at(shift, xr_e, ye[sel])
         xr = grids.to_sensor("right", np.stack([xr_e, yr_e], axis=-1))
+        step = [grids.to_sensor("right", np.stack([xr_e + o, yr_e], axis=-1)) for o in (-0.5, 0.5)]
+        direction.append(step[1] - step[0])
+        sigma_d.append(disp_sigma[sel])
         matches.append(np.stack([xl[sel], xr], axis=1))
         if keep:
             kept.append((disp, *images))
@@ -292,10 +305,19 @@ def stereo_pair(
     points = np.concatenate(points)
     sigma_h = np.concatenate(sigma_h)
     stats.update(drop_outside_validity(points, (ref, sec), paths))
+    match_sigma, orient_sigma = point_height_sigmas(
+        (ref, sec), points, np.concatenate(direction), np.concatenate(sigma_d), orientation
+    )
+    if np.isfinite(match_sigma).any():
+        stats["median_match_sigma_px"] = float(np.nanmedian(np.concatenate(sigma_d)))
+        stats["median_match_sigma_h_m"] = float(np.nanmedian(match_sigma))
+        stats["median_orientation_sigma_h_m"] = float(np.nanmedian(orient_sigma))
     if method == "intersect" and np.isfinite(sigma_h).any():
         stats["median_sigma_h_m"] = float(np.nanmedian(sigma_h))
     log(f"{len(points)} points ({method})")
-    products = PairProducts(points=points, stats=stats)
+    products = PairProducts(
+        points=points, stats=stats, match_sigma_m=match_sigma, orientation_sigma_m=orient_sigma
+    )
     if keep:
         disp, left_w, right_w = (np.concatenate(a) for a in zip(*kept, strict=True))
         products.grids = grids
@@ -340,6 +362,7 @@ def dsm_from_images(
     dem=None,
     height_range_m: tuple[float, float] | None = None,
     max_hole_m: float = MAX_HOLE_M,
+    orientation: Sequence[np.ndarray | None] | None = None,
 ) -> tuple[DSMGrid, list[dict]]:
     """DSM of ``roi`` of the first image from the pairs (first, i): pooled points, median per
     cell (:func:`rasterize`: each point also stands for the cells its footprint covers, the
@@ -353,6 +376,11 @@ def dsm_from_images(
     between the two pairs of the s2p triplet, without GCPs). s2p registers its pair height maps
     too. With GCPs, adjust the models first (``jaxgeo adjust``) and pass ``register=False``.
 
+    ``height_sigma`` (:mod:`._uncertainty`): the matching's sigma of every point, and
+    ``orientation`` (per model the ``2 x 2`` covariance of its remaining image shift, px^2, or
+    ``None``: :func:`~jaxgeo.stereo.orientation_covariances` reads ``jaxgeo adjust``'s), through
+    the intersection, combined per cell.
+
     ``keep_dir``: write each pair's intermediate
     products there (``pair_i.npz``: epipolar images, disparity, tie points, points).
     ``band_rows``: epipolar rows per band of dense matching (:func:`stereo_pair`); ``progress``:
@@ -362,7 +390,11 @@ def dsm_from_images(
             f"dsm: give at least two images, each with its model ({len(paths)} images, "
             f"{len(models)} models)"
         )
-    all_points, all_stats = [], []
+    if orientation is not None and len(orientation) != len(paths):
+        raise StereoError(
+            f"dsm: {len(orientation)} orientation covariances for {len(paths)} images"
+        )
+    all_points, all_stats, all_sigmas = [], [], []
     n = len(paths) - 1
     for i in range(1, len(paths)):
         bar = _Progress(f"pair {i}/{n}", progress)
@@ -371,11 +403,13 @@ def dsm_from_images(
                 models[0], models[i], paths[0], paths[i], roi, method=method,
                 keep=keep_dir is not None, log=bar.log, band_rows=band_rows, on_band=bar.band,
                 dem=dem, height_range_m=height_range_m,
+                orientation=None if orientation is None else (orientation[0], orientation[i]),
             )  # fmt: skip
         finally:
             bar.close()
         all_points.append(pair.points)
         all_stats.append(pair.stats)
+        all_sigmas.append((pair.match_sigma_m, pair.orientation_sigma_m))
         if keep_dir is not None:
             out = pathlib.Path(keep_dir)
             out.mkdir(parents=True, exist_ok=True)
@@ -392,6 +426,7 @@ def dsm_from_images(
     dsm = rasterize(
         np.concatenate(all_points), res_m, epsg=epsg, origin=origin, shape=shape,
         footprint_m=footprint, max_hole_m=max_hole_m,
+        sigmas=tuple(np.concatenate(s) for s in zip(*all_sigmas, strict=True)),
     )  # fmt: skip
     return dsm, all_stats
 

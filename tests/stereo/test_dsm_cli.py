@@ -27,7 +27,10 @@ def test_dsm_cli_pair_against_s2p(shared_data, tmp_path, capsys):
     with rasterio.open(folder / "expected_dsm.tif") as f:
         ref, ref_transform, ref_crs = f.read(1), f.transform, f.crs
     with rasterio.open(out) as f:
-        assert f.count == 4 and f.profile["tiled"]
+        assert f.count == 5 and f.profile["tiled"] and f.descriptions[4] == "height_sigma"
+        sigma = f.read(5)
+        assert np.array_equal(np.isfinite(sigma), np.isfinite(f.read(1)))
+        assert 0.01 < np.nanmedian(sigma) < 2.0
         ours = np.full(ref.shape, np.nan, np.float32)
         reproject(
             f.read(1), ours, src_transform=f.transform, src_crs=f.crs, dst_transform=ref_transform,

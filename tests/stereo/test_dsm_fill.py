@@ -110,10 +110,12 @@ def test_write_dsm_named_bands(tmp_path):
     points, x, y = _lattice()
     points = _without(points, x, y, X0 + 20.0, Y0 - 30.0, 1.5)
     dsm = _grid(points)
-    assert list(DSM_BANDS) == ["height", "count", "spread", "filled"]
+    assert list(DSM_BANDS) == ["height", "count", "spread", "filled", "height_sigma"]
     out = write_dsm(dsm, tmp_path / "dsm.tif")
     with rasterio.open(out) as f:
-        assert f.count == 4 and f.descriptions == ("height", "count", "spread", "filled")
+        assert f.count == 5
+        assert f.descriptions == ("height", "count", "spread", "filled", "height_sigma")
+        assert f.units[4] == "m" and np.isnan(f.read(5)).all()  # no point sigmas: unknown
         assert f.units[0] == "m" and np.isnan(f.nodata)
         assert "interpolated" in f.tags(4)["meaning"]
         height, count, filled = f.read(1), f.read(2), f.read(4)

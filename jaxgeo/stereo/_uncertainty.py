@@ -1,0 +1,215 @@
+"""The height sigma of DSM points and cells: matching and orientation, propagated by autodiff.
+
+**Points.** A dense match is a left pixel (fixed) and a right pixel whose position along the
+epipolar line carries the matching error, of standard deviation ``sigma_d`` (px, from the
+correlation peak: :func:`~jaxgeo.stereo.refine_disparity_sigma`). The point's east/north/up
+sensitivity to the image coordinates is that of the least-squares intersection at its
+solution (implicit function theorem): ``G = (J^T J)^{-1} J^T`` with ``J`` ``(2N, 3)`` the
+models' projection Jacobians in px per metre, by ``jax.jacfwd`` (:func:`intersection_jacobian`).
+Then
+
+- matching: ``sigma_match = |G_up,right . t| sigma_d``, ``t`` the right sensor displacement of
+  one epipolar pixel along the line (from the rectification grids);
+- orientation: ``sigma_orient**2 = sum_i G_up,i C_i G_up,i^T`` with ``C_i`` the ``2 x 2``
+  covariance (px^2) of image ``i``'s remaining shift (the posterior sigmas of an adjustment's
+  bias: :func:`orientation_covariances`); zero for models without one.
+
+**Cells** (:func:`cell_sigma`). A cell's height is the median of its ``n`` points. The matching
+errors of neighbouring points are not independent (their correlation windows overlap by most
+of their pixels), so they do not average down over the cell: the cell takes their RMS. The
+cell's points also differ from one another (a slope inside the cell, an edge, a false match):
+their ``spread`` enters as the standard error of a median, ``sqrt(pi / (2 n)) spread``. The
+height is that of the cell's centre, the points lie anywhere in the cell: on a slope ``s`` of
+the DSM that adds ``s res / sqrt(12)`` per point (a uniform position over a cell of ``res``),
+also over ``n``. The
+orientation error is common to every cell (a shift of the whole DSM): it never averages down
+and is added in quadrature:
+``sigma_cell**2 = rms(sigma_match)**2 + ((pi / 2) spread**2 + s**2 res**2 / 12) / n
++ rms(sigma_orient)**2``.
+"""
+
+from __future__ import annotations
+
+import json
+import os
+import pathlib
+from collections.abc import Mapping, Sequence
+
+import equinox as eqx
+import jax
+import jax.numpy as jnp
+import numpy as np
+
+from ..errors import JaxgeoError
+from ..geodesy import metres_per_unit
+from ..models import AbstractSensorModel
+
+CHUNK = 65536
+
+
+class OrientationError(JaxgeoError, ValueError):
+    """An orientation file (``adjusted_models.json``) jaxgeo cannot use for the height sigma
+    (the message names the file and the image)."""
+
+
+@eqx.filter_jit
+def _jacobian_flat(models, ground):
+    def one(g):
+        mpu = metres_per_unit(g)
+        jac = jnp.concatenate([jax.jacfwd(m.project)(g) / mpu for m in models])  # (2N, 3)
+        return jnp.linalg.solve(jac.T @ jac, jac.T).reshape(3, len(models), 2)
+
+    ok = jnp.all(jnp.isfinite(ground), axis=-1)
+    safe = jnp.where(ok[:, None], ground, jnp.stack([m.reference_ground() for m in models])[0])
+    out = jax.vmap(one)(safe)
+    return jnp.where(ok[:, None, None, None], out, jnp.nan)
+
+
+def intersection_jacobian(
+    models: Sequence[AbstractSensorModel], ground: np.ndarray
+) -> np.ndarray:
+    """``(n, 3, N, 2)``: the derivative of the least-squares intersection's east/north/up
+    (m) with respect to each image's ``(x, y)`` (px), at the ground points ``(n, 3)``
+    ``(lon_deg, lat_deg, h_m)`` (NaN rows give NaN). Computed in chunks of one size (one
+    compilation)."""
+    ground = np.asarray(ground, dtype=float).reshape(-1, 3)
+    models = tuple(models)
+    n = ground.shape[0]
+    out = np.full((n, 3, len(models), 2), np.nan)
+    size = min(CHUNK, max(n, 1))
+    for s in range(0, n, size):
+        part = ground[s : s + size]
+        k = part.shape[0]
+        if k < size:
+            part = np.concatenate([part, np.full((size - k, 3), np.nan)])
+        out[s : s + k] = np.asarray(_jacobian_flat(models, jnp.asarray(part)))[:k]
+    return out
+
+
+def point_height_sigmas(
+    models: Sequence[AbstractSensorModel],
+    ground: np.ndarray,
+    direction_px: np.ndarray,
+    sigma_d_px: np.ndarray,
+    orientation: Sequence[np.ndarray | None] | None = None,
+) -> tuple[np.ndarray, np.ndarray]:
+    """Height sigmas (m) of dense points of a pair (module docstring): ``(matching,
+    orientation)``, each ``(n,)``. ``ground`` ``(n, 3)`` the points, ``direction_px`` ``(n, 2)``
+    the second image's sensor displacement per epipolar pixel of disparity, ``sigma_d_px``
+    ``(n,)`` the disparity sigmas, ``orientation`` per model its ``2 x 2`` shift covariance
+    (px^2) or ``None``."""
+    g = intersection_jacobian(models, ground)[:, 2]  # (n, N, 2): d up / d xy
+    match = np.abs(np.einsum("nc,nc->n", g[:, 1], direction_px)) * np.asarray(sigma_d_px)
+    var = np.zeros(g.shape[0])
+    for i, cov in enumerate(orientation or ()):
+        if cov is not None:
+            var += np.einsum("nc,cd,nd->n", g[:, i], np.asarray(cov, float), g[:, i])
+    orient = np.where(np.isfinite(match), np.sqrt(var), np.nan)
+    return match, orient
+
+
+def cell_sigma(
+    match_ms: np.ndarray,
+    orient_ms: np.ndarray,
+    spread: np.ndarray,
+    count: np.ndarray,
+    height: np.ndarray,
+    res_m: float,
+) -> np.ndarray:
+    """The cells' height sigma (m, module docstring) from the mean squares of their points'
+    matching and orientation sigmas (m^2), their spread (m), their number of points and the
+    grid of heights (for the slope; ``res_m`` the cell size)."""
+    n = np.maximum(np.asarray(count, float), 1.0)
+    spread = np.nan_to_num(np.asarray(spread, float))
+    place = _slope2(height, res_m) * res_m**2 / 12.0
+    return np.sqrt(match_ms + (0.5 * np.pi * spread**2 + place) / n + orient_ms)
+
+
+def _slope2(height, res_m):
+    """Squared slope of a height grid (central differences; 0 where a neighbour is NaN: unknown
+    at the edges of the data, and along an axis of one cell)."""
+    height = np.asarray(height, float)
+    out = np.zeros(height.shape)
+    for axis in (0, 1):
+        if height.shape[axis] > 1:
+            out += np.gradient(height, res_m, axis=axis) ** 2
+    return np.nan_to_num(out)
+
+
+SHIFT_PARAMETERS = ("bias.shift_px[0]", "bias.shift_px[1]")
+"""The names (their ends) of an image-space bias' constant terms x, y among the ``sigmas`` of
+``jaxgeo adjust``'s ``adjusted_models.json``."""
+
+
+def _shift_sigmas(sigmas: Mapping[str, float]) -> tuple[float, float] | None:
+    """The posterior sigmas (px) of a bias' constant x and y terms among an image's
+    ``sigmas``."""
+    found = [
+        next((float(v) for k, v in sigmas.items() if k.endswith(name)), None)
+        for name in SHIFT_PARAMETERS
+    ]
+    return None if None in found else (found[0], found[1])
+
+
+def orientation_covariances(
+    path: str | os.PathLike, images: Sequence[str | os.PathLike]
+) -> list[np.ndarray]:
+    """Per image of ``images``, the ``2 x 2`` covariance (px^2) of its remaining image-space
+    shift after ``jaxgeo adjust``: the posterior sigmas of the bias' constant terms in the
+    adjustment's ``adjusted_models.json`` (``path``), the image found by its name in the
+    adjustment (``--image NAME=...``: the file name without directories and suffixes, or with
+    ``_adjusted``/``_RPC`` dropped). The sigmas of drift or affine terms are not used (the file
+    holds no covariances between parameters): a constant shift per image, independent between
+    images.
+    :class:`OrientationError` naming the file and image when an image or its sigmas are
+    missing."""
+    path = pathlib.Path(path)
+    try:
+        data = json.loads(path.read_text())
+        entries = data["images"]
+    except (OSError, ValueError, KeyError, TypeError) as err:
+        raise OrientationError(
+            f"{path}: not an adjusted_models.json written by jaxgeo adjust ({err})"
+        ) from None
+    out = []
+    for image in images:
+        name = pathlib.Path(image).name
+        stems = [name.split(".")[0], pathlib.Path(image).stem]
+        stems += [s.replace("_adjusted", "").replace("_RPC", "") for s in stems]
+        key = next((s for s in stems if s in entries), None)
+        if key is None:
+            raise OrientationError(
+                f"{path}: no image named {stems[0]!r} (for {image}); it holds "
+                f"{', '.join(sorted(entries))}"
+            )
+        sig = _shift_sigmas(entries[key].get("sigmas", {}))
+        if sig is None or not all(np.isfinite(sig)):
+            raise OrientationError(
+                f"{path}: image {key!r} has no posterior sigmas of a bias shift (x, y)"
+            )
+        out.append(np.diag(np.square(sig)))
+    return out
+
+
+def sigma_calibration(
+    height: np.ndarray, height_sigma: np.ndarray, truth: np.ndarray
+) -> dict[str, float]:
+    """How well ``height_sigma`` describes the errors of ``height`` against ``truth`` (grids of
+    one shape, m; NaN: none) over the cells where all three are finite: ``n_cells``,
+    ``within_1_sigma`` and ``within_2_sigma`` (shares of cells with ``|height - truth|`` at most
+    one / two sigmas; a Gaussian's: 0.683, 0.954), ``median_ratio`` (median of
+    ``|height - truth| / sigma``; a Gaussian's: 0.674), ``rmse_m``, ``median_sigma_m``."""
+    err = np.asarray(height, float) - np.asarray(truth, float)
+    sigma = np.asarray(height_sigma, float)
+    ok = np.isfinite(err) & np.isfinite(sigma) & (sigma > 0)
+    ratio = np.abs(err[ok]) / sigma[ok]
+    if not ok.any():
+        return dict(n_cells=0)
+    return dict(
+        n_cells=int(ok.sum()),
+        within_1_sigma=float(np.mean(ratio <= 1.0)),
+        within_2_sigma=float(np.mean(ratio <= 2.0)),
+        median_ratio=float(np.median(ratio)),
+        rmse_m=float(np.sqrt(np.mean(err[ok] ** 2))),
+        median_sigma_m=float(np.median(sigma[ok])),
+    )

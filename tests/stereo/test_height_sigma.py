@@ -1,0 +1,186 @@
+"""The ``height_sigma`` band (issue 28, item 2): the propagation through the intersection, the
+per-cell combination, the orientation file of ``jaxgeo adjust``, and the calibration against
+simulated truth on a seed the calibration never saw.
+
+``MATCH_SIGMA_SCALE`` was calibrated on ``stereo-scene --size 600 --seed 11 --exact-rpc`` (the
+median of ``|DSM - truth| / height_sigma`` set to a Gaussian's 0.674); here seed 12 at 400 px.
+"""
+
+import json
+
+import jax
+import jax.numpy as jnp
+import numpy as np
+import pytest
+import rasterio
+
+from jaxgeo.cli import main
+from jaxgeo.intersect import intersect
+from jaxgeo.simulate import stereo_scene
+from jaxgeo.simulate._stereo_scene import stereo_scene_truth
+from jaxgeo.stereo import (
+    OrientationError,
+    cell_sigma,
+    correlation_sigma_px,
+    dsm_from_images,
+    intersection_jacobian,
+    orientation_covariances,
+    point_height_sigmas,
+    rasterize,
+    refine_disparity_sigma,
+    sigma_calibration,
+)
+
+EPSG = 32631
+
+
+@pytest.fixture(scope="module")
+def rpcs():
+    scene = stereo_scene_truth(128, 4, exact_rpc=True)
+    return [scene.rpcs[n] for n in ("left", "right")], scene
+
+
+def test_intersection_jacobian_is_the_derivative_of_intersect(rpcs):
+    models, scene = rpcs
+    xy = np.stack([scene.xy["left"][:3], scene.xy["right"][:3]], axis=1)  # (3, 2, 2)
+    ground = np.asarray(intersect(models, xy).ground)
+    jac = intersection_jacobian(models, ground)  # (3, 3 enu, 2 images, 2 xy)
+
+    def up(xy_one):
+        return intersect(models, xy_one[None]).ground[0, 2]
+
+    for i in range(3):
+        auto = np.asarray(jax.grad(up)(jnp.asarray(xy[i])))  # d h / d xy through the solve
+        np.testing.assert_allclose(jac[i, 2], auto, rtol=1e-5, atol=1e-9)
+    # about 1.5 m of height per pixel of disparity (0.67 m GSD, base/height 0.45)
+    assert 1.0 < np.linalg.norm(jac[0, 2, 1]) < 2.5
+    assert np.isnan(intersection_jacobian(models, np.full((1, 3), np.nan))).all()
+
+
+def test_point_sigmas_matching_and_orientation(rpcs):
+    models, scene = rpcs
+    ground = np.asarray(scene.points[:5])
+    jac = intersection_jacobian(models, ground)[:, 2]
+    direction = np.tile([0.0, 1.0], (5, 1))
+    cov = [np.diag([0.04, 0.09]), None]
+    match, orient = point_height_sigmas(models, ground, direction, np.full(5, 0.2), cov)
+    np.testing.assert_allclose(match, 0.2 * np.abs(jac[:, 1, 1]))
+    np.testing.assert_allclose(orient, np.sqrt(0.04 * jac[:, 0, 0] ** 2 + 0.09 * jac[:, 0, 1] ** 2))
+    match0, orient0 = point_height_sigmas(models, ground, direction, np.full(5, 0.2))
+    np.testing.assert_allclose(match0, match)
+    assert np.all(orient0 == 0.0)
+
+
+def test_correlation_sigma_follows_noise_and_curvature():
+    s = correlation_sigma_px(np.array([0.99, 0.96, 0.96]), np.array([-2.0, -2.0, -8.0]), 9)
+    assert s[1] == pytest.approx(2 * s[0]) and s[2] == pytest.approx(s[1] / 2)
+    assert correlation_sigma_px(0.9, 0.0, 9) == 1.0  # no peak: the refinement's reach
+
+
+def test_refined_sigma_tracks_the_error_on_noisy_texture():
+    """Two noise levels on one shifted texture: the sigmas rank the errors and grow with the
+    noise as the errors do."""
+    rng = np.random.default_rng(0)
+    rows, cols, d = 120, 200, -3.3
+    base = rng.normal(size=(rows, cols + 40)).astype(np.float32)
+    import cv2
+
+    base = cv2.GaussianBlur(base, (0, 0), 1.0)
+    xs, ys = np.meshgrid(np.arange(cols, dtype=np.float32), np.arange(rows, dtype=np.float32))
+    left = base[:, 20 : 20 + cols]
+    right = cv2.remap(base, xs + 20 - np.float32(d), ys, cv2.INTER_CUBIC)  # right(x + d) = left
+    spread, median_sigma = [], []
+    for noise in (0.02, 0.08):
+        lt = left + rng.normal(scale=noise, size=left.shape).astype(np.float32)
+        rt = right + rng.normal(scale=noise, size=right.shape).astype(np.float32)
+        start = np.full(left.shape, np.float32(round(d)))
+        disp, sigma = refine_disparity_sigma(lt, rt, start)
+        core = (slice(10, -10), slice(20, -20))
+        err = (disp - d)[core]
+        spread.append(1.4826 * np.median(np.abs(err - np.median(err))))
+        median_sigma.append(np.median(sigma[core]))
+    assert spread[1] > 2 * spread[0] and median_sigma[1] > 2 * median_sigma[0]
+    # the raw formula (MATCH_SIGMA_SCALE apart) is of the order of the error on white-ish noise
+    assert 0.3 < median_sigma[1] / spread[1] < 10.0
+
+
+def test_cell_sigma_combines_matching_spread_slope_and_orientation():
+    x0, y0 = 500000.0, 4900000.0
+    # two points in one cell, one alone in another, 1 m cells, flat
+    xy = np.array([[x0 + 0.3, y0 - 0.5], [x0 + 0.7, y0 - 0.5], [x0 + 1.5, y0 - 0.5]])
+    import pyproj
+
+    lon, lat = pyproj.Transformer.from_crs(EPSG, 4326, always_xy=True).transform(*xy.T)
+    pts = np.stack([lon, lat, [10.0, 10.4, 10.2]], axis=-1)
+    match, orient = np.array([0.1, 0.3, 0.2]), np.array([0.5, 0.5, 0.5])
+    dsm = rasterize(
+        pts, 1.0, epsg=EPSG, origin=(x0, y0), shape=(1, 2), footprint_m=0, max_hole_m=0,
+        sigmas=(match, orient),
+    )  # fmt: skip
+    slope = abs(float(dsm.height[0, 1]) - float(dsm.height[0, 0]))  # 1 m cells
+    expect0 = np.sqrt(0.05 + (0.5 * np.pi * 0.2**2 + slope**2 / 12) / 2 + 0.25)
+    expect1 = np.sqrt(0.04 + slope**2 / 12 + 0.25)
+    np.testing.assert_allclose(dsm.height_sigma[0], [expect0, expect1], rtol=1e-5)
+    same = cell_sigma(np.array(0.05), np.array(0.25), np.array(0.2), np.array(2), dsm.height, 1.0)
+    assert np.all(same >= np.sqrt(0.30))  # the orientation part never averages down
+
+
+def _adjusted_json(path, sigmas):
+    images = {
+        name: {
+            "model": "Biased",
+            "parameters": {".bias.shift_px[0]": 0.1, ".bias.shift_px[1]": -0.2},
+            "sigmas": {".bias.shift_px[0]": sx, ".bias.shift_px[1]": sy},
+        }
+        for name, (sx, sy) in sigmas.items()
+    }
+    path.write_text(json.dumps({"images": images}))
+    return path
+
+
+def test_orientation_covariances_from_adjusted_models_json(tmp_path):
+    path = _adjusted_json(
+        tmp_path / "adjusted_models.json", {"left": (0.1, 0.2), "right": (0.3, 0.4)}
+    )
+    covs = orientation_covariances(path, ["/data/right.tif", "left_RPC.TXT"])
+    np.testing.assert_allclose(covs[0], np.diag([0.09, 0.16]))
+    np.testing.assert_allclose(covs[1], np.diag([0.01, 0.04]))
+    with pytest.raises(OrientationError, match="no image named 'other'.*left, right"):
+        orientation_covariances(path, ["other.tif"])
+    (tmp_path / "bad.json").write_text("{")
+    with pytest.raises(OrientationError, match="bad.json"):
+        orientation_covariances(tmp_path / "bad.json", ["left.tif"])
+
+
+@pytest.fixture(scope="module")
+def scene(tmp_path_factory):
+    folder = tmp_path_factory.mktemp("scene")
+    stereo_scene(folder, 400, 12, exact_rpc=True)  # seed 12: never used for the calibration
+    return folder
+
+
+def test_height_sigma_is_calibrated_on_an_unseen_seed(scene):
+    from jaxgeo.io import read_rpc
+
+    paths = [scene / "left.tif", scene / "right.tif"]
+    with rasterio.open(scene / "truth_dsm.tif") as f:
+        truth, tr, epsg = f.read(1), f.transform, f.crs.to_epsg()
+    dsm, stats = dsm_from_images(
+        [read_rpc(p) for p in paths], paths, res_m=tr.a, epsg=epsg, origin=(tr.c, tr.f),
+        shape=truth.shape,
+    )  # fmt: skip
+    assert np.array_equal(np.isfinite(dsm.height_sigma), np.isfinite(dsm.height))
+    cal = sigma_calibration(dsm.height, dsm.height_sigma, truth)
+    assert cal["n_cells"] > 100_000, cal
+    assert 0.55 <= cal["within_1_sigma"] <= 0.80, cal
+    assert 0.85 <= cal["within_2_sigma"] <= 0.99, cal
+    assert stats[0]["median_orientation_sigma_h_m"] == 0.0  # exact models, none given
+
+
+def test_dsm_cli_refuses_an_orientation_file_without_the_images(scene, tmp_path, capsys):
+    path = _adjusted_json(tmp_path / "adjusted_models.json", {"a": (0.1, 0.1), "b": (0.1, 0.1)})
+    argv = ["dsm", str(scene / "left.tif"), str(scene / "right.tif"), "--orientation", str(path)]
+    assert main([*argv, "-o", str(tmp_path / "dsm.tif"), "--quiet"]) == 2
+    err = capsys.readouterr().err
+    assert "no image named 'left'" in err and "adjusted_models.json" in err
+    assert not (tmp_path / "dsm.tif").exists()
