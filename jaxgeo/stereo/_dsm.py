@@ -281,9 +281,7 @@ def rasterize(
     if footprint_m is None:
         footprint_m = point_spacing(xyh[inside, :2])
     if footprint_m > 0 and np.isfinite(height).any():
-        _footprint_fill(
-            height, count, spread, xyh, x0, y0, res_m, float(footprint_m), extra=extra
-        )
+        _footprint_fill(height, count, spread, xyh, x0, y0, res_m, float(footprint_m), extra=extra)
     sigma = None
     if sigmas is not None:
         sigma = cell_sigma(extra[0][0], extra[1][0], spread, count, height, res_m)

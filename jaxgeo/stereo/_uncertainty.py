@@ -65,9 +65,7 @@ def _jacobian_flat(models, ground):
     return jnp.where(ok[:, None, None, None], out, jnp.nan)
 
 
-def intersection_jacobian(
-    models: Sequence[AbstractSensorModel], ground: np.ndarray
-) -> np.ndarray:
+def intersection_jacobian(models: Sequence[AbstractSensorModel], ground: np.ndarray) -> np.ndarray:
     """``(n, 3, N, 2)``: the derivative of the least-squares intersection's east/north/up
     (m) with respect to each image's ``(x, y)`` (px), at the ground points ``(n, 3)``
     ``(lon_deg, lat_deg, h_m)`` (NaN rows give NaN). Computed in chunks of one size (one
