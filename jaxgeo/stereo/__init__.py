@@ -53,7 +53,9 @@ from ._triangulation import StereoError as StereoError
 from ._triangulation import disparity_to_matches as disparity_to_matches
 from ._triangulation import los_heights as los_heights
 from ._triangulation import triangulate as triangulate
+from ._uncertainty import Orientation as Orientation
 from ._uncertainty import OrientationError as OrientationError
+from ._uncertainty import adjustment_covariance as adjustment_covariance
 from ._uncertainty import cell_sigma as cell_sigma
 from ._uncertainty import intersection_jacobian as intersection_jacobian
 from ._uncertainty import orientation_covariances as orientation_covariances

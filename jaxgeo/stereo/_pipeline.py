@@ -56,7 +56,7 @@ from ._triangulation import (
     los_heights,
     triangulate,
 )
-from ._uncertainty import point_height_sigmas
+from ._uncertainty import Orientation, pair_orientation, point_height_sigmas
 
 MIN_TIE_POINTS = 10
 CONTEXT_PX = 16
@@ -172,7 +172,7 @@ def stereo_pair(
     epipolar_tol_px: float = 10.0,
     dem=None,
     height_range_m: tuple[float, float] | None = None,
-    orientation: Sequence[np.ndarray | None] | None = None,
+    orientation: Orientation = None,
 ) -> PairProducts:
     """3D points of a pair over ``roi = (col, row, width, height)`` of the reference image
     (whole image by default); ``method`` the triangulation (``intersect`` or
@@ -194,8 +194,8 @@ def stereo_pair(
     vertical disparity over ``epipolar_tol_px``.
 
     Each point's height sigma (:mod:`._uncertainty`): from its disparity's matching sigma, and
-    from ``orientation`` (the ``2 x 2`` shift covariance, px^2, of each model, or ``None``:
-    :func:`~jaxgeo.stereo.orientation_covariances`), propagated through the intersection."""
+    from ``orientation`` (the shift covariance of ``(ref, sec)``, px^2,
+    :data:`~jaxgeo.stereo.Orientation`), propagated through the intersection."""
     log = log or (lambda _: None)
     clock = [time.perf_counter()]
 
@@ -362,7 +362,7 @@ def dsm_from_images(
     dem=None,
     height_range_m: tuple[float, float] | None = None,
     max_hole_m: float = MAX_HOLE_M,
-    orientation: Sequence[np.ndarray | None] | None = None,
+    orientation: Orientation = None,
 ) -> tuple[DSMGrid, list[dict]]:
     """DSM of ``roi`` of the first image from the pairs (first, i): pooled points, median per
     cell (:func:`rasterize`: each point also stands for the cells its footprint covers, the
@@ -377,9 +377,11 @@ def dsm_from_images(
     too. With GCPs, adjust the models first (``jaxgeo adjust``) and pass ``register=False``.
 
     ``height_sigma`` (:mod:`._uncertainty`): the matching's sigma of every point, and
-    ``orientation`` (per model the ``2 x 2`` covariance of its remaining image shift, px^2, or
-    ``None``: :func:`~jaxgeo.stereo.orientation_covariances` reads ``jaxgeo adjust``'s), through
-    the intersection, combined per cell.
+    ``orientation`` (the covariance of the models' remaining image shifts, px^2,
+    :data:`~jaxgeo.stereo.Orientation`: from an adjustment,
+    :func:`~jaxgeo.stereo.adjustment_covariance`; from its files,
+    :func:`~jaxgeo.stereo.orientation_covariances`),
+    through the intersection, combined per cell.
 
     ``keep_dir``: write each pair's intermediate
     products there (``pair_i.npz``: epipolar images, disparity, tie points, points).
@@ -390,10 +392,6 @@ def dsm_from_images(
             f"dsm: give at least two images, each with its model ({len(paths)} images, "
             f"{len(models)} models)"
         )
-    if orientation is not None and len(orientation) != len(paths):
-        raise StereoError(
-            f"dsm: {len(orientation)} orientation covariances for {len(paths)} images"
-        )
     all_points, all_stats, all_sigmas = [], [], []
     n = len(paths) - 1
     for i in range(1, len(paths)):
@@ -403,7 +401,7 @@ def dsm_from_images(
                 models[0], models[i], paths[0], paths[i], roi, method=method,
                 keep=keep_dir is not None, log=bar.log, band_rows=band_rows, on_band=bar.band,
                 dem=dem, height_range_m=height_range_m,
-                orientation=None if orientation is None else (orientation[0], orientation[i]),
+                orientation=pair_orientation(orientation, len(paths), 0, i),
             )  # fmt: skip
         finally:
             bar.close()

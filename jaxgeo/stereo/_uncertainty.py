@@ -10,9 +10,11 @@ Then
 
 - matching: ``sigma_match = |G_up,right . t| sigma_d``, ``t`` the right sensor displacement of
   one epipolar pixel along the line (from the rectification grids);
-- orientation: ``sigma_orient**2 = sum_i G_up,i C_i G_up,i^T`` with ``C_i`` the ``2 x 2``
-  covariance (px^2) of image ``i``'s remaining shift (the posterior sigmas of an adjustment's
-  bias: :func:`orientation_covariances`); zero for models without one.
+- orientation: ``sigma_orient**2 = G_up C G_up^T`` with ``C`` the ``(2N, 2N)`` covariance
+  (px^2) of the images' remaining shifts (an adjustment's posterior: with the correlations
+  between images from :func:`adjustment_covariance`, per image without them from the
+  ``adjusted_models.json`` of ``jaxgeo adjust``: :func:`orientation_covariances`, which
+  overstates the sigma where the images' shifts are correlated); zero when unknown.
 
 **Cells** (:func:`cell_sigma`). A cell's height is the median of its ``n`` points. The matching
 errors of neighbouring points are not independent (their correlation windows overlap by most
@@ -45,6 +47,58 @@ from ..geodesy import metres_per_unit
 from ..models import AbstractSensorModel
 
 CHUNK = 65536
+Orientation = np.ndarray | Sequence[np.ndarray | None] | None
+"""The covariance (px^2) of the models' remaining image shifts ``(x_1, y_1, ..., x_N, y_N)``:
+one ``(2N, 2N)`` matrix (with the correlations between images, e.g.
+:func:`adjustment_covariance`), or per model a ``2 x 2`` matrix or ``None`` (independent
+images; :func:`orientation_covariances`), or ``None`` (unknown: no orientation term)."""
+
+
+def joint_covariance(orientation: Orientation, n_models: int) -> np.ndarray:
+    """The ``(2N, 2N)`` matrix of an :data:`Orientation` (zeros for ``None``)."""
+    out = np.zeros((2 * n_models, 2 * n_models))
+    if orientation is None:
+        return out
+    if isinstance(orientation, np.ndarray) and orientation.ndim == 2:
+        if orientation.shape != out.shape:
+            raise ValueError(
+                f"orientation covariance of shape {orientation.shape} for {n_models} images "
+                f"(expected {out.shape})"
+            )
+        return np.asarray(orientation, float)
+    if len(orientation) != n_models:
+        raise ValueError(f"{len(orientation)} orientation covariances for {n_models} images")
+    for i, cov in enumerate(orientation):
+        if cov is not None:
+            out[2 * i : 2 * i + 2, 2 * i : 2 * i + 2] = np.asarray(cov, float)
+    return out
+
+
+def pair_orientation(orientation: Orientation, n_models: int, i: int, j: int) -> np.ndarray:
+    """The ``(4, 4)`` block of images ``i`` and ``j`` of an :data:`Orientation`."""
+    idx = np.array([2 * i, 2 * i + 1, 2 * j, 2 * j + 1])
+    return joint_covariance(orientation, n_models)[np.ix_(idx, idx)]
+
+
+def adjustment_covariance(result, images: Sequence[str]) -> np.ndarray:
+    """The ``(2N, 2N)`` posterior covariance (px^2) of the bias shifts of ``images`` (names in
+    the adjustment) from a :class:`jaxgeo.bundle.AdjustResult`, with the correlations between
+    images (which ``adjusted_models.json`` does not hold). :class:`OrientationError` when an
+    image has no adjusted shift."""
+    names = list(result.param_names)
+    idx = []
+    for image in images:
+        for end in SHIFT_PARAMETERS:
+            key = f"{image}.{end}"
+            if key not in names:
+                raise OrientationError(f"adjustment: no adjusted {key} (a bias shift)")
+            idx.append(names.index(key))
+    from scipy import sparse
+
+    cov = result.param_cov
+    if sparse.issparse(cov):  # a banded covariance (a strip)
+        return np.asarray(cov[idx][:, idx].toarray(), float)
+    return np.asarray(cov, float)[np.ix_(idx, idx)]
 
 
 class OrientationError(JaxgeoError, ValueError):
@@ -89,19 +143,18 @@ def point_height_sigmas(
     ground: np.ndarray,
     direction_px: np.ndarray,
     sigma_d_px: np.ndarray,
-    orientation: Sequence[np.ndarray | None] | None = None,
+    orientation: Orientation = None,
 ) -> tuple[np.ndarray, np.ndarray]:
     """Height sigmas (m) of dense points of a pair (module docstring): ``(matching,
     orientation)``, each ``(n,)``. ``ground`` ``(n, 3)`` the points, ``direction_px`` ``(n, 2)``
     the second image's sensor displacement per epipolar pixel of disparity, ``sigma_d_px``
-    ``(n,)`` the disparity sigmas, ``orientation`` per model its ``2 x 2`` shift covariance
-    (px^2) or ``None``."""
+    ``(n,)`` the disparity sigmas, ``orientation`` the models' shift covariance
+    (:data:`Orientation`)."""
     g = intersection_jacobian(models, ground)[:, 2]  # (n, N, 2): d up / d xy
     match = np.abs(np.einsum("nc,nc->n", g[:, 1], direction_px)) * np.asarray(sigma_d_px)
-    var = np.zeros(g.shape[0])
-    for i, cov in enumerate(orientation or ()):
-        if cov is not None:
-            var += np.einsum("nc,cd,nd->n", g[:, i], np.asarray(cov, float), g[:, i])
+    cov = joint_covariance(orientation, len(models))
+    flat = g.reshape(g.shape[0], -1)
+    var = np.maximum(np.einsum("na,ab,nb->n", flat, cov, flat), 0.0)
     orient = np.where(np.isfinite(match), np.sqrt(var), np.nan)
     return match, orient
 

@@ -119,7 +119,7 @@ def test_rasterize_median_count_spread_and_gaps(tmp_path):
     assert np.nanmax(dsm.spread) > 5  # the outliers show in the spread band
     out = write_dsm(dsm, tmp_path / "dsm.tif")
     with rasterio.open(out) as f:
-        assert f.count == 4 and f.crs.to_epsg() == 32631 and f.profile["tiled"]
+        assert f.count == 5 and f.crs.to_epsg() == 32631 and f.profile["tiled"]
         np.testing.assert_array_equal(f.read(1), dsm.height)
     with pytest.raises(FileExistsError):
         write_dsm(dsm, out)
