@@ -11,10 +11,11 @@ Then
 - matching: ``sigma_match = |G_up,right . t| sigma_d``, ``t`` the right sensor displacement of
   one epipolar pixel along the line (from the rectification grids);
 - orientation: ``sigma_orient**2 = G_up C G_up^T`` with ``C`` the ``(2N, 2N)`` covariance
-  (px^2) of the images' remaining shifts (an adjustment's posterior: with the correlations
-  between images from :func:`adjustment_covariance`, per image without them from the
-  ``adjusted_models.json`` of ``jaxgeo adjust``: :func:`orientation_covariances`, which
-  overstates the sigma where the images' shifts are correlated); zero when unknown.
+  (px^2) of the images' remaining shifts: an adjustment's posterior, from its result
+  (:func:`adjustment_covariance`) or its ``adjusted_models.json``
+  (:func:`orientation_covariances`; per-image sigmas only, unless the file holds the joint
+  covariance, overstate the sigma where the adjustment correlates the images); zero when
+  unknown.
 
 **Cells** (:func:`cell_sigma`). A cell's height is the median of its ``n`` points. The matching
 errors of neighbouring points are not independent (their correlation windows overlap by most
@@ -49,9 +50,9 @@ from ..models import AbstractSensorModel
 CHUNK = 65536
 Orientation = np.ndarray | Sequence[np.ndarray | None] | None
 """The covariance (px^2) of the models' remaining image shifts ``(x_1, y_1, ..., x_N, y_N)``:
-one ``(2N, 2N)`` matrix (with the correlations between images, e.g.
-:func:`adjustment_covariance`), or per model a ``2 x 2`` matrix or ``None`` (independent
-images; :func:`orientation_covariances`), or ``None`` (unknown: no orientation term)."""
+one ``(2N, 2N)`` matrix (with the correlations between images: :func:`adjustment_covariance`,
+:func:`orientation_covariances`), or per model a ``2 x 2`` matrix or ``None`` (independent
+images), or ``None`` (unknown: no orientation term)."""
 
 
 def joint_covariance(orientation: Orientation, n_models: int) -> np.ndarray:
@@ -204,25 +205,31 @@ def _shift_sigmas(sigmas: Mapping[str, float]) -> tuple[float, float] | None:
 
 def orientation_covariances(
     path: str | os.PathLike, images: Sequence[str | os.PathLike]
-) -> list[np.ndarray]:
-    """Per image of ``images``, the ``2 x 2`` covariance (px^2) of its remaining image-space
-    shift after ``jaxgeo adjust``: the posterior sigmas of the bias' constant terms in the
-    adjustment's ``adjusted_models.json`` (``path``), the image found by its name in the
-    adjustment (``--image NAME=...``: the file name without directories and suffixes, or with
-    ``_adjusted``/``_RPC`` dropped). The sigmas of drift or affine terms are not used (the file
-    holds no covariances between parameters): a constant shift per image, independent between
-    images.
-    :class:`OrientationError` naming the file and image when an image or its sigmas are
+) -> np.ndarray:
+    """The ``(2N, 2N)`` covariance (px^2, :data:`Orientation`) of the remaining image-space
+    shifts of ``images`` after ``jaxgeo adjust``, from the adjustment's
+    ``adjusted_models.json`` (``path``); each image found by its name in the adjustment
+    (``--image NAME=...``: the file name without directories and suffixes, or with
+    ``_adjusted``/``_RPC`` dropped).
+
+    With a top-level ``"covariance": {"parameters": [names], "matrix": [[...]]}`` (names as in
+    the images' ``sigmas``, prefixed with the image: ``left.bias.shift_px[0]``), the joint
+    posterior covariance of the shifts, correlations between images included. Otherwise the
+    posterior sigmas of each image's shift, independent between images: where the adjustment
+    correlates them (the same GCPs in both images) that overstates the height sigma (1.35x on
+    a simulated pair). The sigmas of drift or affine terms are not used: a constant shift per
+    image. :class:`OrientationError` naming the file and image when an image or its sigmas are
     missing."""
     path = pathlib.Path(path)
     try:
         data = json.loads(path.read_text())
         entries = data["images"]
-    except (OSError, ValueError, KeyError, TypeError) as err:
+        joint = data.get("covariance")
+    except (OSError, ValueError, KeyError, TypeError, AttributeError) as err:
         raise OrientationError(
             f"{path}: not an adjusted_models.json written by jaxgeo adjust ({err})"
         ) from None
-    out = []
+    keys, sigmas = [], []
     for image in images:
         name = pathlib.Path(image).name
         stems = [name.split(".")[0], pathlib.Path(image).stem]
@@ -238,8 +245,19 @@ def orientation_covariances(
             raise OrientationError(
                 f"{path}: image {key!r} has no posterior sigmas of a bias shift (x, y)"
             )
-        out.append(np.diag(np.square(sig)))
-    return out
+        keys.append(key)
+        sigmas.append(np.diag(np.square(sig)))
+    if joint is None:
+        return joint_covariance(sigmas, len(images))
+    try:
+        names = list(joint["parameters"])
+        matrix = np.asarray(joint["matrix"], float)
+        idx = [names.index(f"{k}.{end}") for k in keys for end in SHIFT_PARAMETERS]
+        return matrix[np.ix_(idx, idx)]
+    except (KeyError, TypeError, ValueError, IndexError) as err:
+        raise OrientationError(
+            f"{path}: its covariance does not hold the bias shifts of {', '.join(keys)} ({err})"
+        ) from None
 
 
 def sigma_calibration(

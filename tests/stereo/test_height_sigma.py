@@ -143,9 +143,17 @@ def test_orientation_covariances_from_adjusted_models_json(tmp_path):
     path = _adjusted_json(
         tmp_path / "adjusted_models.json", {"left": (0.1, 0.2), "right": (0.3, 0.4)}
     )
-    covs = orientation_covariances(path, ["/data/right.tif", "left_RPC.TXT"])
-    np.testing.assert_allclose(covs[0], np.diag([0.09, 0.16]))
-    np.testing.assert_allclose(covs[1], np.diag([0.01, 0.04]))
+    cov = orientation_covariances(path, ["/data/right.tif", "left_RPC.TXT"])
+    np.testing.assert_allclose(cov, np.diag([0.09, 0.16, 0.01, 0.04]))
+    # with the joint covariance (correlations between the images)
+    data = json.loads(path.read_text())
+    names = [f"{i}.bias.shift_px[{c}]" for i in ("left", "right") for c in (0, 1)]
+    matrix = np.diag([0.01, 0.04, 0.09, 0.16])
+    matrix[0, 2] = matrix[2, 0] = 0.02
+    data["covariance"] = {"parameters": names, "matrix": matrix.tolist()}
+    path.write_text(json.dumps(data))
+    cov = orientation_covariances(path, ["left.tif", "right.tif"])
+    np.testing.assert_allclose(cov, matrix)
     with pytest.raises(OrientationError, match="no image named 'other'.*left, right"):
         orientation_covariances(path, ["other.tif"])
     (tmp_path / "bad.json").write_text("{")
