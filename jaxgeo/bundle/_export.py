@@ -22,6 +22,7 @@ from ..io import (
     format_rpc_txt,
     image_stem,
     plan_rpc_outputs,
+    sidecar_name,
     vendor_values,
     write_rpc_outputs,
 )
@@ -150,6 +151,42 @@ def output_paths(
     return paths
 
 
+SIDECAR_FORMATS = ("txt", "rpb", "geom", "dimap")
+
+
+def sidecar_clash(
+    targets: Iterable[str | os.PathLike], inputs: Iterable[str | os.PathLike]
+) -> tuple[pathlib.Path, pathlib.Path] | None:
+    """``(target, raster)`` when an output would be an RPC sidecar of an input raster (its
+    ``<stem>_RPC.TXT``, ``.RPB``, ``.geom`` or ``RPC_<stem>.XML`` beside it): GDAL, OTB and
+    shareloc would then read it as that input's model, an input changed in effect."""
+    side = {}
+    for inp in map(pathlib.Path, inputs):
+        if inp.suffix.lower() in (".tif", ".tiff", ".ntf", ".nitf", ".jp2", ".img", ".vrt"):
+            for fmt in SIDECAR_FORMATS:
+                name = sidecar_name(inp.stem, fmt)
+                side[str(inp.resolve().with_name(name)).lower()] = inp
+    for target in map(pathlib.Path, targets):
+        raster = side.get(str(target.resolve()).lower())
+        if raster is not None:
+            return target, raster
+    return None
+
+
+def _probe_folder(out: pathlib.Path) -> None:
+    """``out`` can be created: a folder is made (and removed) in its nearest existing parent
+    (``os.access`` says yes to root everywhere, even in /proc)."""
+    import tempfile
+
+    base = out
+    while not base.exists() and base != base.parent:
+        base = base.parent
+    try:
+        os.rmdir(tempfile.mkdtemp(prefix=".jaxgeo-probe-", dir=base))
+    except OSError as err:
+        raise PermissionError(f"{out}: cannot be created ({base}: {err.strerror})") from None
+
+
 def check_out_dir(
     out_dir: str | os.PathLike,
     images: Mapping[str, str | os.PathLike] | Iterable[str],
@@ -161,7 +198,8 @@ def check_out_dir(
 ) -> None:
     """Before any computation: ``out_dir`` is (or can be created as) a writable folder, and no
     file :func:`write_outputs` will write (:func:`output_paths`, with the same ``images`` and
-    options) is an input or (unless ``overwrite``) exists. Raises ``FileExistsError`` /
+    options) is an input, an RPC sidecar of an input raster (:func:`sidecar_clash`) or (unless
+    ``overwrite``) exists. Raises ``FileExistsError`` /
     ``PermissionError`` / ``NotADirectoryError`` naming the path, ``ValueError`` when an image
     to copy is not found."""
     out = pathlib.Path(out_dir)
@@ -174,8 +212,18 @@ def check_out_dir(
             break
     if not os.access(base, os.W_OK | os.X_OK):
         raise PermissionError(f"{out}: cannot write there ({base} is not writable)")
+    if not out.exists():
+        _probe_folder(out)
+    inputs = list(inputs)
     given = {pathlib.Path(p).resolve() for p in inputs}
-    for target in output_paths(out, images, rpc_format, copy_images, write_into):
+    targets = output_paths(out, images, rpc_format, copy_images, write_into)
+    clash = sidecar_clash(targets, inputs)
+    if clash is not None:
+        raise FileExistsError(
+            f"{clash[0]}: refusing to write an RPC beside the input image {clash[1]}: tools "
+            "would read it as that image's model (choose another --out)"
+        )
+    for target in targets:
         path = target.resolve()
         if path in given:
             raise FileExistsError(f"{path}: refusing to write an adjusted file over an input")
@@ -256,7 +304,15 @@ def write_outputs(
     files["report.json"] = json.dumps(report, indent=1) + "\n"
     files["report.txt"] = report_text + ("\n\n" + "\n".join(notes) if notes else "") + "\n"
     targets = {n: (out / n).resolve() for n in files}
+    inputs = list(inputs)
     given = {pathlib.Path(p).resolve() for p in inputs}
+    planned = [*targets.values(), *(p for _, plan in placed for p in plan.targets)]
+    clash = sidecar_clash(planned, inputs)
+    if clash is not None:
+        raise FileExistsError(
+            f"{clash[0]}: refusing to write an RPC beside the input image {clash[1]}: tools "
+            "would read it as that image's model (choose another --out)"
+        )
     for path in [*targets.values(), *(p.resolve() for _, plan in placed for p in plan.targets)]:
         if path in given:
             raise FileExistsError(f"{path}: refusing to write an adjusted file over an input")
@@ -300,5 +356,6 @@ __all__ = [
     "models_json",
     "output_paths",
     "rpc_plans",
+    "sidecar_clash",
     "write_outputs",
 ]
