@@ -1,6 +1,7 @@
 """A tiled orthoimage on a dask LocalCluster of 2 spawned workers equals the one made in this
 process; a worker killed mid-run still gives the complete, identical product; ``resume`` skips
-the tiles an interrupted run finished; ``jaxgeo ortho --plan`` lists the tiles and computes
+the tiles an interrupted run finished; a failing tile on a cluster named by its address is
+retried, then named; ``jaxgeo ortho --plan`` lists the tiles and computes
 nothing. The Ventoux Pleiades crop (500 x 500 px, a pixel-space geotransform at 5000, 5000) on
 SRTM + EGM96, in 256 px tiles (9 tiles)."""
 
@@ -88,6 +89,21 @@ class FailOn:
         return self.job(tile, path)
 
 
+@dataclasses.dataclass(frozen=True)
+class FailOnce:
+    """The ortho job, failing the first time it runs ``tile_id`` (a flag file records it)."""
+
+    job: object
+    tile_id: str
+    flag: str
+
+    def __call__(self, tile, path):
+        if tile.id == self.tile_id and not os.path.exists(self.flag):
+            pathlib.Path(self.flag).write_text(str(os.getpid()))
+            raise OSError("a flaky read")
+        return self.job(tile, path)
+
+
 @pytest.fixture(scope="module")
 def in_process(setup, tmp_path_factory):
     tmp = tmp_path_factory.mktemp("in_process")
@@ -158,3 +174,19 @@ def test_plan_lists_the_tiles_and_computes_nothing(setup, crop, tmp_path, capsys
                for w in windows if w is not None)  # fmt: skip
     # the same plan as the library's (the one --resume checks a folder against)
     assert plan["tiles"] == json.loads(setup.plan.to_json())["tiles"]
+
+
+def test_a_cluster_by_address_retries_a_failing_tile_then_names_it(setup, pool, in_process,
+                                                                  tmp_path):  # fmt: skip
+    # --scheduler: the pool's workers reached through their scheduler's address
+    flag = tmp_path / "failed"
+    run = run_tiles(setup.plan, FailOnce(setup.job, "r0002c0000", str(flag)), tmp_path / "a",
+                    scheduler=pool.address, retries=1, progress=False)  # fmt: skip
+    assert flag.exists() and run.scheduler == pool.address
+    assert run.workers >= 1  # those up at the start (the nanny may be restarting a killed one)
+    assert np.array_equal(_product(setup, run, tmp_path / "ortho.tif"), in_process)
+    failed = r"tile r0001c0002 \(rows 256..511, cols 512..\d+\) failed after 2 attempts: OSError"
+    with pytest.raises(TileError, match=failed):
+        run_tiles(setup.plan, FailOn(setup.job, "r0001c0002"), tmp_path / "b",
+                  scheduler=pool.address, retries=1, progress=False)  # fmt: skip
+    assert not (tmp_path / "b" / "tiles" / "r0001c0002.json").exists()
