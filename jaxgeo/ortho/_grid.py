@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import dataclasses
 import math
+import warnings
 
 import numpy as np
 
@@ -170,15 +171,37 @@ def dem_for_image(model, dem, width: int, height: int, source: str = "image"):
     return grid
 
 
-def footprint(model, grid, width: int, height: int) -> np.ndarray:
-    """``(m, 3)`` ground points of the image border on the DEM (those that meet it)."""
-    g, ok = on_dem(model, border_pixels(width, height), grid)
-    if ok.mean() < 0.5:
+def footprint(model, grid, width: int, height: int, source: str = "the DEM") -> np.ndarray:
+    """``(m, 3)`` ground points of the image border on the DEM.
+
+    Border points whose line of sight meets no DEM height (the DEM's nodata: a DSM's holes, its
+    area outside a stereo overlap) are placed at the DEM's median height, so that the product
+    still spans the whole image (nodata there), with a warning naming ``source``; a border
+    that meets the DEM nowhere is an error."""
+    border = border_pixels(width, height)
+    g, ok = on_dem(model, border, grid)
+    if ok.all():
+        return g
+    if not ok.any():
         raise ValueError(
-            f"only {100 * ok.mean():.0f}% of the image border meets the DEM: the DEM does not "
-            "cover the image footprint"
+            f"{source}: no point of the image border meets a DEM height: the DEM (or its valid "
+            "cells) does not cover the image footprint"
         )
-    return g[ok]
+    z = np.asarray(grid.heights_m)
+    h = float(np.nanmedian(z))
+    far = np.asarray(_exported.call(_at_height, model, border[~ok], np.full(int((~ok).sum()), h)))
+    if not np.all(np.isfinite(far)):
+        raise ValueError(f"{source}: the model cannot localise the image border")
+    warnings.warn(
+        f"{source}: {100 * (1 - ok.mean()):.0f}% of the image border falls where the DEM has "
+        f"no height ({100 * np.isnan(z).mean():.0f}% of its cells under the image are nodata): "
+        "the orthoimage is nodata there",
+        UserWarning,
+        stacklevel=2,
+    )
+    out = g.copy()
+    out[~ok] = far
+    return out
 
 
 def default_crs(lonlat: np.ndarray):
@@ -196,8 +219,9 @@ def ground_sample_distance(model, grid, crs, width: int, height: int) -> float:
     c = np.array([(width - 1) / 2, (height - 1) / 2])
     pts = np.stack([c, c + [1.0, 0.0], c + [0.0, 1.0]])
     g, ok = on_dem(model, pts, grid)
-    if not np.all(ok):
-        raise ValueError("the image centre does not meet the DEM: cannot derive the GSD")
+    if not np.all(ok):  # a hole of the DEM under the centre: at its median height
+        h = float(np.nanmedian(np.asarray(grid.heights_m)))
+        g = np.asarray(_exported.call(_at_height, model, pts, np.full(len(pts), h)))
     tr = pyproj.Transformer.from_crs(4326, crs, always_xy=True)
     x, y = tr.transform(g[:, 0], g[:, 1])
     a = np.array([[x[1] - x[0], x[2] - x[0]], [y[1] - y[0], y[2] - y[0]]])

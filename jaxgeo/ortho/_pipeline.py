@@ -1,7 +1,7 @@
 """Orthorectification of an image with any sensor model and a DEM, tile by tile, on all cores.
 
-:func:`orthorectify` = :func:`._plan.plan_ortho` (inputs, footprint, grid, checks, the tile plan;
-the worker processes start meanwhile), then the tiles on the tile runner
+:func:`orthorectify` = :func:`._plan.plan_ortho` (inputs, footprint, grid, checks, the tile plan),
+then the tiles on the tile runner
 (:func:`jaxgeo.tiles.run_tiles`: here for a small product, else on dask workers, one per core) as
 :class:`._job.OrthoJob` calls, each writing its window, then :func:`jaxgeo.tiles.mosaic_cog`
 joins them into a COG renamed onto ``out`` at the end.
@@ -15,18 +15,10 @@ import pathlib
 import shutil
 import tempfile
 import time
-import warnings
 from collections.abc import Sequence
 
 from ..io import DEM, SensorImage
-from ..tiles import (
-    IN_PROCESS_MAX_PX,
-    WorkerPool,
-    cores,
-    mosaic_cog,
-    resolve_workers,
-    run_tiles,
-)
+from ..tiles import mosaic_cog, run_tiles
 from ._plan import plan_ortho
 from ._validate import MAX_PIXELS, OrthoError
 
@@ -118,18 +110,14 @@ def orthorectify(
     existing ``out``, :class:`jaxgeo.tiles.TileError` naming a tile that kept failing.
     """
     t_start = time.perf_counter()
-    pool = _early_pool(image, workers, scheduler, retries)
     folder, done = None, False
+    # the workers start once the plan is made: a refused input is answered without them
+    setup = plan_ortho(
+        image, model, dem, out, crs=crs, res_m=res_m, bounds=bounds, resampling=resampling,
+        occlusion=occlusion, image_origin=image_origin, nodata=nodata, tile_px=tile_px,
+        step_px=step_px, tol_px=tol_px, max_pixels=max_pixels, overwrite=overwrite,
+    )  # fmt: skip
     try:
-        setup = plan_ortho(
-            image, model, dem, out, crs=crs, res_m=res_m, bounds=bounds, resampling=resampling,
-            occlusion=occlusion, image_origin=image_origin, nodata=nodata, tile_px=tile_px,
-            step_px=step_px, tol_px=tol_px, max_pixels=max_pixels, overwrite=overwrite,
-        )  # fmt: skip
-        if pool is not None and not scheduler and workers is None:
-            if resolve_workers(setup.plan, None, None) == 0:  # smaller than the image suggested
-                pool.close()
-                pool = None
         out = setup.out
         if resume is not None:
             folder = pathlib.Path(resume)
@@ -137,7 +125,7 @@ def orthorectify(
             folder = pathlib.Path(tempfile.mkdtemp(prefix=f".{out.name}.", suffix=".tiles",
                                                    dir=out.parent))  # fmt: skip
         run = run_tiles(setup.plan, setup.job, folder, workers=workers, scheduler=scheduler,
-                        pool=pool, retries=retries, progress=progress)  # fmt: skip
+                        retries=retries, progress=progress)  # fmt: skip
         stats = [r.stats for r in run.results.values() if r.path is not None]
         if not stats:
             raise OrthoError(f"{setup.image.path}: no tile of the product holds data (the "
@@ -147,8 +135,6 @@ def orthorectify(
                    overview_resampling=overviews)  # fmt: skip
         done = True
     finally:
-        if pool is not None:
-            pool.close()
         if folder is not None and (resume is None or done):
             _remove_work(folder, created=resume is None)
     total = setup.plan.width * setup.plan.height
@@ -164,33 +150,6 @@ def orthorectify(
         seconds=time.perf_counter() - t_start, tiles=len(setup.plan), empty_tiles=run.empty,
         reused_tiles=run.reused, workers=run.workers, scheduler=run.scheduler,
     )  # fmt: skip
-
-
-def _early_pool(image, workers, scheduler, retries) -> WorkerPool | None:
-    """Workers started now, while the tiles are planned, when they will be needed: asked for
-    (``workers`` >= 1 or a ``scheduler``), or by default for an image larger than the tile
-    runner's in-process limit on a machine with several cores."""
-    if workers == 0 and not scheduler:
-        return None
-    if not scheduler and workers is None:
-        if cores() < 2:
-            return None
-        try:
-            if isinstance(image, SensorImage):
-                w, h = image.size or (0, 0)
-            else:
-                import rasterio
-                import rasterio.errors
-
-                with warnings.catch_warnings():
-                    warnings.simplefilter("ignore", rasterio.errors.NotGeoreferencedWarning)
-                    with rasterio.open(image) as src:
-                        w, h = src.width, src.height
-        except Exception:  # reported by plan_ortho, with the file named
-            return None
-        if w * h <= IN_PROCESS_MAX_PX:
-            return None
-    return WorkerPool(workers or cores(), scheduler, retries, warm=("jaxgeo.ortho",))
 
 
 def _remove_work(folder: pathlib.Path, created: bool) -> None:

@@ -179,7 +179,7 @@ def plan_ortho(
             bands, dtype = src.count, src.dtypes[0]
     model = sensor.model
     dem_grid = dem_for_image(model, dem, width, height, source=str(sensor.path))
-    ground = footprint(model, dem_grid, width, height)
+    ground = footprint(model, dem_grid, width, height, source=str(dem.path))
     out_crs = out_crs if out_crs is not None else default_crs(ground)
     gsd = ground_sample_distance(model, dem_grid, out_crs, width, height)
     gsd_m = gsd * M_PER_DEG if out_crs.is_geographic else gsd
