@@ -4,10 +4,11 @@
     run = run_tiles(plan, work, folder, workers=None)    # work(tile, path) -> stats | None
     mosaic_cog(run, plan, spec, "product.tif")
 
-Generic over what a tile produces: the orthoimage (:mod:`jaxgeo.ortho`) and the DSM use the same
-runner with their own per-tile function and mosaic. By default the tiles of a large product run on
-an embedded dask LocalCluster of spawned worker processes, one per core; a small one in this
-process; ``scheduler=`` names an existing dask cluster (:mod:`._runner` says how to start one).
+Generic over what a tile produces: the orthoimage (:mod:`jaxgeo.ortho`) runs on it with its own
+per-tile function (:class:`jaxgeo.ortho.OrthoJob`); other raster products can do the same. By
+default the tiles of a large product run on an embedded dask LocalCluster of spawned worker
+processes, one per core, and a small product's in this process; ``scheduler=`` names an
+existing dask cluster (:mod:`._runner` says how to start one).
 """
 
 from ._mosaic import COMPRESSIONS as COMPRESSIONS

@@ -1,6 +1,6 @@
 """The tile runner in this process: results recorded atomically, no-data tiles, retries that
 end naming the tile, a second run on the same folder reusing finished tiles, another plan's
-folder refused. (Worker processes: tests/tiles/test_cluster.py.)"""
+folder refused. (Worker processes: tests/tiles/test_ortho_tiles.py.)"""
 
 import dataclasses
 import pathlib
