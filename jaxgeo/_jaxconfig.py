@@ -68,9 +68,10 @@ SINGLE_THREAD_FLAG = "xla_cpu_multi_thread_eigen=false"
 
 def usable_cores() -> int:
     """The cores this process may run on (its CPU affinity where the OS has one)."""
-    if hasattr(os, "sched_getaffinity"):
+    try:
         return max(1, len(os.sched_getaffinity(0)))
-    return max(1, os.cpu_count() or 1)
+    except AttributeError:  # no CPU affinity on this OS (macOS, Windows)
+        return max(1, os.cpu_count() or 1)
 
 
 def cpu_device_count() -> int:
