@@ -14,8 +14,8 @@ The stages: :func:`~._prepare.prepare` (checks, groups, initial points, priors) 
 
 from __future__ import annotations
 
-from collections.abc import Callable, Mapping
-from typing import Any
+from collections.abc import Callable, Mapping, Sequence
+from typing import Any, NamedTuple
 
 import equinox as eqx
 import jax
@@ -23,33 +23,78 @@ import numpy as np
 
 from ..io import GroundPoints, Observations
 from ..lsq import DEFAULT_SOLVER, SolverConfig
-from ..models import BIAS_KINDS, AbstractBias, AbstractSensorModel, Biased
+from ..models import BIAS_KINDS, AbstractBias, AbstractSensorModel, Biased, JitterBias
 from ._prepare import prepare
 from ._prepare.checks import Sources
 from ._result import AdjustResult, make_result
 from ._snooping import snoop
 
-BIAS_CHOICES = ("none", *BIAS_KINDS)
-"""Names accepted for ``bias``: ``"none"`` and the kinds of
-:data:`jaxgeo.models.BIAS_KINDS` (defined there once)."""
+BIAS_CHOICES = ("none", *BIAS_KINDS, "jitter")
+"""Names accepted for ``bias``: ``"none"``, the kinds of :data:`jaxgeo.models.BIAS_KINDS`
+(defined there once) and ``"jitter"`` (:class:`~jaxgeo.models.JitterBias`: the affine bias
+plus smooth offsets along the lines, :class:`JitterSettings`)."""
 
 
-def with_bias(models: Mapping[str, Any], bias: str | type[AbstractBias] | None) -> dict[str, Any]:
+class JitterSettings(NamedTuple):
+    """The spline of ``bias="jitter"``: a knot every ``knot_lines`` lines, second differences
+    of its coefficients held at ``smoothness_px`` (px). The defaults follow a jitter of a
+    period of 400 lines or more to < 0.1 px (benchmarks/accuracy/jitter.py)."""
+
+    knot_lines: float = 100.0
+    smoothness_px: float = 1.0
+
+
+DEFAULT_JITTER = JitterSettings()
+
+
+def image_lines(model: Any, domain: Sequence[float] | None = None) -> tuple[float, float]:
+    """``(first, last)`` image line a model is used over: from ``domain`` (``(x_min, y_min,
+    x_max, y_max)`` px, e.g. :meth:`jaxgeo.io.SensorImage.domain`), else its RPC's image
+    domain. Raises ``ValueError`` when neither bounds it."""
+    if domain is not None and np.all(np.isfinite(np.asarray(domain, float))):
+        return float(domain[1]), float(domain[3])
+    rpc = model.base_rpc() if isinstance(model, AbstractSensorModel) else None
+    if rpc is None:
+        raise ValueError(
+            f"bias 'jitter' needs the lines of each image: a {type(model).__name__} model "
+            "without an RPC and without its raster's size"
+        )
+    off, scale = float(rpc.image_offset[1]), abs(float(rpc.image_scale[1]))
+    return off - scale, off + scale
+
+
+def with_bias(
+    models: Mapping[str, Any],
+    bias: str | type[AbstractBias] | None,
+    domains: Mapping[str, Sequence[float]] | None = None,
+    jitter: JitterSettings = DEFAULT_JITTER,
+) -> dict[str, Any]:
     """Wrap every single-image model in :class:`~jaxgeo.models.Biased` with a zero bias.
 
-    ``bias``: a name of :data:`BIAS_CHOICES` (``"shift"``, ``"shift-drift"``, ``"affine"``), a
-    bias class, or ``None``/``"none"`` (models unchanged). Models that are already
-    :class:`Biased` (and multi-image models) are kept as they are.
+    ``bias``: a name of :data:`BIAS_CHOICES` (``"shift"``, ``"shift-drift"``, ``"affine"``,
+    ``"jitter"``), a bias class, or ``None``/``"none"`` (models unchanged). Models that are
+    already :class:`Biased` (and multi-image models) are kept as they are. A jitter's spline
+    spans each image's lines (:func:`image_lines` of ``domains[name]``) with ``jitter``'s knots.
     """
     if bias is None or bias == "none":
         return dict(models)
-    kind = BIAS_KINDS.get(bias) if isinstance(bias, str) else bias
-    if kind is None:
-        raise ValueError(f"unknown bias {bias!r}; expected one of {', '.join(BIAS_CHOICES)}")
+    if bias == "jitter":
+        domains = domains or {}
+
+        def kind(name, m):
+            return JitterBias(image_lines(m, domains.get(name)), *jitter)
+    else:
+        cls = BIAS_KINDS.get(bias) if isinstance(bias, str) else bias
+        if cls is None:
+            raise ValueError(f"unknown bias {bias!r}; expected one of {', '.join(BIAS_CHOICES)}")
+
+        def kind(name, m):
+            return cls()
+
     return {
         k: m
         if isinstance(m, Biased) or not isinstance(m, AbstractSensorModel)
-        else Biased(m, kind())
+        else Biased(m, kind(k, m))
         for k, m in models.items()
     }
 
@@ -58,8 +103,9 @@ def bias_prior_sigma(
     models: Mapping[Any, Any], shift_px: float | None, matrix: float | None
 ) -> dict[Any, Any] | None:
     """Prior sigmas of the image biases as :func:`adjust` takes them (per model key): ``shift_px``
-    (px) on every bias shift, ``matrix`` (px/px) on the other bias terms (drift or affine
-    matrix); ``None`` for no prior. The names of ``jaxgeo strip``'s ``--bias-prior-*``."""
+    (px) on every bias shift, ``matrix`` (px/px) on the drift or affine matrix (a jitter's
+    spline has its own smoothness prior); ``None`` for no prior. The names of ``jaxgeo
+    strip``'s ``--bias-prior-*``."""
     if shift_px is None and matrix is None:
         return None
     out = {}
@@ -67,8 +113,8 @@ def bias_prior_sigma(
         if not isinstance(m, Biased):
             continue
         sigma = jax.tree.map(lambda x: np.full(np.shape(x), np.inf), m)
-        for name in m.bias.__dataclass_fields__:
-            value = shift_px if name == "shift_px" else matrix
+        for name in m.bias.__dataclass_fields__:  # a jitter's knots: their own prior
+            value = {"shift_px": shift_px, "matrix": matrix, "drift": matrix}.get(name)
             leaf = getattr(m.bias, name)
             if value is None or not eqx.is_array(leaf):
                 continue
@@ -154,7 +200,7 @@ def adjust(
     :class:`~._errors.SingularNormalEquations` naming the undetermined parameters or points.
     """
     if bias is not None:
-        models = with_bias(models, bias)
+        models = with_bias(models, bias, image_domains)
     setup = prepare(
         models,
         observations,

@@ -26,7 +26,7 @@ from ..io import (
     vendor_values,
     write_rpc_outputs,
 )
-from ..models import RPC, Biased, fit_rpc
+from ..models import RPC, AffineBias, Biased, JitterBias, fit_rpc
 from ._report import format_reports
 
 
@@ -38,8 +38,11 @@ def adjusted_rpc(model: Any, domain: RPC | None = None) -> tuple[RPC, float, str
     (a bias with drift or affine terms mixes the sample and line rational functions, whose
     denominators differ) the RPC is re-fitted to the model over the validity cube and image of
     ``domain`` (the delivered RPC; ``how = "refit"``, ``max_error_px`` the maximum error on the
-    independent check grid). Raises ``TypeError`` when neither is possible.
+    independent check grid). A jitter's spline is left out: it is :func:`jitter_grid`'s.
+    Raises ``TypeError`` when neither is possible.
     """
+    if isinstance(model, Biased) and isinstance(model.bias, JitterBias):  # the grid holds s(y)
+        model = Biased(model.model, AffineBias(model.bias.shift_px, model.bias.matrix))
     exact = model.exact_rpc()
     if exact is not None:
         return exact, 0.0, "exact"
@@ -52,6 +55,26 @@ def adjusted_rpc(model: Any, domain: RPC | None = None) -> tuple[RPC, float, str
     go, gs = np.asarray(domain.ground_offset), np.asarray(domain.ground_scale)
     refit, report = fit_rpc(model, n_cols, n_rows, (go[2] - gs[2], go[2] + gs[2]))
     return refit, float(report.check_max_px), "refit"
+
+
+def jitter_grid(model: Any) -> str | None:
+    """The line-dependent correction of a :class:`~jaxgeo.models.JitterBias` as CSV text (None
+    for any other model): ``line,dx_px,dy_px`` every quarter knot spacing over the image's
+    lines, such that ``image = RPC(ground) + (dx, dy)`` where RPC is the adjusted RPC written
+    beside it (:func:`adjusted_rpc`: the affine part) and ``(dx, dy)`` is read (linearly
+    interpolated) at the RPC's line. The error of reading it at the RPC's line instead of the
+    image's is the correction's slope times ``dy`` (1e-2 px for 1.5 px at a 1000-line period)."""
+    if not (isinstance(model, Biased) and isinstance(model.bias, JitterBias)):
+        return None
+    bias = model.bias
+    n = bias.knots_px.shape[0]
+    last = bias.line0 + (n - 3) * bias.knot_lines
+    lines = np.arange(bias.line0, last + bias.knot_lines / 8, bias.knot_lines / 4)
+    s = np.asarray(bias.offsets(lines))
+    # (I + M) image + a0 + s(y) = RPC model pixel  =>  image = affine part - (I + M)^-1 s(y)
+    corr = -np.linalg.solve(np.eye(2) + np.asarray(bias.matrix), s.T).T
+    return _csv(["line", "dx_px", "dy_px"], [[_r(y), _r(c[0]), _r(c[1])] for y, c in
+                                             zip(lines, corr, strict=True)])  # fmt: skip
 
 
 def delivered_rpcs(result) -> dict[str, RPC | None]:
@@ -140,7 +163,7 @@ def output_paths(
 ) -> list[pathlib.Path]:
     """Every file :func:`write_outputs` may write: the fixed outputs and, per image, its RPC
     (and image copy) as planned from ``images`` (name -> file), or ``NAME_adjusted_RPC.TXT``
-    when only names are given."""
+    when only names are given, and the jitter grids a jitter bias writes."""
     out = pathlib.Path(out_dir)
     paths = [out / n for n in FIXED_OUTPUTS]
     if isinstance(images, Mapping):
@@ -148,7 +171,7 @@ def output_paths(
         paths += [p for plan in plans.values() for p in plan.targets]
     else:
         paths += [out / f"{n}_adjusted_RPC.TXT" for n in images]
-    return paths
+    return paths + [out / f"{n}_jitter.csv" for n in images]  # with a jitter bias
 
 
 SIDECAR_FORMATS = ("txt", "rpb", "geom", "dimap")
@@ -273,6 +296,14 @@ def write_outputs(
                 f"{name}_adjusted_RPC.TXT: {how}"
                 + (f" (max error {err:.3g} px on the check grid)" if how == "refit" else "")
             )
+    for name, model in result.models.items():
+        grid = jitter_grid(model)
+        if grid is not None:
+            files[f"{name}_jitter.csv"] = grid
+            notes.append(
+                f"{name}_jitter.csv: the jitter correction along the lines (image = RPC(ground) "
+                "+ (dx, dy) at the RPC's line); the RPC holds the affine bias only"
+            )
     files["adjusted_models.json"] = json.dumps(models_json(result), indent=1) + "\n"
     files["ground_adjusted.csv"] = _csv(
         ["id", "lon", "lat", "h", "role", "sigma_e_m", "sigma_n_m", "sigma_h_m"],
@@ -353,6 +384,7 @@ __all__ = [
     "check_out_dir",
     "delivered_rpcs",
     "format_reports",
+    "jitter_grid",
     "models_json",
     "output_paths",
     "rpc_plans",

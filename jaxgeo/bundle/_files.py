@@ -33,7 +33,14 @@ from ..io import (
     table_lines,
 )
 from ..lsq import DEFAULT_SOLVER, SolverConfig
-from ._adjustment import BIAS_CHOICES, adjust, bias_prior_sigma, with_bias
+from ._adjustment import (
+    BIAS_CHOICES,
+    DEFAULT_JITTER,
+    JitterSettings,
+    adjust,
+    bias_prior_sigma,
+    with_bias,
+)
 from ._export import write_outputs
 from ._prepare.checks import Sources
 from ._report import AccuracyReport, direct_georeferencing, format_reports
@@ -222,13 +229,15 @@ def adjust_files(
     dem: Any = None,
     tie_height_sigma_m: float = 10.0,
     progress: Callable[[str], None] | None = None,
+    jitter: JitterSettings = DEFAULT_JITTER,
 ) -> FileAdjustment:
     """Read the images (name -> raster, model file or :class:`~jaxgeo.io.SensorImage`, see the
     module docstring), OBS.csv and GROUND.csv, adjust with an image bias per image (a name of
     :data:`BIAS_CHOICES`; optional priors on it, :func:`bias_prior_sigma`; tie heights from
     ``dem``, a :class:`~jaxgeo.io.DEM`, with sigma ``tie_height_sigma_m``), and intersect the
     ``direct_roles`` points with the given models for comparison (tables 3 and 4 of 000_).
-    ``progress``: called with a line of text at each stage."""
+    ``progress``: called with a line of text at each stage; ``jitter``: the spline of
+    ``bias="jitter"`` (over each image's lines)."""
     if bias not in BIAS_CHOICES:
         raise ValueError(f"unknown bias {bias!r}; expected one of {', '.join(BIAS_CHOICES)}")
     opened = {name: sensor_image(name, source) for name, source in images.items()}
@@ -243,7 +252,7 @@ def adjust_files(
         table_lines(ground) if ground is not None else (),
     )
     if bias != "none":
-        models = with_bias(models, bias)
+        models = with_bias(models, bias, {n: img.domain() for n, img in opened.items()}, jitter)
     notes = []
     measured = set(obs.point_ids)
     gcps = [] if points is None else [

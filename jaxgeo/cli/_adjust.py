@@ -47,7 +47,12 @@ EXIT_CODES = {
 
 
 def register(sub) -> None:
-    from ..bundle import BIAS_CHOICES, RELATIVE_PRIOR_MATRIX, RELATIVE_PRIOR_SHIFT_PX
+    from ..bundle import (
+        BIAS_CHOICES,
+        RELATIVE_PRIOR_MATRIX,
+        RELATIVE_PRIOR_SHIFT_PX,
+        JitterSettings,
+    )
     from ..lsq import LOSSES
     from ._common import add_command, add_image_options, add_json, add_quiet
 
@@ -75,7 +80,24 @@ def register(sub) -> None:
         "--bias",
         choices=BIAS_CHOICES,
         default="affine",
-        help="image-space bias model adjusted per image (default affine)",
+        help="image-space bias model adjusted per image (default affine; jitter: affine plus "
+        "smooth offsets along the lines, for attitude jitter, from dense ties)",
+    )
+    parser.add_argument(
+        "--jitter-knot-lines",
+        type=float,
+        default=JitterSettings().knot_lines,
+        metavar="N",
+        help=f"--bias jitter: a spline knot every N lines (default {JitterSettings().knot_lines:g};"
+        " about an eighth of the shortest jitter period to follow)",
+    )
+    parser.add_argument(
+        "--jitter-smoothness-px",
+        type=float,
+        default=JitterSettings().smoothness_px,
+        metavar="S",
+        help="--bias jitter: prior sigma (px) of the spline's second differences (default "
+        f"{JitterSettings().smoothness_px:g}; smaller is smoother)",
     )
     parser.add_argument(
         "--method",
@@ -257,7 +279,7 @@ def run(args: argparse.Namespace) -> int:
     import warnings
 
     from .. import bundle
-    from ..bundle import NotConvergedWarning, PoorFitWarning, image_inputs
+    from ..bundle import JitterSettings, NotConvergedWarning, PoorFitWarning, image_inputs
     from ..lsq import SolverConfig
     from . import CommandError
     from ._common import EXIT_NOT_CONVERGED, EXIT_OK, EXIT_POOR_FIT, EXIT_WRITE, note, print_json
@@ -269,6 +291,10 @@ def run(args: argparse.Namespace) -> int:
         raise CommandError("--dem-offset-m applies to --dem heights only")
     if not (args.tie_height_sigma_m > 0 and args.tie_height_sigma_m < float("inf")):
         raise CommandError(f"--tie-height-sigma-m must be positive, got {args.tie_height_sigma_m}")
+    for flag, value in (("--jitter-knot-lines", args.jitter_knot_lines),
+                        ("--jitter-smoothness-px", args.jitter_smoothness_px)):  # fmt: skip
+        if not (0 < value < float("inf")):
+            raise CommandError(f"{flag} must be a positive number, got {value}")
     if args.max_steps < 1:
         raise CommandError(f"--max-steps must be at least 1, got {args.max_steps}")
     for flag, value in (("--bias-prior-shift-px", args.bias_prior_shift_px),
@@ -315,6 +341,7 @@ def run(args: argparse.Namespace) -> int:
             bias_prior_shift_px=args.bias_prior_shift_px,
             bias_prior_matrix=args.bias_prior_matrix, dem=dem,
             tie_height_sigma_m=args.tie_height_sigma_m, progress=say,
+            jitter=JitterSettings(args.jitter_knot_lines, args.jitter_smoothness_px),
         )  # fmt: skip
     for w in caught:  # warnings are printed even with --quiet
         warn = issubclass(w.category, (NotConvergedWarning, PoorFitWarning))
