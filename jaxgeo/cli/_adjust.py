@@ -24,6 +24,11 @@ adjusted points, the residuals and the report. Every output is checked before an
 no input is ever replaced (``--overwrite`` replaces earlier outputs only); the report is printed
 before anything is written.
 
+``--bias jitter`` adds to the affine bias offsets along the lines (a spline with a knot every
+``--jitter-knot-lines``, held smooth by ``--jitter-smoothness-px``) for attitude jitter; the
+RPC written holds the affine part and ``<image>_jitter.csv`` the rest (``image = RPC(ground) +
+(dx, dy)`` at the RPC's line).
+
 Gross errors: by default the image observations and GCP coordinates get a Cauchy loss at 3 a
 priori sigmas (IRLS), then data snooping (Baarda's w-test, iterated) removes the flagged
 observations and re-solves (``--keep-blunders``: flag only). Snooping removes at most
