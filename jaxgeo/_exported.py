@@ -15,16 +15,25 @@ environment variables that change a trace, the backend, the input structure with
 (non-array) values pickled, and each array's shape and dtype. Anything that cannot be keyed or
 exported this way (an unpicklable static value, a host callback in the program) falls back to
 ``eqx.filter_jit`` -- slower, never different.
-Results are those of the jitted function (the same StableHLO; tested bit for bit).
+Results are those of the jitted function (the same StableHLO; tested bit for bit), compiled
+with the same XLA options; small programs get quicker ones (:data:`QUICK_COMPILE`), whose
+roundings may differ from XLA's defaults in the last bits (a solve then stops within its
+tolerance of the same point).
 
 Off with the compilation cache (``JAXGEO_CACHE_DIR=off``), inside transformations (tracers in
 the inputs) and for inputs over ``MAX_ELEMENTS``: then :func:`call` is ``eqx.filter_jit(fn)``.
+Inputs over ``MAX_ELEMENTS`` are compiled apart from their first run (``lower().compile()``, kept
+per structure), and the C heap's free pages are given back to the OS between the two
+(:func:`release_heap`): compiling a large program leaves hundreds of MB of freed memory in
+the allocator's arenas (the 200 000-observation pair: 810 -> 530 MB), on top of which the run
+would allocate its working memory.
 Files are written atomically; at most ``MAX_ENTRIES`` are kept (least recently used first out).
 """
 
 from __future__ import annotations
 
 import contextlib
+import ctypes
 import functools
 import hashlib
 import logging
@@ -60,11 +69,38 @@ MAX_ELEMENTS = 1_000_000
 is lowered twice and compiled more slowly on its first run (a 200 000-observation pair: 25 s
 cold against 20 s), which the tracing it saves repays only where tracing dominates, as in small
 problems (the demo: 6.6 -> 2.7 s warm, +0.7 s cold)."""
+QUICK_MAX_ELEMENTS = 100_000
+"""Programs whose inputs hold at most this many array elements (a pair with a few thousand
+ties, the demo) are compiled with :data:`QUICK_COMPILE`: their run takes milliseconds, their
+compilation seconds."""
+QUICK_COMPILE = {
+    "xla_backend_optimization_level": 0,
+    "xla_llvm_disable_expensive_passes": True,
+    "xla_cpu_use_fusion_emitters": False,
+}
+"""XLA options (``jax.jit(compiler_options=...)``) of small programs: LLVM without its expensive
+optimisations and XLA's legacy CPU emitters. ``jaxgeo demo`` cold: 32.5 -> 19.3 s of CPU time
+(2-core AVX-512 CPU, same output); an elementwise 1e6-point kernel runs 10 % slower with them,
+which is why large programs keep XLA's defaults. The test suite sets the same flags for every
+program (tests/conftest.py)."""
 MAX_ENTRIES = 200
 """Exported programs kept on disk (~0.3 MB each); older ones are removed when more are written."""
 
 _log = logging.getLogger(__name__)
 _loaded: dict[str, tuple[Any, Any, Any]] = {}
+_compiled: dict[str, Any] = {}
+_runners: dict[str, Callable] = {}
+
+
+def release_heap() -> None:
+    """Return the C heap's free pages to the OS (glibc's ``malloc_trim``; nothing elsewhere)."""
+    if not sys.platform.startswith("linux"):
+        return
+    try:
+        trim = ctypes.CDLL(None).malloc_trim  # glibc only (not musl)
+    except (OSError, AttributeError):
+        return
+    trim(0)
 
 
 @functools.cache
@@ -161,14 +197,14 @@ def _write(path: Path, blob: bytes) -> None:
 
 
 def _program(where: Path, fn: Callable, treedef, static, leaves):
-    """The exported program for this call (memory, disk under ``where``, or traced now), or
-    ``None``."""
+    """``(key, exported program, output structure, output statics)`` for this call (memory,
+    disk under ``where``, or traced now), or ``None``."""
     try:
         key = _key(fn, treedef, static, leaves)
     except Exception:  # an unpicklable static value: no stable key
         return None
     if key in _loaded:
-        return _loaded[key]
+        return (key, *_loaded[key])
     from jax import export
 
     path = where / f"{key}{SUFFIX}"
@@ -198,7 +234,7 @@ def _program(where: Path, fn: Callable, treedef, static, leaves):
             _log.debug("exported program not written to %s (%s)", path, err)
         found = (exported, out_def, out_static)
     _loaded[key] = found
-    return found
+    return (key, *found)
 
 
 def call(fn: Callable, *args, **kwargs):
@@ -207,15 +243,35 @@ def call(fn: Callable, *args, **kwargs):
     dynamic, static = eqx.partition((args, kwargs), eqx.is_array)
     leaves, treedef = jax.tree.flatten(dynamic)
     where = folder()
-    if (
-        where is None
-        or any(isinstance(x, jax.core.Tracer) for x in leaves)
-        or sum(int(np.size(x)) for x in leaves) > MAX_ELEMENTS
-    ):
+    if any(isinstance(x, jax.core.Tracer) for x in leaves):
+        return _filter_jit(fn)(*args, **kwargs)
+    if sum(int(np.size(x)) for x in leaves) > MAX_ELEMENTS:
+        return _compiled_call(fn, treedef, static, leaves, args, kwargs)
+    if where is None:
         return _filter_jit(fn)(*args, **kwargs)
     program = _program(where, fn, treedef, static, leaves)
     if program is None:
         return _filter_jit(fn)(*args, **kwargs)
-    exported, out_def, out_static = program
-    out_leaves = exported.call(*leaves)
+    key, exported, out_def, out_static = program
+    runner = _runners.get(key)
+    if runner is None:
+        quick = sum(int(np.size(x)) for x in leaves) <= QUICK_MAX_ELEMENTS
+        runner = jax.jit(exported.call, compiler_options=QUICK_COMPILE if quick else None)
+        _runners[key] = runner
+    out_leaves = runner(*leaves)
     return eqx.combine(jax.tree.unflatten(out_def, out_leaves), out_static)
+
+
+def _compiled_call(fn: Callable, treedef, static, leaves, args, kwargs):
+    """``eqx.filter_jit(fn)(*args, **kwargs)``, compiled apart (once per structure in this
+    process) with the heap released before the first run (see the module docstring)."""
+    try:
+        key = _key(fn, treedef, static, leaves)
+    except Exception:  # an unpicklable static value: no stable key
+        return _filter_jit(fn)(*args, **kwargs)
+    compiled = _compiled.get(key)
+    if compiled is None:
+        compiled = _filter_jit(fn).lower(*args, **kwargs).compile()
+        _compiled[key] = compiled
+        release_heap()
+    return compiled(*args, **kwargs)

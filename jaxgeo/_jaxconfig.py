@@ -16,6 +16,19 @@ Several processes may share the cache: jax writes an entry with a plain ``write_
 could see half of it), so the size limit is set, which makes jax take a file lock
 (``filelock``) around every read and write and evict least-recently-used entries beyond
 ``CACHE_MAX_BYTES``.
+
+The CPU's cores: XLA runs a program on one device, and its intra-op threads share out that
+program's operations; the many small operations of a batch of small problems
+(``lsq.solve_batch``: 10 000 bias adjustments) then make the threads wait on each other at
+every step (~500 thread switches per call of that batch on 2 cores, against ~70 with a device
+per core), and they do not split further over more cores. jaxgeo therefore asks jax for one
+CPU device per core this process may use (``jax_num_cpu_devices``: ``os.sched_getaffinity``,
+so ``taskset -c 0`` gives one), and the batch paths shard their problems over the devices, each
+running its own share (:func:`cpu_device_count`).
+One device -- jax's own default -- where ``JAXGEO_CPU_DEVICES=1``, where the caller chose a
+device count (``JAX_NUM_CPU_DEVICES``, ``--xla_force_host_platform_device_count``) or asked
+XLA for a single thread (``--xla_cpu_multi_thread_eigen=false``, as the test suite does). One
+program on one device (a single adjustment, a projection) runs as before.
 """
 
 from __future__ import annotations
@@ -41,6 +54,62 @@ XLA's CPU code uses 256-bit vectors by default even where the CPU has 512-bit on
 1e6-point RPC projection takes 1.6 ms with it against 2.1 ms without (2-core AVX-512 CPU, same
 results to the bit). Ignored on CPUs without AVX-512 and on other backends; jax reads it when
 its CPU backend starts, so it has no effect in a process that used jax before importing jaxgeo."""
+
+
+DEVICES_ENV = "JAXGEO_CPU_DEVICES"
+"""Environment variable: the number of CPU devices jaxgeo asks jax for (default: the usable
+cores; ``1``: jax's single device)."""
+DEVICES_MARK_ENV = "_JAXGEO_EXPORTED_NUM_CPU_DEVICES"
+"""Set beside the ``JAX_NUM_CPU_DEVICES`` jaxgeo exports, so that a child process (another
+affinity: ``taskset``) counts its own cores instead of inheriting its parent's number."""
+SINGLE_THREAD_FLAG = "xla_cpu_multi_thread_eigen=false"
+"""An ``XLA_FLAGS`` entry that asks XLA's CPU backend for one thread: then one device too."""
+
+
+def usable_cores() -> int:
+    """The cores this process may run on (its CPU affinity where the OS has one)."""
+    try:
+        return max(1, len(os.sched_getaffinity(0)))
+    except AttributeError:  # no CPU affinity on this OS (macOS, Windows)
+        return max(1, os.cpu_count() or 1)
+
+
+def cpu_device_count() -> int:
+    """The CPU devices jaxgeo asks for: ``$JAXGEO_CPU_DEVICES`` (an integer >= 1; anything
+    else counts as 1), else :func:`usable_cores`; 1 where the caller chose the device count or
+    a single thread (see the module docstring)."""
+    value = os.environ.get(DEVICES_ENV, "").strip()
+    if value:
+        try:
+            return max(1, int(value))
+        except ValueError:
+            return 1
+    flags = os.environ.get("XLA_FLAGS", "")
+    if "xla_force_host_platform_device_count" in flags or SINGLE_THREAD_FLAG in flags:
+        return 1
+    return usable_cores()
+
+
+def _cpu_devices(jax) -> None:
+    """Ask jax for :func:`cpu_device_count` CPU devices, unless the caller set a count."""
+    mark = os.environ.pop(DEVICES_MARK_ENV, None)
+    if mark is not None and os.environ.get("JAX_NUM_CPU_DEVICES") == mark:
+        os.environ.pop("JAX_NUM_CPU_DEVICES")  # a parent jaxgeo's number, not the caller's
+    if "JAX_NUM_CPU_DEVICES" in os.environ or "xla_force_host_platform_device_count" in (
+        os.environ.get("XLA_FLAGS", "")
+    ):
+        return
+    n = cpu_device_count()
+    if n < 2:
+        return
+    if jax is None:
+        os.environ["JAX_NUM_CPU_DEVICES"] = os.environ[DEVICES_MARK_ENV] = str(n)
+        return
+    try:  # refused once jax has started its backends: one device then, as jax's default
+        if jax.config.jax_num_cpu_devices < 0:
+            jax.config.update("jax_num_cpu_devices", n)
+    except Exception:  # noqa: BLE001 - jax raises a RuntimeError; any refusal means "leave it"
+        pass
 
 
 def default_cache_dir() -> Path:
@@ -98,10 +167,11 @@ def _vector_width() -> None:
 
 
 def configure() -> None:
-    """float64 on; 512-bit vectors for XLA's CPU code; the persistent compilation cache on
-    (unless off or set by the user)."""
+    """float64 on; 512-bit vectors for XLA's CPU code; one CPU device per usable core; the
+    persistent compilation cache on (unless off or set by the user)."""
     _vector_width()
     jax = sys.modules.get("jax")
+    _cpu_devices(jax)
     if jax is None:
         _forget_inherited()
         os.environ["JAX_ENABLE_X64"] = "1"

@@ -23,9 +23,10 @@ API_NAMES = {
     "ortho": ("orthorectify", "OrthoReport"),
     "stereo": ("dsm_from_images", "stereo_pair", "DSMGrid"),
     "simulate": ("cartosat1_stereo", "demo_dir"),
+    "tiles": ("run_tiles", "plan_tiles", "TilePlan"),
 }
 # the public packages with a "::: public" page (intersect is a module: plain ":::")
-PUBLIC_PAGES = ("models", "lsq", "io", "bundle", "strip", "ortho", "stereo", "simulate")
+PUBLIC_PAGES = ("models", "lsq", "io", "bundle", "strip", "ortho", "stereo", "simulate", "tiles")
 
 
 def _hooks():

@@ -4,8 +4,11 @@ jax reads the settings when it starts)."""
 import json
 import os
 import pathlib
+import shutil
 import subprocess
 import sys
+
+import pytest
 
 REPO = pathlib.Path(__file__).resolve().parents[1]
 PROBE = (
@@ -76,3 +79,64 @@ def test_a_child_of_a_jaxgeo_process_keeps_its_own_setting(tmp_path):
     )  # fmt: skip
     assert run.returncode == 0, run.stderr[-2000:]
     assert json.loads(run.stdout.strip().splitlines()[-1]) == {child: child, "off": None}
+
+
+DEVICES = "import json, jaxgeo, jax; print(json.dumps(jax.local_device_count()))"
+
+
+def _devices(taskset: str | None = None, drop=(), **env) -> int:
+    """``jax.local_device_count()`` in a fresh interpreter that imports jaxgeo first, without
+    the suite's own XLA flags (a user's environment) unless ``env`` gives some."""
+    full = {k: v for k, v in os.environ.items() if k not in ("XLA_FLAGS", *drop)}
+    full = {k: v for k, v in full.items() if not k.startswith(("JAXGEO_CPU", "JAX_NUM_CPU"))}
+    full.update(env, PYTHONPATH=str(REPO), JAXGEO_CACHE_DIR="off")
+    cmd = [sys.executable, "-c", DEVICES]
+    if taskset is not None:
+        cmd = ["taskset", "-c", taskset, *cmd]
+    run = subprocess.run(cmd, env=full, capture_output=True, text=True, timeout=300)
+    assert run.returncode == 0, run.stderr[-2000:]
+    return json.loads(run.stdout.strip().splitlines()[-1])
+
+
+def test_one_cpu_device_per_usable_core():
+    assert _devices() == len(os.sched_getaffinity(0))
+    first = sorted(os.sched_getaffinity(0))[0]
+    if shutil.which("taskset"):
+        assert _devices(taskset=str(first)) == 1  # pinned to one core: jax's single device
+
+
+def test_device_count_set_by_the_user_or_single_threaded_is_kept():
+    assert _devices(JAXGEO_CPU_DEVICES="3") == 3
+    assert _devices(JAXGEO_CPU_DEVICES="1") == 1
+    assert _devices(JAXGEO_CPU_DEVICES="many") == 1  # not a number: the safe single device
+    assert _devices(JAX_NUM_CPU_DEVICES="3") == 3
+    assert _devices(XLA_FLAGS="--xla_force_host_platform_device_count=3") == 3
+    # the test suite's flags (tests/conftest.py): one thread asked for, one device given
+    assert _devices(XLA_FLAGS="--xla_cpu_multi_thread_eigen=false", JAXGEO_CPU_DEVICES="") == 1
+
+
+def test_the_suite_runs_on_one_device():
+    """tests/conftest.py asks XLA for a single thread; the suite's results are one device's."""
+    import jax
+
+    assert jax.local_device_count() == 1
+
+
+def test_a_child_counts_its_own_cores():
+    """jaxgeo exports ``JAX_NUM_CPU_DEVICES`` for jax to read; a child process pinned to one core
+    must not inherit its parent's count."""
+    if not shutil.which("taskset") or len(os.sched_getaffinity(0)) < 2:
+        pytest.skip("needs taskset and two usable cores")
+    first = sorted(os.sched_getaffinity(0))[0]
+    parent = (
+        "import json, subprocess, sys, jaxgeo\n"
+        f"cmd = ['taskset', '-c', '{first}', sys.executable, '-c', {DEVICES!r}]\n"
+        "print(subprocess.run(cmd, capture_output=True, text=True, check=True).stdout)\n"
+    )
+    env = {k: v for k, v in os.environ.items() if k != "XLA_FLAGS"}
+    env.update(PYTHONPATH=str(REPO), JAXGEO_CACHE_DIR="off", JAXGEO_CPU_DEVICES="")
+    run = subprocess.run(
+        [sys.executable, "-c", parent], env=env, capture_output=True, text=True, timeout=300
+    )
+    assert run.returncode == 0, run.stderr[-2000:]
+    assert json.loads(run.stdout.strip().splitlines()[-1]) == 1

@@ -14,55 +14,87 @@ The stages: :func:`~._prepare.prepare` (checks, groups, initial points, priors) 
 
 from __future__ import annotations
 
-import dataclasses
-import os
-import pathlib
-from collections.abc import Mapping, Sequence
-from typing import Any
+from collections.abc import Callable, Mapping, Sequence
+from typing import Any, NamedTuple
 
 import equinox as eqx
 import jax
 import numpy as np
 
-from ..io import (
-    DEM,
-    GroundPoints,
-    Observations,
-    read_ground,
-    read_observations,
-    read_rpc,
-    table_lines,
-)
+from ..io import GroundPoints, Observations
 from ..lsq import DEFAULT_SOLVER, SolverConfig
-from ..models import BIAS_KINDS, AbstractBias, AbstractSensorModel, Biased
-from ._export import write_outputs
+from ..models import BIAS_KINDS, AbstractBias, AbstractSensorModel, Biased, JitterBias
 from ._prepare import prepare
 from ._prepare.checks import Sources
-from ._report import AccuracyReport, direct_georeferencing, format_reports
 from ._result import AdjustResult, make_result
 from ._snooping import snoop
 
-BIAS_CHOICES = ("none", *BIAS_KINDS)
-"""Names accepted for ``bias``: ``"none"`` and the kinds of
-:data:`jaxgeo.models.BIAS_KINDS` (defined there once)."""
+BIAS_CHOICES = ("none", *BIAS_KINDS, "jitter")
+"""Names accepted for ``bias``: ``"none"``, the kinds of :data:`jaxgeo.models.BIAS_KINDS`
+(defined there once) and ``"jitter"`` (:class:`~jaxgeo.models.JitterBias`: the affine bias
+plus smooth offsets along the lines, :class:`JitterSettings`)."""
 
 
-def with_bias(models: Mapping[str, Any], bias: str | type[AbstractBias] | None) -> dict[str, Any]:
+class JitterSettings(NamedTuple):
+    """The spline of ``bias="jitter"``: a knot every ``knot_lines`` lines, second differences
+    of its coefficients held at ``smoothness_px`` (px). The defaults follow a jitter of a
+    period of 400 lines or more to < 0.1 px (benchmarks/accuracy/jitter.py)."""
+
+    knot_lines: float = 100.0
+    smoothness_px: float = 1.0
+
+
+DEFAULT_JITTER = JitterSettings()
+
+
+def image_lines(model: Any, domain: Sequence[float] | None = None) -> tuple[float, float]:
+    """``(first, last)`` image line a model is used over: from ``domain`` (``(x_min, y_min,
+    x_max, y_max)`` px, e.g. :meth:`jaxgeo.io.SensorImage.domain`), else its RPC's image
+    domain. Raises ``ValueError`` when neither bounds it."""
+    if domain is not None and np.all(np.isfinite(np.asarray(domain, float))):
+        return float(domain[1]), float(domain[3])
+    rpc = model.base_rpc() if isinstance(model, AbstractSensorModel) else None
+    if rpc is None:
+        raise ValueError(
+            f"bias 'jitter' needs the lines of each image: a {type(model).__name__} model "
+            "without an RPC and without its raster's size"
+        )
+    off, scale = float(rpc.image_offset[1]), abs(float(rpc.image_scale[1]))
+    return off - scale, off + scale
+
+
+def with_bias(
+    models: Mapping[str, Any],
+    bias: str | type[AbstractBias] | None,
+    domains: Mapping[str, Sequence[float]] | None = None,
+    jitter: JitterSettings = DEFAULT_JITTER,
+) -> dict[str, Any]:
     """Wrap every single-image model in :class:`~jaxgeo.models.Biased` with a zero bias.
 
-    ``bias``: a name of :data:`BIAS_CHOICES` (``"shift"``, ``"shift-drift"``, ``"affine"``), a
-    bias class, or ``None``/``"none"`` (models unchanged). Models that are already
-    :class:`Biased` (and multi-image models) are kept as they are.
+    ``bias``: a name of :data:`BIAS_CHOICES` (``"shift"``, ``"shift-drift"``, ``"affine"``,
+    ``"jitter"``), a bias class, or ``None``/``"none"`` (models unchanged). Models that are
+    already :class:`Biased` (and multi-image models) are kept as they are. A jitter's spline
+    spans each image's lines (:func:`image_lines` of ``domains[name]``) with ``jitter``'s knots.
     """
     if bias is None or bias == "none":
         return dict(models)
-    kind = BIAS_KINDS.get(bias) if isinstance(bias, str) else bias
-    if kind is None:
-        raise ValueError(f"unknown bias {bias!r}; expected one of {', '.join(BIAS_CHOICES)}")
+    if bias == "jitter":
+        domains = domains or {}
+
+        def kind(name, m):
+            return JitterBias(image_lines(m, domains.get(name)), *jitter)
+    else:
+        cls = BIAS_KINDS.get(bias) if isinstance(bias, str) else bias
+        if cls is None:
+            raise ValueError(f"unknown bias {bias!r}; expected one of {', '.join(BIAS_CHOICES)}")
+
+        def kind(name, m):
+            return cls()
+
     return {
         k: m
         if isinstance(m, Biased) or not isinstance(m, AbstractSensorModel)
-        else Biased(m, kind())
+        else Biased(m, kind(k, m))
         for k, m in models.items()
     }
 
@@ -71,8 +103,9 @@ def bias_prior_sigma(
     models: Mapping[Any, Any], shift_px: float | None, matrix: float | None
 ) -> dict[Any, Any] | None:
     """Prior sigmas of the image biases as :func:`adjust` takes them (per model key): ``shift_px``
-    (px) on every bias shift, ``matrix`` (px/px) on the other bias terms (drift or affine
-    matrix); ``None`` for no prior. The names of ``jaxgeo strip``'s ``--bias-prior-*``."""
+    (px) on every bias shift, ``matrix`` (px/px) on the drift or affine matrix (a jitter's
+    spline has its own smoothness prior); ``None`` for no prior. The names of ``jaxgeo
+    strip``'s ``--bias-prior-*``."""
     if shift_px is None and matrix is None:
         return None
     out = {}
@@ -80,8 +113,8 @@ def bias_prior_sigma(
         if not isinstance(m, Biased):
             continue
         sigma = jax.tree.map(lambda x: np.full(np.shape(x), np.inf), m)
-        for name in m.bias.__dataclass_fields__:
-            value = shift_px if name == "shift_px" else matrix
+        for name in m.bias.__dataclass_fields__:  # a jitter's knots: their own prior
+            value = {"shift_px": shift_px, "matrix": matrix, "drift": matrix}.get(name)
             leaf = getattr(m.bias, name)
             if value is None or not eqx.is_array(leaf):
                 continue
@@ -107,6 +140,8 @@ def adjust(
     tie_height: Any = None,
     tie_height_sigma_m: float = 10.0,
     throw: bool = True,
+    image_domains: Mapping[str, Any] | None = None,
+    progress: Callable[[str], None] | None = None,
 ) -> AdjustResult:
     """Bundle block adjustment.
 
@@ -144,17 +179,28 @@ def adjust(
             did not converge (default, as :func:`jaxgeo.lsq.solve`'s ``throw``); ``False``:
             return the result and let ``result.converged``, ``result.result`` and
             ``result.message`` say it (errors as data). Bad input is refused either way.
+        image_domains: image name -> ``(x_min, y_min, x_max, y_max)`` px of the image's raster
+            (:meth:`jaxgeo.io.SensorImage.domain`): its measurements must lie inside it;
+            an image without one is checked against its RPC's image domain.
+        progress: called with a line of text at each stage (solving, each snooping round).
 
     Pre-flight checks (:mod:`~._prepare.checks`) refuse, naming the observation or point (and
     file and line with ``sources``): a point measured twice in one image, a ground id given
-    twice, a measurement outside its image, a GCP or check point outside the validity cube of
-    the RPC of an image it is measured in.
+    twice, a measurement outside its image (its raster's size with ``image_domains``, else its
+    RPC's image domain), a GCP or check point outside the validity cube of the RPC of an image
+    it is measured in, two images with the same RPC.
+
+    Gross errors: a robust loss, then data snooping (:func:`~._snooping.snoop`), which removes
+    at most ``max(1, 20 %)`` of the GCPs and of each image's observations: beyond that the
+    models do not fit, and :class:`~._errors.PoorFitWarning` says so (``result.poor_fit``);
+    the check-point statistics are reported with (``report_all``) and without (``report``)
+    the check points that have a flagged observation.
 
     Raises :class:`~._errors.AdjustmentError` (bad input, too few GCPs) before solving, and
     :class:`~._errors.SingularNormalEquations` naming the undetermined parameters or points.
     """
     if bias is not None:
-        models = with_bias(models, bias)
+        models = with_bias(models, bias, image_domains)
     setup = prepare(
         models,
         observations,
@@ -166,163 +212,9 @@ def adjust(
         sources=sources,
         tie_height=tie_height,
         tie_height_sigma_m=tie_height_sigma_m,
+        image_domains=image_domains,
     )
-    sol, rem_i, rem_g, rounds = snoop(setup, solver)
+    sol, rem_i, rem_g, rounds = snoop(setup, solver, progress=progress)
     return make_result(
         setup, sol, observations, ground, solver, (rem_i, rem_g), rounds, throw=throw
     )
-
-
-@dataclasses.dataclass(frozen=True)
-class FileAdjustment:
-    """An adjustment of files (:func:`adjust_files`): the result, direct georeferencing with the
-    given models (``None`` without ground points or with one image), and what was read."""
-
-    result: AdjustResult
-    direct: AccuracyReport | None
-    bias: str
-    inputs: tuple[pathlib.Path, ...]
-
-    def summary(self) -> dict[str, Any]:
-        """JSON-ready: s0, redundancy, convergence, check points, per image RMS and parameters
-        with sigmas, blunders, and the direct-georeferencing report."""
-        result, direct = self.result, self.direct
-        rep = result.report.to_dict() if result.report is not None else None
-        empty = {"n": 0, "rms_m": [None] * 3, "min_m": [None] * 3, "max_m": [None] * 3}
-        images = {}
-        for name in result.models:
-            rms = rep["images"].get(name, {}).get("rms_px", [None, None]) if rep else [None] * 2
-            own = result.parameters(name)
-            images[name] = {
-                "rms_px": rms,
-                "params": {k: v for k, (v, _) in own.items()},
-                "sigmas": {k: s for k, (_, s) in own.items()},
-            }
-        blunders = [
-            {"id": p, "image": img, "w": [float(x) for x in w]}
-            for p, img, w, b in zip(
-                result.observation_ids,
-                result.observation_images,
-                result.standardized,
-                result.blunders,
-                strict=True,
-            )
-            if b
-        ]
-        return {
-            "bias": self.bias,
-            "s0": result.s0 if result.s0 == result.s0 else None,
-            "redundancy": result.redundancy,
-            "converged": result.converged,
-            "message": result.message,
-            "num_steps": result.num_steps,
-            "checkpoints": rep["checkpoints"] if rep else empty,
-            "images": images,
-            "blunders": blunders,
-            "removed": int(result.removed.sum()) if result.removed is not None else 0,
-            "gcp_flagged": [
-                {"id": p, "w": w, "removed": p in result.gcp_removed}
-                for p, w in zip(result.gcp_flagged, result.gcp_w, strict=True)
-            ],
-            "checks_excluded": list(result.checks_excluded),
-            "snooping_rounds": result.snooping_rounds,
-            "direct": direct.to_dict() if direct is not None else None,
-        }
-
-    def format(self) -> str:
-        """The text report: status, tables 3-4 of 000_ side by side, parameters, blunders."""
-        result = self.result
-        lines = [
-            f"bundle adjustment ({self.bias} bias): {result.message} in {result.num_steps} "
-            f"steps, s0 = {result.s0:.3f}, redundancy {result.redundancy}"
-        ]
-        reports = [r for r in (self.direct, result.report) if r is not None]
-        if reports:
-            lines += ["", format_reports(reports)]
-        lines += ["", "adjusted parameters (a posteriori sigma):"]
-        for name, value, sigma in zip(
-            result.param_names, result.params, result.param_sigma, strict=True
-        ):
-            lines.append(f"  {name:<32} {value: .6g} +- {sigma:.2g}")
-        flagged = [
-            f"{p}@{img}"
-            for p, img, b in zip(
-                result.observation_ids, result.observation_images, result.blunders, strict=True
-            )
-            if b
-        ]
-        if flagged:
-            gone = result.removed if result.removed is not None else np.zeros(len(flagged))
-            what = "gross errors removed" if np.any(gone) else "possible gross errors (|w| > k)"
-            lines.append(f"{what} ({len(flagged)} observations): {', '.join(flagged)}")
-        for p, w in zip(result.gcp_flagged, result.gcp_w, strict=True):
-            j = result.gcp_ids.index(p)
-            off = np.linalg.norm(np.nan_to_num(result.ground_residuals_m[j]))
-            how = "removed (adjusted as a tie point)" if p in result.gcp_removed else "flagged"
-            lines.append(
-                f"GCP {p!r}: ground coordinates {off:.1f} m from the adjusted point "
-                f"(w = {w:.1f}): {how}"
-            )
-        if result.checks_excluded:
-            lines.append(
-                f"check points excluded from the statistics (an observation flagged): "
-                f"{len(result.checks_excluded)} ({', '.join(result.checks_excluded[:20])}"
-                + (" ..." if len(result.checks_excluded) > 20 else "")
-                + ")"
-            )
-        return "\n".join(lines)
-
-    def write(
-        self, out_dir: str | os.PathLike, overwrite: bool = False, **rpc_options
-    ) -> list[pathlib.Path]:
-        """Write the adjusted models, points, residuals and report (never over an input, nor
-        over an existing file unless ``overwrite``); returns the paths written. ``rpc_options``:
-        ``images``, ``rpc_format``, ``copy_images``, ``write_into`` of :func:`write_outputs`."""
-        return write_outputs(
-            out_dir, self.result, self.format(), self.summary(), self.inputs, overwrite=overwrite,
-            **rpc_options,
-        )  # fmt: skip
-
-
-def adjust_files(
-    images: Mapping[str, str | os.PathLike | str],
-    observations: str | os.PathLike | str,
-    ground: str | os.PathLike | str | None = None,
-    *,
-    bias: str = "affine",
-    solver: SolverConfig = DEFAULT_SOLVER,
-    bias_prior_shift_px: float | None = None,
-    bias_prior_matrix: float | None = None,
-    direct_roles: Sequence[str] = ("gcp", "check"),
-    dem: Any = None,
-    tie_height_sigma_m: float = 10.0,
-) -> FileAdjustment:
-    """Read the RPC files (image name -> path), OBS.csv and GROUND.csv, adjust with an image
-    bias per image (a name of :data:`BIAS_CHOICES`; optional priors on it,
-    :func:`bias_prior_sigma`; tie heights from ``dem``, a :class:`~jaxgeo.io.DEM`, with
-    sigma ``tie_height_sigma_m``), and intersect the ``direct_roles`` points
-    with the given RPCs for comparison (tables 3 and 4 of 000_)."""
-    if bias not in BIAS_CHOICES:
-        raise ValueError(f"unknown bias {bias!r}; expected one of {', '.join(BIAS_CHOICES)}")
-    models = {name: read_rpc(path) for name, path in images.items()}
-    obs = read_observations(observations)
-    points = read_ground(ground) if ground is not None else None
-    sources = Sources(
-        str(observations),
-        table_lines(observations),
-        str(ground) if ground is not None else None,
-        table_lines(ground) if ground is not None else (),
-    )
-    if bias != "none":
-        models = with_bias(models, bias)
-    prior = bias_prior_sigma(models, bias_prior_shift_px, bias_prior_matrix)
-    result = adjust(
-        models, obs, points, prior_sigma=prior, solver=solver, sources=sources, tie_height=dem,
-        tie_height_sigma_m=tie_height_sigma_m,
-    )  # fmt: skip
-    direct = None
-    if points is not None and len(models) >= 2:
-        direct = direct_georeferencing(models, obs, points, roles=tuple(direct_roles))
-    inputs = [*images.values(), observations] + ([ground] if ground is not None else [])
-    inputs += [dem.path] if isinstance(dem, DEM) else []
-    return FileAdjustment(result, direct, bias, tuple(pathlib.Path(p) for p in inputs))

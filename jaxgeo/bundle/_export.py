@@ -22,10 +22,11 @@ from ..io import (
     format_rpc_txt,
     image_stem,
     plan_rpc_outputs,
+    sidecar_name,
     vendor_values,
     write_rpc_outputs,
 )
-from ..models import RPC, Biased, fit_rpc
+from ..models import RPC, AffineBias, Biased, JitterBias, fit_rpc
 from ._report import format_reports
 
 
@@ -37,8 +38,11 @@ def adjusted_rpc(model: Any, domain: RPC | None = None) -> tuple[RPC, float, str
     (a bias with drift or affine terms mixes the sample and line rational functions, whose
     denominators differ) the RPC is re-fitted to the model over the validity cube and image of
     ``domain`` (the delivered RPC; ``how = "refit"``, ``max_error_px`` the maximum error on the
-    independent check grid). Raises ``TypeError`` when neither is possible.
+    independent check grid). A jitter's spline is left out: it is :func:`jitter_grid`'s.
+    Raises ``TypeError`` when neither is possible.
     """
+    if isinstance(model, Biased) and isinstance(model.bias, JitterBias):  # the grid holds s(y)
+        model = Biased(model.model, AffineBias(model.bias.shift_px, model.bias.matrix))
     exact = model.exact_rpc()
     if exact is not None:
         return exact, 0.0, "exact"
@@ -51,6 +55,26 @@ def adjusted_rpc(model: Any, domain: RPC | None = None) -> tuple[RPC, float, str
     go, gs = np.asarray(domain.ground_offset), np.asarray(domain.ground_scale)
     refit, report = fit_rpc(model, n_cols, n_rows, (go[2] - gs[2], go[2] + gs[2]))
     return refit, float(report.check_max_px), "refit"
+
+
+def jitter_grid(model: Any) -> str | None:
+    """The line-dependent correction of a :class:`~jaxgeo.models.JitterBias` as CSV text (None
+    for any other model): ``line,dx_px,dy_px`` every quarter knot spacing over the image's
+    lines, such that ``image = RPC(ground) + (dx, dy)`` where RPC is the adjusted RPC written
+    beside it (:func:`adjusted_rpc`: the affine part) and ``(dx, dy)`` is read (linearly
+    interpolated) at the RPC's line. The error of reading it at the RPC's line instead of the
+    image's is the correction's slope times ``dy`` (1e-2 px for 1.5 px at a 1000-line period)."""
+    if not (isinstance(model, Biased) and isinstance(model.bias, JitterBias)):
+        return None
+    bias = model.bias
+    n = bias.knots_px.shape[0]
+    last = bias.line0 + (n - 3) * bias.knot_lines
+    lines = np.arange(bias.line0, last + bias.knot_lines / 8, bias.knot_lines / 4)
+    s = np.asarray(bias.offsets(lines))
+    # (I + M) image + a0 + s(y) = RPC model pixel  =>  image = affine part - (I + M)^-1 s(y)
+    corr = -np.linalg.solve(np.eye(2) + np.asarray(bias.matrix), s.T).T
+    return _csv(["line", "dx_px", "dy_px"], [[_r(y), _r(c[0]), _r(c[1])] for y, c in
+                                             zip(lines, corr, strict=True)])  # fmt: skip
 
 
 def delivered_rpcs(result) -> dict[str, RPC | None]:
@@ -139,7 +163,7 @@ def output_paths(
 ) -> list[pathlib.Path]:
     """Every file :func:`write_outputs` may write: the fixed outputs and, per image, its RPC
     (and image copy) as planned from ``images`` (name -> file), or ``NAME_adjusted_RPC.TXT``
-    when only names are given."""
+    when only names are given, and the jitter grids a jitter bias writes."""
     out = pathlib.Path(out_dir)
     paths = [out / n for n in FIXED_OUTPUTS]
     if isinstance(images, Mapping):
@@ -147,7 +171,43 @@ def output_paths(
         paths += [p for plan in plans.values() for p in plan.targets]
     else:
         paths += [out / f"{n}_adjusted_RPC.TXT" for n in images]
-    return paths
+    return paths + [out / f"{n}_jitter.csv" for n in images]  # with a jitter bias
+
+
+SIDECAR_FORMATS = ("txt", "rpb", "geom", "dimap")
+
+
+def sidecar_clash(
+    targets: Iterable[str | os.PathLike], inputs: Iterable[str | os.PathLike]
+) -> tuple[pathlib.Path, pathlib.Path] | None:
+    """``(target, raster)`` when an output would be an RPC sidecar of an input raster (its
+    ``<stem>_RPC.TXT``, ``.RPB``, ``.geom`` or ``RPC_<stem>.XML`` beside it): GDAL, OTB and
+    shareloc would then read it as that input's model, an input changed in effect."""
+    side = {}
+    for inp in map(pathlib.Path, inputs):
+        if inp.suffix.lower() in (".tif", ".tiff", ".ntf", ".nitf", ".jp2", ".img", ".vrt"):
+            for fmt in SIDECAR_FORMATS:
+                name = sidecar_name(inp.stem, fmt)
+                side[str(inp.resolve().with_name(name)).lower()] = inp
+    for target in map(pathlib.Path, targets):
+        raster = side.get(str(target.resolve()).lower())
+        if raster is not None:
+            return target, raster
+    return None
+
+
+def _probe_folder(out: pathlib.Path) -> None:
+    """``out`` can be created: a folder is made (and removed) in its nearest existing parent
+    (``os.access`` says yes to root everywhere, even in /proc)."""
+    import tempfile
+
+    base = out
+    while not base.exists() and base != base.parent:
+        base = base.parent
+    try:
+        os.rmdir(tempfile.mkdtemp(prefix=".jaxgeo-probe-", dir=base))
+    except OSError as err:
+        raise PermissionError(f"{out}: cannot be created ({base}: {err.strerror})") from None
 
 
 def check_out_dir(
@@ -161,7 +221,8 @@ def check_out_dir(
 ) -> None:
     """Before any computation: ``out_dir`` is (or can be created as) a writable folder, and no
     file :func:`write_outputs` will write (:func:`output_paths`, with the same ``images`` and
-    options) is an input or (unless ``overwrite``) exists. Raises ``FileExistsError`` /
+    options) is an input, an RPC sidecar of an input raster (:func:`sidecar_clash`) or (unless
+    ``overwrite``) exists. Raises ``FileExistsError`` /
     ``PermissionError`` / ``NotADirectoryError`` naming the path, ``ValueError`` when an image
     to copy is not found."""
     out = pathlib.Path(out_dir)
@@ -174,8 +235,18 @@ def check_out_dir(
             break
     if not os.access(base, os.W_OK | os.X_OK):
         raise PermissionError(f"{out}: cannot write there ({base} is not writable)")
+    if not out.exists():
+        _probe_folder(out)
+    inputs = list(inputs)
     given = {pathlib.Path(p).resolve() for p in inputs}
-    for target in output_paths(out, images, rpc_format, copy_images, write_into):
+    targets = output_paths(out, images, rpc_format, copy_images, write_into)
+    clash = sidecar_clash(targets, inputs)
+    if clash is not None:
+        raise FileExistsError(
+            f"{clash[0]}: refusing to write an RPC beside the input image {clash[1]}: tools "
+            "would read it as that image's model (choose another --out)"
+        )
+    for target in targets:
         path = target.resolve()
         if path in given:
             raise FileExistsError(f"{path}: refusing to write an adjusted file over an input")
@@ -225,6 +296,14 @@ def write_outputs(
                 f"{name}_adjusted_RPC.TXT: {how}"
                 + (f" (max error {err:.3g} px on the check grid)" if how == "refit" else "")
             )
+    for name, model in result.models.items():
+        grid = jitter_grid(model)
+        if grid is not None:
+            files[f"{name}_jitter.csv"] = grid
+            notes.append(
+                f"{name}_jitter.csv: the jitter correction along the lines (image = RPC(ground) "
+                "+ (dx, dy) at the RPC's line); the RPC holds the affine bias only"
+            )
     files["adjusted_models.json"] = json.dumps(models_json(result), indent=1) + "\n"
     files["ground_adjusted.csv"] = _csv(
         ["id", "lon", "lat", "h", "role", "sigma_e_m", "sigma_n_m", "sigma_h_m"],
@@ -256,7 +335,15 @@ def write_outputs(
     files["report.json"] = json.dumps(report, indent=1) + "\n"
     files["report.txt"] = report_text + ("\n\n" + "\n".join(notes) if notes else "") + "\n"
     targets = {n: (out / n).resolve() for n in files}
+    inputs = list(inputs)
     given = {pathlib.Path(p).resolve() for p in inputs}
+    planned = [*targets.values(), *(p for _, plan in placed for p in plan.targets)]
+    clash = sidecar_clash(planned, inputs)
+    if clash is not None:
+        raise FileExistsError(
+            f"{clash[0]}: refusing to write an RPC beside the input image {clash[1]}: tools "
+            "would read it as that image's model (choose another --out)"
+        )
     for path in [*targets.values(), *(p.resolve() for _, plan in placed for p in plan.targets)]:
         if path in given:
             raise FileExistsError(f"{path}: refusing to write an adjusted file over an input")
@@ -297,8 +384,10 @@ __all__ = [
     "check_out_dir",
     "delivered_rpcs",
     "format_reports",
+    "jitter_grid",
     "models_json",
     "output_paths",
     "rpc_plans",
+    "sidecar_clash",
     "write_outputs",
 ]

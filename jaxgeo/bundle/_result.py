@@ -28,8 +28,8 @@ from ..lsq import (
 from ._diagnose import directions, explain, undetermined
 from ._errors import S0_WARN, NotConvergedWarning, PoorFitWarning, SingularNormalEquations
 from ._prepare import Prepared
-from ._report import AccuracyReport, accuracy
-from ._snooping import standardized
+from ._report import AccuracyReport, accuracy, project
+from ._snooping import MAX_REMOVED_FRACTION, snooping_verdict, standardized
 
 
 @dataclasses.dataclass(frozen=True)
@@ -56,8 +56,11 @@ class AdjustResult:
     because an observation of theirs is flagged; ``snooping_rounds`` re-solves.
     Statistics: ``s0``, ``redundancy``, ``cost`` (sum of squared weighted residuals),
     ``converged``, ``message`` (short), ``result`` (:class:`jaxgeo.lsq.RESULTS`), ``num_steps``;
-    ``report`` (check points, tables 2-6 of 000_)
-    or None.
+    ``report`` (check points without a flagged observation, tables 2-6 of 000_) or None;
+    ``report_all`` (every check point, flagged or not) or None.
+    Fit: ``poor_fit`` the :class:`~._errors.PoorFitWarning` message when the observations do not
+    fit the models (s0 far above 1, or more gross errors than snooping may remove:
+    :func:`~._snooping.snooping_verdict`), else ``""``.
     """
 
     models: dict[str, Any]
@@ -94,6 +97,8 @@ class AdjustResult:
     gcp_w: tuple[float, ...] = ()
     checks_excluded: tuple[str, ...] = ()
     snooping_rounds: int = 0
+    report_all: AccuracyReport | None = None
+    poor_fit: str = ""
 
     def parameters(self, key: Any) -> dict[str, tuple[float, float]]:
         """``{leaf path: (value, sigma)}`` of one model key (image name or tuple of names)."""
@@ -126,7 +131,9 @@ def raise_singular(
         "fix it with a GCP measured in that image, bias priors (--bias-prior-shift-px S "
         "--bias-prior-matrix M), or tie heights from a DEM (--dem)"
         if pnames
-        else "add GCPs or tie points, or choose fewer adjustable parameters"
+        else "their rays do not intersect: seen in one image only, or along parallel rays, as "
+        "when two images are given models of the same view; check that each image has its own "
+        "model, or give the points ground coordinates"
     )
     raise SingularNormalEquations(
         f"singular normal equations{when}: not determined: {'; '.join(what)}{directions} ({fix})",
@@ -194,10 +201,13 @@ def make_result(
             stacklevel=3,
         )
     out = _result(setup, sol, theta, s0, converged, message, solver, observations, ground, removed)
+    reasons = snooping_verdict(setup, sol, removed, solver)
     plain = plain_s0(sol, removed)
-    if np.isfinite(plain) and plain > S0_WARN:
-        warnings.warn(poor_fit_message(out, plain), PoorFitWarning, stacklevel=3)
-    return dataclasses.replace(out, snooping_rounds=int(rounds))
+    poor = ""
+    if reasons or (np.isfinite(plain) and plain > S0_WARN):
+        poor = poor_fit_message(out, plain, reasons, observations, ground)
+        warnings.warn(poor, PoorFitWarning, stacklevel=3)
+    return dataclasses.replace(out, snooping_rounds=int(rounds), poor_fit=poor)
 
 
 def plain_s0(sol: Solution, removed=None) -> float:
@@ -218,11 +228,48 @@ def plain_s0(sol: Solution, removed=None) -> float:
     return float(np.sqrt(cost / red)) if red > 0 else float("nan")
 
 
-def poor_fit_message(res: AdjustResult, s0: float) -> str:
-    """Why s0 is far above 1: the worst images (RMS and mean residual) and points, and the
-    likely cause read from the image-space residual pattern."""
+def control_misfit(
+    res: AdjustResult, observations: Observations, ground: GroundPoints | None
+) -> dict[str, tuple[float, float, int]]:
+    """Per image ``(adjusted px, given px, n)``: median distance between the measurements of the
+    GCPs and check points and their given coordinates projected with the adjusted model and
+    with the model as given (the start of the adjustment; the median, so that a few gross
+    errors do not dominate). A model that does not belong to its image is far off with both."""
+    if ground is None or not len(ground.ids):
+        return {}
+    truth = dict(zip(ground.ids, np.asarray(ground.lonlath, float), strict=True))
+    groups = res.setup.problem.groups
+    given = res.setup.image_models(groups, tuple(g.theta0 for g in groups))
+    out = {}
+    for name, model in res.models.items():
+        pairs = zip(observations.point_ids, observations.images, strict=True)
+        sel = [i for i, (p, img) in enumerate(pairs) if img == name and p in truth]
+        if not sel:
+            continue
+        g = np.stack([truth[observations.point_ids[i]] for i in sel])
+        xy = np.asarray(observations.xy, float)[sel]
+        dist = [
+            float(np.median(np.linalg.norm(np.asarray(project(m, g)) - xy, axis=1)))
+            for m in (model, given[name])
+        ]
+        out[name] = (dist[0], dist[1], len(sel))
+    return out
+
+
+def poor_fit_message(
+    res: AdjustResult,
+    s0: float,
+    reasons: list[str] | tuple[str, ...] = (),
+    observations: Observations | None = None,
+    ground: GroundPoints | None = None,
+) -> str:
+    """Why the observations do not fit the models: snooping's limits reached (``reasons``,
+    :func:`~._snooping.snooping_verdict`) and/or s0 far above 1; the worst images (RMS and mean
+    residual, and how far their control points are from the adjusted and given models) and
+    points, and the likely cause read from the residual pattern."""
     keep = ~res.removed if res.removed is not None else np.ones(len(res.observation_ids), bool)
     imgs = np.asarray(res.observation_images)
+    control = control_misfit(res, observations, ground) if observations is not None else {}
     rows = []
     for name in dict.fromkeys(res.observation_images):
         sel = keep & (imgs == name)
@@ -231,32 +278,65 @@ def poor_fit_message(res: AdjustResult, s0: float) -> str:
         r = res.residuals_px[sel]
         rms = float(np.sqrt(np.nanmean(np.sum(r**2, axis=1))))
         mean = np.nanmean(r, axis=0)
-        rows.append((rms, name, mean))
-    rows.sort(reverse=True)
-    worst_img = ", ".join(
-        f"{n!r} (RMS {rms:.1f} px, mean residual {m[0]:+.1f}, {m[1]:+.1f} px)"
-        for rms, n, m in rows[:3]
-    )
+        rows.append((control.get(name, (0.0,))[0], rms, name, mean))
+    rows.sort(key=lambda row: row[:2], reverse=True)
+
+    def image(row) -> str:
+        _, rms, n, m = row
+        text = f"{n!r} (RMS {rms:.1f} px, mean residual {m[0]:+.1f}, {m[1]:+.1f} px"
+        if n in control:
+            adj, giv, k = control[n]
+            text += (f"; its {k} GCP/check measurements are {adj:.3g} px (median) from their "
+                     f"ground coordinates projected with the adjusted model, {giv:.3g} px with "
+                     "the given one")  # fmt: skip
+        return text + ")"
+
+    worst_img = ", ".join(image(row) for row in rows[:3])
     w = np.max(np.abs(np.nan_to_num(res.standardized)), axis=1)
     order = [i for i in np.argsort(-w) if keep[i]][:5]
     worst_pts = ", ".join(
         f"{res.observation_ids[i]}@{res.observation_images[i]} (w {w[i]:.1f})" for i in order
     )
     misfit = float(np.mean(w[keep] > 3.29)) if keep.any() else 0.0
-    systematic = misfit > 0.2 or any(np.linalg.norm(m) > 0.5 * rms for rms, _, m in rows[:2])
-    cause = (
-        f"the residuals are systematic ({100 * misfit:.0f} % of the observations beyond 3.29 "
-        "sigma): a model that does not belong to its image (e.g. two RPC files swapped, or a "
-        "model of another scene), or a bias the chosen bias model cannot absorb"
-        if systematic
-        else f"a few observations dominate ({100 * misfit:.0f} % beyond 3.29 sigma): gross "
-        "errors left, or a priori sigmas too optimistic"
+    # the models fit the bulk of the control when its median distance is a few sigma: then the
+    # observations beyond the limits are gross errors, too many to remove safely
+    sigma = float(np.median(observations.sigma_px)) if observations is not None else 1.0
+    bulk_fits = bool(control) and all(adj <= 3.0 * sigma for adj, _, _ in control.values())
+    systematic = not (reasons and bulk_fits) and (
+        bool(reasons)
+        or misfit > 0.2
+        or any(np.linalg.norm(m) > 0.5 * rms for _, rms, _, m in rows[:2])
     )
+    if reasons and bulk_fits:
+        cause = (
+            "more gross errors than snooping may remove, or a priori sigmas too optimistic for "
+            "the model: the adjusted models fit the bulk of the GCPs and check points (median "
+            f"within {3 * sigma:.2g} px), but the observations named above do not; check their "
+            "measurements, coordinates and sigmas (or remove them and run again)"
+        )
+    elif systematic:
+        cause = (
+            f"the residuals are systematic ({100 * misfit:.0f} % of the observations beyond "
+            "3.29 sigma): a model that does not belong to its image (e.g. two RPC files "
+            "swapped, or a model of another scene), or a bias the chosen bias model cannot "
+            "absorb"
+        )
+    else:
+        cause = (f"a few observations dominate ({100 * misfit:.0f} % beyond 3.29 sigma): gross "
+                 "errors left, or a priori sigmas too optimistic")  # fmt: skip
+    fit = f"s0 = {s0:.3g} (least squares; {res.s0:.3g} robust)"
+    if reasons:
+        share = f"{100 * MAX_REMOVED_FRACTION:.0f} %"
+        head = (
+            f"the observations do not fit the models: snooping would remove "
+            f"{'; '.join(reasons)}, more than the share of gross errors it may remove (at most "
+            f"max(1, {share}) of the GCPs, of each image's GCPs and of each image's "
+            f"observations); they are kept and flagged ({fit})."
+        )
+    else:
+        head = f"{fit} is far above 1 (> {S0_WARN:g}): the observations do not fit the models."
     return (
-        f"s0 = {s0:.3g} (least squares; {res.s0:.3g} robust) is far above 1 (> {S0_WARN:g}): "
-        "the observations do not fit the "
-        f"models. Worst images: {worst_img}. Worst observations: {worst_pts}. Likely cause: "
-        f"{cause}."
+        f"{head} Worst images: {worst_img}. Worst observations: {worst_pts}. Likely cause: {cause}."
     )
 
 
@@ -296,18 +376,21 @@ def _result(setup, sol, theta, s0, converged, message, solver, observations, gro
     gcp_w = tuple(float(w) for w, f in zip(g_w, g_flag, strict=True) if f)
     flat = np.concatenate([t.reshape(-1) for t in theta] + [np.zeros(0)])
     qpp = np.asarray(sol.q_points)
-    report, excluded = None, ()
+    report, report_all, excluded = None, None, ()
     if ground is not None and "check" in setup.point_role:
         models = setup.image_models(problem.groups, theta)
         bad = {p for p, b in zip(observations.point_ids, blunders, strict=True) if b}
         excluded = tuple(p for p, r in zip(setup.point_ids, setup.point_role, strict=True)
                          if r == "check" and p in bad)  # fmt: skip
-        est = {
-            p: g
-            for p, g in zip(setup.point_ids, np.asarray(sol.ground), strict=True)
-            if p not in bad or role[p] != "check"
-        }
+        every = dict(zip(setup.point_ids, np.asarray(sol.ground), strict=True))
+        est = {p: g for p, g in every.items() if p not in bad or role[p] != "check"}
         report = accuracy(models, observations, ground, est, s0=s0, title="adjusted")
+        # every check point, flagged or not: the statistics a poor fit must still show
+        report_all = (
+            accuracy(models, observations, ground, every, s0=s0, title="adjusted, all checks")
+            if excluded
+            else report
+        )
     return AdjustResult(
         models=setup.image_models(problem.groups, theta),
         blocks=setup.blocks(problem.groups, theta),
@@ -342,4 +425,5 @@ def _result(setup, sol, theta, s0, converged, message, solver, observations, gro
         gcp_removed=gcp_removed,
         gcp_w=gcp_w,
         checks_excluded=excluded,
+        report_all=report_all,
     )

@@ -214,13 +214,17 @@ def open_images(paths: Sequence[str], args: argparse.Namespace):
     names = [pathlib.Path(p).stem for p in paths]
     if len(set(names)) != len(names):
         raise CommandError("image file names (stems) must differ: they name the images")
-    keys = list(paths)
-    models = _by_image(getattr(args, "model", []), keys, "--model")
-    origins = {
-        k: _origin(v, v)
-        for k, v in _by_image(getattr(args, "image_origin", []), keys, "--image-origin").items()
-    }
+    models, origins = image_settings(args, list(paths))
     return [open_image(p, model=models.get(p), origin=origins.get(p)) for p in paths]
+
+
+def image_settings(args: argparse.Namespace, images: Sequence[str]) -> tuple[dict, dict]:
+    """``({image: model file}, {image: (col, row)})`` from ``--model`` and ``--image-origin``
+    (IMG is an entry of ``images``, its file name or its stem)."""
+    models = _by_image(getattr(args, "model", None) or [], images, "--model")
+    specs = getattr(args, "image_origin", None) or []
+    origins = {k: _origin(v, v) for k, v in _by_image(specs, images, "--image-origin").items()}
+    return models, origins
 
 
 def _same(a: pathlib.Path, b: pathlib.Path) -> bool:

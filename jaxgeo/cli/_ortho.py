@@ -1,84 +1,240 @@
-"""``jaxgeo ortho IMAGE --dem DEM -o OUT.tif``: orthorectify an image with its model and a DEM."""
+"""``jaxgeo ortho IMAGE --dem DEM -o OUT.tif``: orthorectify an image with its model and a DEM.
+
+Orthorectify IMAGE on DEM into a tiled, compressed COG. The model is the image's own RPC (GeoTIFF
+tags, .RPB/_RPC.TXT sidecar) unless --model names a model file; a crop's pixel-space geotransform
+gives its origin in the model's frame (--image-origin COL,ROW otherwise). Default CRS: the local
+UTM zone; default resolution: the image's GSD. Every option is checked before any computation.
+
+The product is made tile by tile: a small one in this process, a large one on worker processes,
+one per core (--workers), or on an existing dask cluster (--scheduler ADDRESS: start one with
+``dask scheduler`` and ``dask worker ADDRESS`` on each machine, or dask-jobqueue's SLURMCluster /
+PBSCluster, whose ``scheduler_address`` you pass here; workers need jaxgeo and the same paths to
+the inputs and to the output's folder). Tiles that fail are retried (--retries), then named in
+the error; --resume DIR keeps finished tiles in DIR so that the same command run again after an
+interruption reuses them; --plan FILE writes the tiles (JSON) without computing them.
+"""
 
 from __future__ import annotations
 
 import argparse
+import dataclasses
 import pathlib
+import sys
+import warnings
+
+from ._common import add_command, add_image_options, add_json, add_out, add_quiet
 
 
 def register(sub) -> None:
-    parser = sub.add_parser(
-        "ortho",
-        help="orthorectify an image with its RPCs (or any model file) and a DEM",
-        description=(
-            "Orthorectify IMAGE on DEM into a tiled, compressed COG. The model is the image's own "
-            "RPC (GeoTIFF tags, .RPB/_RPC.TXT sidecar) unless --model names a model file. "
-            "Default CRS: the local UTM zone; default resolution: the image's GSD."
-        ),
+    parser = add_command(
+        sub, "ortho", "orthorectify an image with its RPCs (or any model file) and a DEM", __doc__
     )
+    parser.epilog = __doc__.split("\n\n", 1)[1].strip() + "\n\n" + parser.epilog
     parser.add_argument("image", metavar="IMAGE", help="the image (any raster GDAL reads)")
-    parser.add_argument("--dem", required=True, help="DEM raster (any CRS)")
-    parser.add_argument("--dem-height", choices=("ellipsoidal", "orthometric"), default=None,
-                        help="height reference of the DEM values (default: the file's vertical "
-                        "CRS if it declares EGM96/EGM2008, else ellipsoidal)")  # fmt: skip
-    parser.add_argument("--geoid", default=None,
-                        help="egm96, egm2008 (PROJ grids) or a geoid grid file, for orthometric "
-                        "DEMs (implies --dem-height orthometric)")  # fmt: skip
-    parser.add_argument("--model", default=None, help="model file (any RPC format jaxgeo reads)")
-    parser.add_argument("--image-origin", nargs=2, type=float, default=(0.0, 0.0),
-                        metavar=("COL", "ROW"),
-                        help="model pixel of the image's first pixel (for crops)")  # fmt: skip
-    parser.add_argument("--crs", default=None, help="output CRS, e.g. EPSG:32631 (default UTM)")
-    parser.add_argument("--res", type=float, default=None, help="output pixel size (CRS units)")
-    parser.add_argument("--resampling", choices=("nearest", "bilinear", "cubic"),
-                        default="bilinear", help="image resampling (default bilinear)")  # fmt: skip
+    parser.add_argument("--dem", required=True, metavar="DEM", help="DEM raster (any CRS)")
+    parser.add_argument(
+        "--dem-height",
+        choices=("ellipsoidal", "orthometric"),
+        default=None,
+        help="height reference of the DEM values (default: the file's vertical "
+        "CRS if it declares EGM96/EGM2008, else ellipsoidal)",
+    )
+    parser.add_argument(
+        "--geoid",
+        default=None,
+        metavar="GEOID",
+        help="egm96, egm2008 (PROJ grids) or a geoid grid file, for orthometric "
+        "DEMs (implies --dem-height orthometric)",
+    )
+    add_image_options(parser)
+    parser.add_argument(
+        "--crs",
+        default=None,
+        metavar="CRS",
+        help="output CRS, e.g. EPSG:32631 (default: the local UTM zone)",
+    )
+    parser.add_argument(
+        "--res",
+        type=float,
+        default=None,
+        metavar="RES",
+        help="output pixel size in CRS units: metres, or degrees in a geographic "
+        "CRS (default: the image's GSD)",
+    )
     parser.add_argument(
         "--bounds",
         nargs=4,
         type=float,
         default=None,
         metavar=("W", "S", "E", "N"),
-        help="output bounds in the output CRS",
+        help="output bounds in the output CRS (needs --crs; default: the footprint on the DEM)",
+    )
+    parser.add_argument(
+        "--resampling",
+        choices=("nearest", "bilinear", "cubic"),
+        default="bilinear",
+        help="image resampling (default: bilinear)",
     )
     parser.add_argument(
         "--occlusion",
         choices=("off", "nodata", "band"),
         default="off",
-        help="terrain hidden from the sensor: nodata, or an extra mask band",
+        help="terrain hidden from the sensor: nodata, or an extra mask band (default: off)",
     )
-    parser.add_argument("--tile", type=int, default=1024, help="tile size (px)")
-    parser.add_argument("-o", "--out", required=True, help="output GeoTIFF (COG)")
-    parser.add_argument("--overwrite", action="store_true", help="replace an existing output")
-    parser.add_argument("--no-progress", action="store_true", help="no progress bar")
+    parser.add_argument(
+        "--compress",
+        choices=("deflate", "zstd", "lzw", "none"),
+        default="deflate",
+        help="COG compression (default: deflate)",
+    )
+    parser.add_argument(
+        "--max-pixels",
+        type=float,
+        default=None,
+        metavar="N",
+        help="refuse a product of more pixels (default: 2e9; 0: no limit)",
+    )
+    parser.add_argument(
+        "--tile",
+        type=int,
+        default=1024,
+        metavar="PX",
+        help="tile size in output pixels (default: 1024)",
+    )
+    parser.add_argument(
+        "--workers",
+        type=int,
+        default=None,
+        metavar="N",
+        help="worker processes (default: one per core for a large product, none "
+        "for a small one; 0: all tiles in this process)",
+    )
+    parser.add_argument(
+        "--scheduler",
+        default=None,
+        metavar="ADDRESS",
+        help="run the tiles on the dask cluster of this scheduler "
+        "(tcp://host:8786) instead of local workers",
+    )
+    parser.add_argument(
+        "--retries",
+        type=int,
+        default=2,
+        metavar="N",
+        help="retries of a failing tile or of a tile whose worker died (default: 2)",
+    )
+    parser.add_argument(
+        "--resume",
+        default=None,
+        metavar="DIR",
+        help="keep finished tiles in DIR (created if needed) and reuse those an "
+        "interrupted run of the same command left there",
+    )
+    parser.add_argument(
+        "--plan",
+        default=None,
+        metavar="FILE",
+        help="write the tile plan (JSON: tiles, windows, job) to FILE and stop, computing nothing",
+    )
+    add_out(parser, "OUT.tif", "the orthoimage (a COG; written only once complete)")
+    add_quiet(parser)
+    add_json(parser)
     parser.set_defaults(func=run)
 
 
-def run(args: argparse.Namespace) -> int:
-    from jaxgeo.io import read_dem, read_rpc
-    from jaxgeo.ortho import orthorectify
+def _inputs(image, dem) -> list[pathlib.Path]:
+    paths = [*image.inputs, pathlib.Path(dem.path)]
+    if dem.geoid is not None and pathlib.Path(str(dem.geoid.source)).exists():
+        paths.append(pathlib.Path(str(dem.geoid.source)))
+    return paths
 
+
+def run(args: argparse.Namespace) -> int:
     from . import CommandError
 
-    out = pathlib.Path(args.out)
-    if out.exists() and not args.overwrite:
-        raise CommandError(f"{out}: exists; pass --overwrite to replace it")
-    source = args.model or args.image
-    try:
-        model = read_rpc(source)
-    except (ValueError, KeyError) as err:
-        raise CommandError(
-            f"{source}: no sensor model found ({err}); give one with --model"
-        ) from None
+    for name, value, low in (("--workers", args.workers, 0), ("--retries", args.retries, 0),
+                             ("--tile", args.tile, 64)):  # fmt: skip
+        if value is not None and value < low:
+            raise CommandError(f"{name} must be >= {low}, got {value}")
+    if args.max_pixels is not None and args.max_pixels < 0:
+        raise CommandError(f"--max-pixels must be >= 0 (0: no limit), got {args.max_pixels:g}")
+    with warnings.catch_warnings(record=True) as caught:
+        warnings.simplefilter("always")
+        try:
+            return _run(args)
+        finally:  # jaxgeo's warnings once each, one line (printed even with --quiet)
+            shown = set()
+            for w in caught:
+                ours = w.category is UserWarning or w.category.__module__.startswith("jaxgeo")
+                if issubclass(w.category, UserWarning) and ours and str(w.message) not in shown:
+                    shown.add(str(w.message))
+                    print(f"jaxgeo ortho: warning: {w.message}", file=sys.stderr)
+
+
+def _run(args: argparse.Namespace) -> int:
+    from jaxgeo.io import read_dem
+    from jaxgeo.ortho import MAX_PIXELS, orthorectify, plan_ortho
+    from jaxgeo.tiles import TileError, write_plan
+
+    from . import CommandError
+    from ._common import guard_outputs, note, open_images, print_json
+
+    (image,) = open_images([args.image], args)
     dem = read_dem(args.dem, height=args.dem_height, geoid=args.geoid)
-    report = orthorectify(
-        args.image, model, dem, out, crs=args.crs, res_m=args.res, bounds=args.bounds,
-        resampling=args.resampling, occlusion=args.occlusion, image_origin=args.image_origin,
-        tile_px=args.tile, overwrite=args.overwrite, progress=not args.no_progress,
+    inputs = _inputs(image, dem)
+    if args.plan:  # the plan is written; the product is only named (never an input)
+        guard_outputs([args.plan], inputs, args.overwrite)
+        guard_outputs([args.out], inputs, overwrite=True)
+    else:
+        guard_outputs([args.out], inputs, args.overwrite)
+    if args.resume:
+        resume = pathlib.Path(args.resume)
+        if resume.exists() and not resume.is_dir():
+            raise CommandError(f"--resume {resume}: exists and is not a folder")
+        for p in inputs:
+            if resume.resolve() == p.resolve():
+                raise CommandError(f"--resume {resume}: is an input; name a folder")
+    note(dem.describe(), args.quiet)
+    options = dict(
+        crs=args.crs, res_m=args.res, bounds=args.bounds, resampling=args.resampling,
+        occlusion=args.occlusion, tile_px=args.tile, overwrite=args.overwrite,
+        max_pixels=MAX_PIXELS if args.max_pixels is None else args.max_pixels,
     )  # fmt: skip
-    print(f"wrote {report.path}: {report.width} x {report.height} px, {report.res_m:.3f} m, "
-          f"{report.crs}; {100 * report.valid_fraction:.1f}% with data; grid error left "
+    if args.plan:
+        setup = plan_ortho(image, None, dem, args.out, **{**options, "overwrite": True})
+        write_plan(setup.plan, args.plan, overwrite=args.overwrite)
+        plan = setup.plan
+        if args.json:
+            print_json({"plan": args.plan, "tiles": len(plan), "width": plan.width,
+                        "height": plan.height, "tile_px": plan.tile_px})  # fmt: skip
+        else:
+            crs = setup.crs.to_string()
+            print(f"wrote {args.plan}: {len(plan)} tiles of {plan.tile_px} px over "
+                  f"{plan.width} x {plan.height} px ({crs}); nothing computed")  # fmt: skip
+        return 0
+    try:
+        report = orthorectify(
+            image, None, dem, args.out, **options, compress=args.compress, workers=args.workers,
+            scheduler=args.scheduler, resume=args.resume, retries=args.retries,
+            progress=not args.quiet,
+        )  # fmt: skip
+    except (KeyboardInterrupt, TileError):
+        if args.resume and pathlib.Path(args.resume).is_dir():
+            note(f"jaxgeo ortho: the finished tiles are kept in {args.resume}: the same command "
+                 "reuses them")  # fmt: skip
+        raise
+    if args.json:
+        print_json({k: (str(v) if isinstance(v, pathlib.Path) else v)
+                    for k, v in dataclasses.asdict(report).items()})  # fmt: skip
+        return 0
+    where = (f"{report.workers} worker(s) at {report.scheduler}" if report.scheduler
+             else "this process")  # fmt: skip
+    print(f"wrote {report.path}: {report.width} x {report.height} px of {report.res_m:.4g} "
+          f"(CRS units), {report.crs}; "
+          f"{100 * report.valid_fraction:.1f}% with data; grid error left "
           f"{report.grid_error_px:.2g} px ({100 * report.refined_fraction:.1f}% of blocks "
-          f"projected in full); {report.seconds:.1f} s")  # fmt: skip
+          f"projected in full); {report.tiles} tiles ({report.empty_tiles} without data, "
+          f"{report.reused_tiles} reused) on {where}; {report.seconds:.1f} s")  # fmt: skip
     if report.occluded_fraction is not None:
         print(f"occluded: {100 * report.occluded_fraction:.2f}% of the output")
     return 0

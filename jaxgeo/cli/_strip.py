@@ -3,8 +3,8 @@
     jaxgeo strip STRIP [--ground CSV] [--observations CSV] [--ties-per-pair N]
                  [--tie-height M | --dem FILE] [--bias affine|shift-drift|shift]
                  [--degree quadratic|affine|shift] [--loss l2|huber|cauchy]
-                 [--loss-scale C] [--keep-blunders] [--json]
-                 [--out DIR [--rpc-format txt|rpb|geom|dimap]] [--overwrite]
+                 [--loss-scale C] [--keep-blunders] [--json] [--quiet]
+                 [-o DIR [--rpc-format txt|rpb|geom|dimap]] [--overwrite]
 
 STRIP is a folder holding ``strip.json`` (or the json file itself; see
 :func:`jaxgeo.strip.read_strip`) with the sub-scenes' vendor RPCs, ``ground.csv`` and
@@ -14,10 +14,11 @@ sub-scene with the ties and the GCPs; level 2 fits one universal lat/lon correct
 and applies it to every sub-scene (003_a7d3ea260371d8c5.txt sections 6-9). The report gives,
 per sub-scene, the check-point RMS (east/north m) of the vendor RPCs (``direct``), after level 1
 and after level 2, and per adjacent pair the gap between a tie localised in one sub-scene and in
-the other. ``--out DIR`` writes one RPC per sub-scene refitted to its final model
+the other. ``-o/--out DIR`` writes one RPC per sub-scene refitted to its final model
 (``NAME_RPC.TXT`` or ``NAME.RPB``), ``report.json`` and ``report.txt``; every destination is
-checked before anything is written, inputs are never replaced and existing files only with
-``--overwrite``.
+checked before any computation, inputs (strip.json, the RPC files, the tables, the DEM) are
+never replaced and earlier outputs only with ``--overwrite``; the report is printed before
+anything is written. Progress goes to stderr (``--quiet``: none).
 
 Gross errors, as ``jaxgeo adjust``: by default a Cauchy loss at 3 a priori sigmas (``--loss``,
 ``--loss-scale``; IRLS) at both levels, then data snooping (Baarda's w-test with redundancy
@@ -33,6 +34,14 @@ the checks and their messages are the library's (settings named by their flags, 
 from __future__ import annotations
 
 import argparse
+
+EXIT_CODES = {
+    0: "adjusted (gross errors, if any, removed and listed)",
+    1: "the level-1 bundle adjustment did not converge (the last state is reported)",
+    3: "the observations do not fit the models (s0 > 3, or more gross errors than snooping\n"
+    "       may remove; converged or not): the warning names the sub-scenes",
+    4: "the adjustment ran but -o/--out could not be written (the report is printed first)",
+}
 
 
 def _flag(name: str):
@@ -71,12 +80,15 @@ def register(sub) -> None:
         RefitConfig,
         TieConfig,
     )
+    from ._common import add_command, add_json, add_quiet
 
     ties0, level1, refit0 = TieConfig(), Level1Config(), RefitConfig()
-    parser = sub.add_parser(
+    parser = add_command(
+        sub,
         "strip",
-        help="two-level full-strip adjustment of a Carto-2S-style strip of sub-scenes",
-        description=__doc__.split("\n\n")[0],
+        "two-level full-strip adjustment of a Carto-2S-style strip of sub-scenes",
+        __doc__,
+        EXIT_CODES,
     )
     parser.add_argument("strip", metavar="STRIP", help="strip folder or its strip.json")
     parser.add_argument("--ground", metavar="CSV", help="GCPs/check points (default ground.csv)")
@@ -136,7 +148,12 @@ def register(sub) -> None:
         metavar="X",
         help="prior sigma (px/px) of the affine matrix (or shift-drift drift) terms",
     )
-    ties.add_argument("--method", choices=("lm", "gn"), default="lm", help="level-1 solver")
+    ties.add_argument(
+        "--method",
+        choices=("lm", "gn"),
+        default="lm",
+        help="level-1 solver: Levenberg-Marquardt (default) or Gauss-Newton",
+    )
     ties.add_argument(
         "--max-steps", type=int, default=100, metavar="N", help="level-1 solver steps (100)"
     )
@@ -166,9 +183,12 @@ def register(sub) -> None:
         help="level 2: the universal correction (default quadratic, eq. 12-13 of 003_; auto: "
         "the degree that best predicts each GCP scene left out)",
     )
+    add_json(parser)
+    add_quiet(parser)
     out = parser.add_argument_group("output")
-    out.add_argument("--json", action="store_true", help="print one JSON object")
-    out.add_argument("--out", metavar="DIR", help="write the updated RPCs and the report here")
+    out.add_argument("-o", "--out", metavar="DIR",
+                     help="write the updated RPCs and the report into this folder (created if "
+                     "needed; default: print the report only)")  # fmt: skip
     out.add_argument(
         "--rpc-format",
         choices=tuple(SUFFIX),
@@ -185,7 +205,9 @@ def register(sub) -> None:
         help="RPC refit grid: columns, rows, height layers (default %(default)s)",
     )
     out.add_argument(
-        "--overwrite", action="store_true", help="replace earlier outputs (never the inputs)"
+        "--overwrite",
+        action="store_true",
+        help="replace earlier outputs in -o/--out (an input is never replaced)",
     )
     parser.set_defaults(func=run)
 
@@ -239,8 +261,35 @@ def run(args: argparse.Namespace) -> int:
         raise CommandError(err.render(FLAGS)) from None
 
 
+def _guard(args, strip, targets) -> None:
+    """Before any computation: the outputs are no input (whatever ``--overwrite``), and the
+    folder they go into is writable."""
+    import os
+    import pathlib
+    import tempfile
+
+    from . import CommandError
+    from ._common import guard_outputs
+
+    inputs = [*(strip.files.all() if strip.files is not None else ()),
+              *([args.dem] if args.dem else [])]  # fmt: skip
+    out = pathlib.Path(args.out)
+    if out.is_dir():
+        try:
+            guard_outputs(targets.values(), inputs, args.overwrite)
+        except CommandError as err:
+            raise CommandError(f"-o/--out: {err}") from None
+        return
+    base = out
+    while not base.exists() and base != base.parent:
+        base = base.parent
+    try:  # a folder made and removed: os.access says yes to root everywhere
+        os.rmdir(tempfile.mkdtemp(prefix=".jaxgeo-probe-", dir=base))
+    except OSError as err:
+        raise CommandError(f"-o/--out: {out}: cannot be created ({base}: {err.strerror})") from None
+
+
 def _run(args: argparse.Namespace) -> int:
-    import json
     import sys
     import warnings
 
@@ -261,6 +310,10 @@ def _run(args: argparse.Namespace) -> int:
         write_strip_outputs,
     )
     from . import CommandError
+    from ._common import EXIT_NOT_CONVERGED, EXIT_OK, EXIT_POOR_FIT, EXIT_WRITE, note, print_json
+
+    def say(line: str) -> None:
+        note(f"jaxgeo strip: {line}", args.quiet)
 
     if args.dem_offset_m and not args.dem:
         raise CommandError("--dem-offset-m applies to --dem heights only")
@@ -270,12 +323,17 @@ def _run(args: argparse.Namespace) -> int:
     if args.out:
         targets = strip_output_paths(strip, args.out, args.rpc_format, args.overwrite,
                                       [args.dem] if args.dem else [])  # fmt: skip
+        _guard(args, strip, targets)
     if args.dem:
         dem = read_dem(args.dem, offset_m=args.dem_offset_m)
         if dem.vertical_crs and not args.dem_offset_m:
-            print(f"jaxgeo strip: note: {args.dem} declares vertical CRS {dem.vertical_crs!r}; "
-                  "heights are used as ellipsoidal", file=sys.stderr)  # fmt: skip
+            say(f"note: {args.dem} declares vertical CRS {dem.vertical_crs!r}; heights are used "
+                "as ellipsoidal")  # fmt: skip
         config, _ = strip_config(args, tie_height=dem)
+    say(f"adjusting {len(strip.names)} sub-scenes: tie points, level-1 bundle adjustment and "
+        "snooping, level-2 correction (the first run of a strip shape compiles, up to a "
+        "minute)")  # fmt: skip
+    poor = False
     with warnings.catch_warnings(record=True) as caught:
         warnings.simplefilter("always")
         try:
@@ -285,24 +343,35 @@ def _run(args: argparse.Namespace) -> int:
                 warns = (GCPDistributionWarning, UniversalCorrectionWarning, LineOffsetWarning,
                          NotConvergedWarning, PoorFitWarning, MeasuredTieWarning)  # fmt: skip
                 kind = "warning" if issubclass(w.category, warns) else "note"
+                poor |= issubclass(w.category, PoorFitWarning)
                 print(f"jaxgeo strip: {kind}: {w.message}", file=sys.stderr)
     converged = bool(result.report.strip["converged"])
     if not converged:
         print("jaxgeo strip: warning: the level-1 bundle adjustment did not converge",
               file=sys.stderr)  # fmt: skip
-    if targets is not None:
+    # the misfit first: a solve it drove off does not converge either
+    code = EXIT_POOR_FIT if poor else EXIT_OK if converged else EXIT_NOT_CONVERGED
+    if not args.json:
+        print(format_strip_result(result), flush=True)  # the report first
+    if targets is None:
+        if args.json:
+            print_json({**strip_summary(result), "exit_status": code})
+        return code
+    say(f"refitting {len(strip.names)} RPCs and writing {args.out}")
+    try:
         data = write_strip_outputs(result, targets, refit, args.rpc_format, args.overwrite)
-        worst, px = worst_refit(data)
-        if px > REFIT_WARN_PX:
-            print(f"jaxgeo strip: warning: the refitted RPC of {worst} differs from its adjusted "
-                  f"model by up to {px:.3g} px on the check grid", file=sys.stderr)  # fmt: skip
-    else:
-        data = strip_summary(result)
+    except (OSError, ValueError) as err:
+        if args.json:
+            print_json({**strip_summary(result), "exit_status": EXIT_WRITE})
+        note(f"jaxgeo strip: error: writing -o/--out failed: {err}")
+        return EXIT_WRITE
+    worst, px = worst_refit(data)
+    if px > REFIT_WARN_PX:
+        print(f"jaxgeo strip: warning: the refitted RPC of {worst} differs from its adjusted "
+              f"model by up to {px:.3g} px on the check grid", file=sys.stderr)  # fmt: skip
     if args.json:
-        print(json.dumps(data, indent=1))
+        print_json({**data, "exit_status": code})
     else:
-        print(format_strip_result(result))
-        if targets is not None:
-            print(f"\nwrote {len(data['written'])} files to {args.out} (updated RPCs: refit "
-                  f"error <= {px:.2g} px on the check grid)")  # fmt: skip
-    return 0 if converged else 1
+        print(f"\nwrote {len(data['written'])} files to {args.out} (updated RPCs: refit "
+              f"error <= {px:.2g} px on the check grid)")  # fmt: skip
+    return code

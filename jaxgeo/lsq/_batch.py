@@ -11,8 +11,10 @@ chunks of ``chunk`` problems. The iterates, results and step counts are those of
 to differentiate). The small factorisations are LAPACK-free
 (:mod:`~jaxgeo.lsq._factor`), which removes the hang of >= 1000 vmapped problems in jaxlib's
 batched LAPACK; problems whose reduced system is larger (LAPACK) run one at a time. With
-several local devices (``jax.local_device_count() > 1``) the problems are sharded over them
-(``jax.sharding``, one mesh axis): the results are those of one device.
+several local devices (``jax.local_device_count() > 1``; on a CPU jaxgeo makes one device per
+usable core, :mod:`jaxgeo._jaxconfig`) the problems are sharded over them (``shard_map``, one
+mesh axis), each device running its own queue of lanes on its own core: the results are
+those of one device.
 
 Example::
 
@@ -152,13 +154,19 @@ def _solve_stacked(stacked: Problem, solver: SolverConfig, chunk: int, mesh) -> 
     return jax.shard_map(run, mesh=mesh, in_specs=spec, out_specs=spec, check_vma=False)(dyn)
 
 
-def _mesh(n: int):
-    """A one-axis mesh over all local devices (problem axis), or ``None`` with one device or
-    a batch their number does not divide."""
-    devices = jax.local_devices()
-    if len(devices) < 2 or n % len(devices):
+def _mesh(devices: int):
+    """A one-axis mesh (problem axis) over the first ``devices`` local devices, or ``None``
+    for one."""
+    if devices < 2:
         return None
-    return jax.sharding.Mesh(np.array(devices), ("problems",))
+    return jax.sharding.Mesh(np.array(jax.local_devices()[:devices]), ("problems",))
+
+
+def shard_count(n: int, shard: bool = True) -> int:
+    """Devices a batch of ``n`` problems is spread over: all local devices (jaxgeo asks jax
+    for one CPU device per usable core: :mod:`jaxgeo._jaxconfig`), at most ``n``; 1 without
+    ``shard``."""
+    return max(1, min(jax.local_device_count(), n)) if shard else 1
 
 
 def default_chunk(stacked: Problem) -> int:
@@ -193,13 +201,14 @@ def solve_batch(
     of problems; ``result`` and ``num_steps`` are per problem (a failed problem does not stop
     the others). Up to ``chunk`` problems are vmapped together (see the module docstring;
     default :func:`default_chunk`; chunks of balanced sizes); ``shard=True`` spreads the
-    problems over all local devices when there are several (and their number divides the
-    batch).
+    problems over all local devices when there are several (:func:`shard_count`; on a CPU,
+    one device per core by default, so the cores share the batch), padding the batch to a
+    whole number of chunks per device. The results are those of one device.
     """
     stacked = problems if isinstance(problems, Problem) else stack_problems(problems)
     n = jax.tree.leaves(eqx.filter(_without_structure(stacked), eqx.is_array))[0].shape[0]
-    mesh = _mesh(n) if shard else None
-    devices = 1 if mesh is None else mesh.size
+    devices = shard_count(n, shard)
+    mesh = _mesh(devices)
     chunk = balanced_chunk(n, devices, default_chunk(stacked) if chunk is None else chunk)
     if stacked.structure.n_params + 1 > UNROLL_MAX:
         # the reduced system goes to LAPACK, whose batched (vmapped) kernels deadlock on this
@@ -212,7 +221,6 @@ def solve_batch(
         dyn, static = eqx.partition(_without_structure(stacked), eqx.is_array)
         dyn = jax.tree.map(lambda x: jnp.concatenate([x, jnp.repeat(x[-1:], total - n, 0)]), dyn)
         stacked = _with_structure(eqx.combine(dyn, static), stacked.structure)
-        mesh = _mesh(total) if shard else None
     sol = _solve_stacked(stacked, solver, chunk, mesh)
     if total == n:
         return sol

@@ -9,14 +9,20 @@ or NaN for one the observations do not determine (:func:`undetermined_unknowns`)
 from __future__ import annotations
 
 import equinox as eqx
-import jax
 import jax.numpy as jnp
 from jaxtyping import Array, Bool, Float
 
 from . import _band as band
+from . import _schur
 from ._factor import cho_solve, cholesky
 from ._problem import Problem, Structure
-from ._schur import Jacobians, NormalBlocks, reduced_system, u_diagonal
+from ._schur import (
+    Jacobians,
+    NormalBlocks,
+    chunked_segment_sum,
+    reduced_system,
+    u_diagonal,
+)
 
 INFLATION_MAX = 1e6
 """An unknown whose variance is this many times that of an uncorrelated one (its sigma amplified
@@ -50,26 +56,42 @@ def cofactors(jac: Jacobians, blocks: NormalBlocks, s: Structure) -> Covariance:
     if s.band:  # the inverse only where the pattern of S is (linear in the sub-scenes)
         qcc = band.selected_inverse(band.band_cholesky(big_s))
         ob = s.obs_block
-        qab = qcc.blocks(ob[s.pair_a], ob[s.pair_b], s.width)  # (K, P, P)
-        qoo = qcc.blocks(ob, ob, s.width)
+
+        def q_blocks(a, b):  # Q_cc blocks (k, P, P) between the parameters of a and of b
+            return qcc.blocks(ob[a], ob[b], s.width)
+
         cc, diag_q = qcc, qcc.diagonal()
     else:
         qcc = cho_solve(cholesky(big_s), jnp.eye(n + 1))
-        pa, pb = s.obs_params[s.pair_a], s.obs_params[s.pair_b]
-        qab = qcc[pa[:, :, None], pb[:, None, :]]  # (K, P, P)
-        idx = s.obs_params
-        qoo = qcc[idx[:, :, None], idx[:, None, :]]
+
+        def q_blocks(a, b):
+            pa, pb = s.obs_params[a], s.obs_params[b]
+            return qcc[pa[:, :, None], pb[:, None, :]]
+
         cc, diag_q = qcc[:n, :n], jnp.diagonal(qcc)[:n]
-    t = jnp.einsum("kpi,kpq,kqj->kij", y[s.pair_a], qab, y[s.pair_b])
-    qpp = vinv + jax.ops.segment_sum(t, s.pair_point, s.n_points)
     m = s.obs_point.shape[0]
-    qcp = -jax.ops.segment_sum(jnp.einsum("kpq,kqj->kpj", qab, y[s.pair_b]), s.pair_a, m)
-    jc, jp = jac.jc, jac.jp
-    fit = (
-        jnp.einsum("mkp,mpq,mkq->mk", jc, qoo, jc)
-        + 2.0 * jnp.einsum("mkp,mpj,mkj->mk", jc, qcp, jp)
-        + jnp.einsum("mki,mij,mkj->mk", jp, qpp[s.obs_point], jp)
+
+    def per_pair(a, b):  # pairs of observations of one point: their Q_cc block with W V^-1
+        qab = q_blocks(a, b)
+        t = jnp.einsum("kpi,kpq,kqj->kij", y[a], qab, y[b])
+        return t, -jnp.einsum("kpq,kqj->kpj", qab, y[b])
+
+    # summed per point and per observation over chunks of the pairs: no (K, P, P) temporary
+    t, qcp = chunked_segment_sum(
+        per_pair, (s.pair_a, s.pair_b), (s.pair_point, s.pair_a), (s.n_points, m)
     )
+    qpp = vinv + t
+    jc, jp = jac.jc, jac.jp
+
+    def per_obs(i):  # the diagonal of J Q J^T, observation by observation
+        return (
+            jnp.einsum("mkp,mpq,mkq->mk", jc[i], q_blocks(i, i), jc[i])
+            + 2.0 * jnp.einsum("mkp,mpj,mkj->mk", jc[i], qcp[i], jp[i])
+            + jnp.einsum("mki,mij,mkj->mk", jp[i], qpp[s.obs_point[i]], jp[i])
+        )
+
+    rows = jnp.arange(m)
+    fit = per_obs(rows) if m <= _schur.SUM_CHUNK else chunked_segment_sum(per_obs, (rows,), rows, m)
     gfit = jnp.einsum("cki,cij,ckj->ck", jac.jg, qpp[s.ground_point], jac.jg)
     infl_c = diag_q * u_diagonal(blocks, s)
     infl_p = jnp.diagonal(qpp, axis1=1, axis2=2) * jnp.diagonal(blocks.v, axis1=1, axis2=2)

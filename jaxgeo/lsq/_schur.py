@@ -30,6 +30,11 @@ from ._problem import Structure
 
 DIAG_MIN = 1e-6
 DIAG_MAX = 1e32
+SUM_CHUNK = 1 << 14
+"""Rows (observations, pairs of observations) whose products are formed at a time when they are
+summed per block (:func:`chunked_segment_sum`): a 100 000-tie pair has 400 000 pairs, whose
+6 x 6 products alone would take 115 MB at once, and the solve held several such temporaries
+(1.5 GB peak); in chunks of 2^14 rows they take 4.7 MB, and the sum runs in cache."""
 
 
 class Jacobians(eqx.Module):
@@ -62,21 +67,72 @@ class NormalBlocks(eqx.Module):
     w: Float[Array, "M P 3"]
 
 
+def chunked_segment_sum(
+    values: Callable[..., Array | tuple[Array, ...]],
+    rows: tuple[Array, ...],
+    segments: Array | tuple[Array, ...],
+    num_segments: int | tuple[int, ...],
+    chunk: int | None = None,
+) -> Array | tuple[Array, ...]:
+    """``segment_sum(values(*rows), segments, num_segments)`` without forming ``values`` for
+    all rows at once: ``values`` maps index arrays (a chunk of each of ``rows``, all of one
+    length K) to per-row values, summed over ``chunk`` (default :data:`SUM_CHUNK`) rows at a
+    time (a ``scan``; one call when K fits in a chunk). Several outputs: ``values`` returns a
+    tuple, and ``segments`` / ``num_segments`` are tuples (one per output)."""
+    chunk = SUM_CHUNK if chunk is None else int(chunk)
+    many = isinstance(num_segments, tuple)
+    segs = segments if many else (segments,)
+    nums = num_segments if many else (num_segments,)
+
+    def add(acc, idx, seg):  # scatter-add into the accumulators (in place in the loop)
+        out = values(*idx)
+        out = out if many else (out,)
+        return tuple(a.at[g].add(o, mode="drop") for a, o, g in zip(acc, out, seg, strict=True))
+
+    shapes = jax.eval_shape(lambda *r: values(*r), *(r[:1] for r in rows))
+    shapes = shapes if many else (shapes,)
+    init = tuple(jnp.zeros((n, *o.shape[1:]), o.dtype) for o, n in zip(shapes, nums, strict=True))
+    k = rows[0].shape[0]
+    if k <= chunk:
+        out = add(init, rows, segs)
+        return out if many else out[0]
+    n_chunks = -(-k // chunk)
+    pad = n_chunks * chunk - k
+
+    def split(x, fill):
+        x = jnp.concatenate([x, jnp.full((pad, *x.shape[1:]), fill, x.dtype)])
+        return x.reshape(n_chunks, chunk, *x.shape[1:])
+
+    idx = tuple(split(r, 0) for r in rows)
+    seg = tuple(split(g, n) for g, n in zip(segs, nums, strict=True))  # padding: dropped
+
+    def body(acc, xs):
+        return add(acc, *xs), None
+
+    out, _ = jax.lax.scan(body, init, (idx, seg))
+    return out if many else out[0]
+
+
 def add_per_block(target: Array, s: Structure, values: Array) -> Array:
     """``target`` (N+1,) or (N+1, N+1) plus per-observation ``values`` (M, P) or (M, P, P) at
     their parameters: summed per block first (``segment_sum``), then one small scatter (a
     scatter-add of every element is slow on CPU: ~10x at 40 000 x 6 x 6)."""
+    summed = jax.ops.segment_sum(values, s.obs_block, s.all_block_params.shape[0])
+    return add_block_sums(target, s, summed)
+
+
+def add_block_sums(target: Array, s: Structure, summed: Array) -> Array:
+    """``target`` (N+1,) or (N+1, N+1) plus per-block sums (B, P) or (B, P, P) at their
+    parameters (one small scatter)."""
     bp = s.all_block_params
-    summed = jax.ops.segment_sum(values, s.obs_block, bp.shape[0])
-    if values.ndim == 2:
+    if summed.ndim == 2:
         return target.at[bp].add(summed)
     return target.at[bp[:, :, None], bp[:, None, :]].add(summed)
 
 
-def add_per_pair(target: Array, s: Structure, values: Array) -> Array:
-    """``target`` (N+1, N+1) plus per-pair ``values`` (K, P, P) at (parameters of the pair's
-    first observation, of its second), summed per block pair first."""
-    summed = jax.ops.segment_sum(values, s.pair_seg, s.pair_blocks.shape[0])
+def add_pair_sums(target: Array, s: Structure, summed: Array) -> Array:
+    """``target`` (N+1, N+1) plus per-block-pair sums (Q, P, P) at (parameters of the pair's
+    first block, of its second)."""
     pa = s.all_block_params[s.pair_blocks[:, 0]]
     pb = s.all_block_params[s.pair_blocks[:, 1]]
     return target.at[pa[:, :, None], pb[:, None, :]].add(summed)
@@ -111,11 +167,16 @@ def split_jacobians(fn: Callable, args: Any, y: PyTree, width: int) -> Jacobians
 def normal_blocks(jac: Jacobians, s: Structure) -> NormalBlocks:
     """Assemble :class:`NormalBlocks` from the Jacobian blocks (no dense ``J``)."""
     n1 = s.n_params + 1
-    jtj = jnp.einsum("mkp,mkq->mpq", jac.jc, jac.jc)
+    m = s.obs_block.shape[0]
+    # sum_m J_c^T J_c per block, in chunks of observations (no (M, P, P) temporary)
+    jtj = chunked_segment_sum(
+        lambda i: jnp.einsum("mkp,mkq->mpq", jac.jc[i], jac.jc[i]),
+        (jnp.arange(m),), s.obs_block, s.all_block_params.shape[0],
+    )  # fmt: skip
     if s.band:  # one group: its blocks in order, the priors' blocks aligned with them
-        u = jax.ops.segment_sum(jtj, s.obs_block, s.n_blocks)
+        u = jtj
     else:
-        u = add_per_block(jnp.zeros((n1, n1)), s, jtj)
+        u = add_block_sums(jnp.zeros((n1, n1)), s, jtj)
     gc = add_per_block(jnp.zeros(n1), s, jnp.einsum("mkp,mk->mp", jac.jc, jac.r))
     for bidx, jpr, rpr in zip(s.block_params, jac.jpr, jac.rpr, strict=True):
         prior = jnp.einsum("bqp,bqr->bpr", jpr, jpr)
@@ -167,11 +228,14 @@ def reduced_system(
     u, v = damped(blocks, s, lam)
     vinv = inv3(v)
     y = jnp.einsum("mpj,mjk->mpk", blocks.w, vinv[s.obs_point])
-    sub = jnp.einsum("kpj,kqj->kpq", y[s.pair_a], blocks.w[s.pair_b])
+    # W V^-1 W^T summed per block pair, over chunks of the pairs (no (K, P, P) temporary)
+    summed = chunked_segment_sum(
+        lambda a, b: jnp.einsum("kpj,kqj->kpq", y[a], blocks.w[b]),
+        (s.pair_a, s.pair_b), s.pair_seg, s.pair_blocks.shape[0],
+    )  # fmt: skip
     if s.band:
-        summed = jax.ops.segment_sum(sub, s.pair_seg, s.pair_blocks.shape[0])
         return band.assemble_band(u, s.pair_blocks, -summed, s.band, n), vinv, y
-    big_s = add_per_pair(u, s, -sub)
+    big_s = add_pair_sums(u, s, -summed)
     # the dummy (padding) parameter stays an identity row
     big_s = big_s.at[n, :].set(0.0).at[:, n].set(0.0).at[n, n].set(1.0)
     return big_s, vinv, y

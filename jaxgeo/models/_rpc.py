@@ -17,7 +17,13 @@ import numpy as np
 from jaxtyping import Array, ArrayLike, Bool, Float, PyTree
 
 from ._base import AbstractSensorModel, nothing
-from ._rpc_eval import is_concrete, localize_concrete, project_concrete, project_stacked
+from ._rpc_eval import (
+    is_concrete,
+    localize_concrete,
+    localize_traced,
+    project_concrete,
+    project_stacked,
+)
 
 TermOrder = Literal["RPC00B", "RPC00A"]
 
@@ -214,10 +220,13 @@ class RPC(AbstractSensorModel):
         guess: Float[ArrayLike, "*gbatch 2"] | None = None,
     ) -> Float[Array | np.ndarray, "... 3"]:
         """See :meth:`AbstractSensorModel.localize`; concrete calls without ``guess`` run a
-        compiled kernel (numpy in -> numpy out)."""
+        compiled kernel (numpy in -> numpy out). Every call runs the same iteration over whole
+        arrays (Newton, then chord steps; :func:`~._rpc_eval.localize_lph`): under ``jit``,
+        ``vmap`` or ``grad`` the same values and NaN flags as the numpy call, with the
+        derivatives of the implicit function theorem."""
         if guess is None and is_concrete(self, image, h):
             return localize_concrete(self, image, h)
-        return super().localize(image, h, guess)
+        return localize_traced(self, image, h, guess)
 
     def reference_ground(self) -> Float[Array, "3"]:
         return jnp.asarray(self.ground_offset)

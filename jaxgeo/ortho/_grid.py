@@ -4,43 +4,91 @@ from __future__ import annotations
 
 import dataclasses
 import math
+import warnings
 
-import equinox as eqx
 import numpy as np
 
+from .. import _exported
 from ..geodesy import utm_epsg, utm_zone
 from ..io import dem_coverage
-from ..models import DEMStatus, localize_on_dem
 
 BATCH = 64
-CHUNK = 4096
-"""Host-side localisation calls are padded to ``BATCH`` points or run in ``CHUNK``-point
-pieces: few shapes, few compilations."""
+"""Host-side localisations on the DEM are padded to a multiple of ``BATCH`` points: one shape,
+one compilation."""
+ON_DEM_STEPS = 24
+"""Regula falsi (Illinois) steps of :func:`on_dem`."""
+ON_DEM_TOL_M = 0.01
+"""A point of :func:`on_dem` is kept when ``|DEM(ground) - h|`` ends below this (m)."""
 
 
-@eqx.filter_jit
-def _on_dem(model, xy, grid):
-    return localize_on_dem(model, xy, grid)
-
-
-@eqx.filter_jit
 def _at_height(model, xy, h):
     return model.localize(xy, h)
 
 
-def localize_on_dem_padded(model, xy: np.ndarray, grid) -> tuple[np.ndarray, np.ndarray]:
-    """Jitted :func:`localize_on_dem` on ``(n, 2)`` points padded to a multiple of ``BATCH``."""
+def _on_dem_bracketed(model, xy, grid, lo, hi):
+    """Image points ``xy`` ``(n, 2)`` on the DEM: a root of ``f(h) = DEM(localize(xy, h)) - h``
+    between ``lo`` (f >= 0) and ``hi`` (f <= 0) by the Illinois method. Returns the ground
+    points and the last ``|f|`` (m; NaN where the DEM has no height)."""
+    import jax
+    import jax.numpy as jnp
+
+    def f(points, h):
+        g = model.localize(points, h)
+        return g, grid.height(g[..., :2]) - h
+
+    n = xy.shape[0]
+    both = jnp.concatenate([xy, xy])
+    g_ab, f_ab = f(both, jnp.concatenate([jnp.full(n, lo), jnp.full(n, hi)]))
+    a, b, fa, fb = jnp.full(n, lo), jnp.full(n, hi), f_ab[:n], f_ab[n:]
+
+    def body(_, state):
+        a, b, fa, fb, side, g, best = state
+        den = fb - fa
+        c = jnp.where(jnp.abs(den) > 1e-12, (a * fb - b * fa) / jnp.where(den == 0, 1, den),
+                      0.5 * (a + b))  # fmt: skip
+        gc, fc = f(xy, c)
+        better = jnp.abs(fc) < best
+        g = jnp.where(better[:, None], gc, g)
+        best = jnp.where(better, jnp.abs(fc), best)
+        to_b = fc * fb > 0  # c replaces b (same sign)
+        fa = jnp.where(to_b & (side == -1), 0.5 * fa, fa)
+        fb = jnp.where(~to_b & (side == 1), 0.5 * fb, fb)
+        a, fa = jnp.where(to_b, a, c), jnp.where(to_b, fa, fc)
+        b, fb = jnp.where(to_b, c, b), jnp.where(to_b, fc, fb)
+        side = jnp.where(to_b, -1, 1)
+        return a, b, fa, fb, side, g, best
+
+    use_a = jnp.abs(fa) < jnp.abs(fb)
+    g0 = jnp.where(use_a[:, None], g_ab[:n], g_ab[n:])
+    best0 = jnp.where(jnp.isfinite(fa) | jnp.isfinite(fb), jnp.fmin(jnp.abs(fa), jnp.abs(fb)),
+                      jnp.inf)  # fmt: skip
+    state = (a, b, fa, fb, jnp.zeros(n, dtype=int), g0, best0)
+    *_, g, best = jax.lax.fori_loop(0, ON_DEM_STEPS, body, state)
+    return g, best
+
+
+def on_dem(model, xy: np.ndarray, grid) -> tuple[np.ndarray, np.ndarray]:
+    """Ground points ``(n, 3)`` where image points ``xy`` ``(n, 2)`` meet the DEM ``grid``, and
+    which did (bool ``(n,)``).
+
+    The footprint and the GSD need an intersection of each line of sight with the DEM, not
+    the first one :func:`~jaxgeo.models.localize_on_dem` marches to (hidden terrain decides no
+    border of a footprint): a bracketed root between the grid's lowest and highest heights, a
+    few dozen localisations of one compiled program (tracing the march took 3-8 s of every run,
+    compiling it a minute in the test suite). Traced once per shape across runs
+    (:mod:`jaxgeo._exported`); padded to ``BATCH`` points.
+    """
     xy = np.asarray(xy, dtype=float).reshape(-1, 2)
     n = len(xy)
-    size = BATCH if n <= BATCH else CHUNK  # two shapes at most: two compilations
-    gs, sts = [], []
-    for i in range(0, max(n, 1), size):
-        part = xy[i : i + size] if n else np.zeros((1, 2))
-        pad = np.concatenate([part, np.repeat(part[:1], size - len(part), axis=0)])
-        g, st = _on_dem(model, pad, grid)
-        gs.append(np.asarray(g)[: len(part)])
-        sts.append(np.asarray(st)[: len(part)])
-    return np.concatenate(gs)[:n], np.concatenate(sts)[:n]
+    z = np.asarray(grid.heights_m)
+    lo, hi = float(np.nanmin(z)) - 1.0, float(np.nanmax(z)) + 1.0
+    size = int(math.ceil(max(n, 1) / BATCH) * BATCH)
+    pad = np.concatenate([xy, np.repeat(xy[:1], size - n, axis=0)]) if n else np.zeros((size, 2))
+    bracket = np.asarray(lo), np.asarray(hi)  # arrays: the DEM's range is no part of the program
+    g, res = _exported.call(_on_dem_bracketed, model, pad, grid, *bracket)
+    g, res = np.asarray(g)[:n], np.asarray(res)[:n]
+    ok = np.isfinite(res) & (res < ON_DEM_TOL_M) & np.all(np.isfinite(g), axis=-1)
+    return g, ok
 
 
 @dataclasses.dataclass(frozen=True)
@@ -79,7 +127,9 @@ def rough_bounds(model, border_xy: np.ndarray, dh_m: float = 500.0, heights=None
     h0 = float(model.reference_ground()[2])
     pts = []
     for h in heights if heights is not None else (h0 - dh_m, h0, h0 + dh_m):
-        g = np.asarray(_at_height(model, border_xy, np.full(len(border_xy), float(h))))
+        g = np.asarray(
+            _exported.call(_at_height, model, border_xy, np.full(len(border_xy), float(h)))
+        )
         pts.append(g[:, :2])
     pts = np.concatenate(pts)
     if not np.all(np.isfinite(pts)):
@@ -111,7 +161,8 @@ def dem_for_image(model, dem, width: int, height: int, source: str = "image"):
 
     grid = dem.grid(clip(box))
     # second pass: the footprint at the DEM's own height range, which the first box may miss
-    lo, hi = (float(v) for v in grid.height_range())
+    z = np.asarray(grid.heights_m)
+    lo, hi = float(np.nanmin(z)), float(np.nanmax(z))
     box2, _ = rough_bounds(model, border, heights=(lo - 10.0, 0.5 * (lo + hi), hi + 10.0))
     if not (box2[0] >= box[0] and box2[1] >= box[1] and box2[2] <= box[2] and box2[3] <= box[3]):
         box = (min(box[0], box2[0]), min(box[1], box2[1]), max(box[2], box2[2]),
@@ -120,16 +171,37 @@ def dem_for_image(model, dem, width: int, height: int, source: str = "image"):
     return grid
 
 
-def footprint(model, grid, width: int, height: int) -> np.ndarray:
-    """``(m, 3)`` ground points of the image border on the DEM (those that meet it)."""
-    g, st = localize_on_dem_padded(model, border_pixels(width, height), grid)
-    ok = st == DEMStatus.OK
-    if ok.mean() < 0.5:
+def footprint(model, grid, width: int, height: int, source: str = "the DEM") -> np.ndarray:
+    """``(m, 3)`` ground points of the image border on the DEM.
+
+    Border points whose line of sight meets no DEM height (the DEM's nodata: a DSM's holes, its
+    area outside a stereo overlap) are placed at the DEM's median height, so that the product
+    still spans the whole image (nodata there), with a warning naming ``source``; a border
+    that meets the DEM nowhere is an error."""
+    border = border_pixels(width, height)
+    g, ok = on_dem(model, border, grid)
+    if ok.all():
+        return g
+    if not ok.any():
         raise ValueError(
-            f"only {100 * ok.mean():.0f}% of the image border meets the DEM: the DEM does not "
-            "cover the image footprint"
+            f"{source}: no point of the image border meets a DEM height: the DEM (or its valid "
+            "cells) does not cover the image footprint"
         )
-    return g[ok]
+    z = np.asarray(grid.heights_m)
+    h = float(np.nanmedian(z))
+    far = np.asarray(_exported.call(_at_height, model, border[~ok], np.full(int((~ok).sum()), h)))
+    if not np.all(np.isfinite(far)):
+        raise ValueError(f"{source}: the model cannot localise the image border")
+    warnings.warn(
+        f"{source}: {100 * (1 - ok.mean()):.0f}% of the image border falls where the DEM has "
+        f"no height ({100 * np.isnan(z).mean():.0f}% of its cells under the image are nodata): "
+        "the orthoimage is nodata there",
+        UserWarning,
+        stacklevel=2,
+    )
+    out = g.copy()
+    out[~ok] = far
+    return out
 
 
 def default_crs(lonlat: np.ndarray):
@@ -146,9 +218,10 @@ def ground_sample_distance(model, grid, crs, width: int, height: int) -> float:
 
     c = np.array([(width - 1) / 2, (height - 1) / 2])
     pts = np.stack([c, c + [1.0, 0.0], c + [0.0, 1.0]])
-    g, st = localize_on_dem_padded(model, pts, grid)
-    if not np.all(np.asarray(st) == DEMStatus.OK):
-        raise ValueError("the image centre does not meet the DEM: cannot derive the GSD")
+    g, ok = on_dem(model, pts, grid)
+    if not np.all(ok):  # a hole of the DEM under the centre: at its median height
+        h = float(np.nanmedian(np.asarray(grid.heights_m)))
+        g = np.asarray(_exported.call(_at_height, model, pts, np.full(len(pts), h)))
     tr = pyproj.Transformer.from_crs(4326, crs, always_xy=True)
     x, y = tr.transform(g[:, 0], g[:, 1])
     a = np.array([[x[1] - x[0], x[2] - x[0]], [y[1] - y[0], y[2] - y[0]]])

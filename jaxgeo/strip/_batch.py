@@ -4,13 +4,17 @@
 adjusts every draw in one jitted call (:func:`~._solve.two_level_batch`). A batch is
 the compiled call alone: the solver's robust loss acts, but nothing is removed (data snooping
 is a host-side loop around one strip, :func:`~._adjustment.adjust_strip`); the level-2 GCP
-weights are the result's (GCP measurements removed there stay out).
+weights are the result's (GCP measurements removed there stay out). With several local devices
+(on a CPU jaxgeo makes one per usable core: :mod:`jaxgeo._jaxconfig`) the draws are shared out
+over them (:func:`two_level_sharded`), each device adjusting its draws one after another on its
+own core.
 """
 
 from __future__ import annotations
 
 import time
 
+import equinox as eqx
 import jax
 import jax.numpy as jnp
 import numpy as np
@@ -66,7 +70,41 @@ def monte_carlo(
     evaluation (leading axis ``n_runs``)."""
     xy, gcp_xy, check_xy = monte_carlo_inputs(result, n_runs, noise_px, seed)
     c = result.config
-    return two_level_batch(
-        result.setup.problem, result.data, jnp.asarray(xy), jnp.asarray(gcp_xy),
-        jnp.asarray(check_xy), degree_index(c.level2.degree), c.solver,
+    return two_level_sharded(
+        result.setup.problem, result.data, xy, gcp_xy, check_xy, degree_index(c.level2.degree),
+        c.solver,
     )  # fmt: skip
+
+
+def two_level_sharded(problem, data, xy, gcp_xy, check_xy, degree, solver, *, shard=True):
+    """:func:`~._solve.two_level_batch` with the batch shared out over the local devices
+    (``shard_map`` over the first axis, padded with copies of the last item to a multiple of
+    their number; each device runs its items one after another): the same results as one
+    device. One device, one item, or ``shard=False``: :func:`~._solve.two_level_batch`."""
+    xy, gcp_xy, check_xy = (jnp.asarray(a, dtype=float) for a in (xy, gcp_xy, check_xy))
+    n = xy.shape[0]
+    devices = min(jax.local_device_count(), n) if shard else 1
+    if devices < 2:
+        return two_level_batch(problem, data, xy, gcp_xy, check_xy, degree, solver)
+    total = -(-n // devices) * devices
+    batch = tuple(
+        jnp.concatenate([a, jnp.repeat(a[-1:], total - n, 0)]) for a in (xy, gcp_xy, check_xy)
+    )
+    mesh = jax.sharding.Mesh(np.array(jax.local_devices()[:devices]), ("runs",))
+    out = _sharded(problem, data, batch, degree, solver, mesh)
+    return jax.tree.map(lambda a: a[:n], out)
+
+
+@eqx.filter_jit
+def _sharded(problem, data, batch, degree, solver, mesh):
+    fixed, static = eqx.partition((problem, data, degree), eqx.is_array)
+    spec, whole = jax.sharding.PartitionSpec("runs"), jax.sharding.PartitionSpec()
+
+    def run(fixed, xy, gcp_xy, check_xy):  # one device's items
+        p, d, g = eqx.combine(fixed, static)
+        return two_level_batch(p, d, xy, gcp_xy, check_xy, g, solver)
+
+    # check_vma off: the solver linearises inside, which the varying-axis types reject
+    return jax.shard_map(
+        run, mesh=mesh, in_specs=(whole, spec, spec, spec), out_specs=spec, check_vma=False
+    )(fixed, *batch)

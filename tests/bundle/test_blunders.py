@@ -4,15 +4,18 @@ The Ventoux block (conftest): 30 points in two images, 6 GCPs, 24 check points, 
 10 % of the image observations get 10-100 px gross errors in random directions (six draws,
 pooled). A gross error on a two-ray point is flagged with its point group (which of the two rays
 is wrong cannot be told); one along the epipolar line is not detectable at all (it only moves
-the point's height), which is why detection is asked for at 95 %, not 100 %.
+the point's height), which is why detection is asked for at 95 %, not 100 %. Two draws flag
+2 of the 6 GCP rays of one image (a gross error and one it spreads into, or two gross errors),
+more than snooping removes (max(1, 20 %)): they stay, flagged, and the warning names them.
 """
 
 import dataclasses
+import warnings
 
 import numpy as np
 import pytest
 
-from jaxgeo.bundle import adjust
+from jaxgeo.bundle import PoorFitWarning, adjust
 from jaxgeo.bundle._report import enu_errors
 from jaxgeo.geodesy import metres_per_unit
 from jaxgeo.lsq import SolverConfig
@@ -50,7 +53,11 @@ def runs(block):
     out = []
     for seed in SEEDS:
         obs, mask = _inject(block.obs, seed)
-        out.append((mask, adjust(block.models, obs, block.ground, bias="affine")))
+        with warnings.catch_warnings(record=True) as caught:
+            warnings.simplefilter("always")
+            r = adjust(block.models, obs, block.ground, bias="affine")
+        poor = [str(w.message) for w in caught if issubclass(w.category, PoorFitWarning)]
+        out.append((mask, r, poor))
     return out
 
 
@@ -68,8 +75,22 @@ def test_gross_errors_found_and_check_points_keep_clean_accuracy(block, clean, r
     role = dict(zip(block.ground.ids, block.ground.role, strict=True))
     pids = np.asarray(block.obs.point_ids)
     found = total = true_groups = groups = 0
-    for mask, r in runs:
+    limited = 0
+    for mask, r, poor in runs:
         assert r.converged and r.snooping_rounds >= 1
+        if poor:
+            # the draw put more gross errors on one image's GCP rays than snooping may remove
+            # (2 of its 6): declared, naming them, and told from a model that does not fit
+            limited += 1
+            (text,) = poor
+            assert "snooping would remove" in text and "more gross errors than" in text
+            assert "GCPs of image" in text and r.poor_fit == text
+            named = text.split("coordinates: ")[1].split(";")[0]
+            img = text.split("GCPs of image '")[1].split("'")[0]
+            pids = np.asarray(block.obs.point_ids)
+            images = np.asarray(block.obs.images)
+            named = named.replace("'", "").split(", ")  # flagged: a gross error among them
+            assert any(np.any(mask & (pids == p) & (images == img)) for p in named), named
         found += int(np.sum(r.blunders & mask))
         total += int(mask.sum())
         # flags of a point without ground control come as a point group; of a GCP, one by one
@@ -90,7 +111,9 @@ def test_gross_errors_found_and_check_points_keep_clean_accuracy(block, clean, r
         flagged = {p for p in pids[r.blunders] if role[p] == "check"}
         assert set(r.checks_excluded) == flagged
         assert r.report.n == sum(x == "check" for x in block.ground.role) - len(flagged)
-    print(f"flagged {found}/{total} gross errors, {true_groups}/{groups} flags true")
+    print(f"flagged {found}/{total} gross errors, {true_groups}/{groups} flags true, "
+          f"{limited} of {len(runs)} draws beyond snooping's limits")  # fmt: skip
+    assert limited <= 2
     assert found / total >= 0.95, (found, total)
     assert true_groups / groups >= 0.8, (true_groups, groups)
 

@@ -24,7 +24,9 @@ def test_help_documents_exit_codes(capsys):
         main(["adjust", "--help"])
     text = capsys.readouterr().out
     assert "exit status:" in text and "--keep-blunders" in text
-    assert all(f"\n  {k}  " in text for k in range(5))
+    assert all(f"\n    {k}  " in text for k in range(5))
+    # help text on every option
+    assert "\n  --quiet " in text and "-o DIR, --out DIR" in text and "--image-origin" in text
 
 
 @pytest.mark.skipif(os.geteuid() == 0, reason="root writes into read-only folders")
@@ -79,15 +81,15 @@ def test_existing_output_refused_before_computing(scene, tmp_path, capsys, monke
 
 
 def test_failed_write_keeps_the_report(scene, tmp_path, capsys, monkeypatch):
-    import jaxgeo.bundle._adjustment as adjustment
+    import jaxgeo.bundle._files as files
 
     def fail(*args, **kwargs):
         raise PermissionError("disk says no")
 
-    monkeypatch.setattr(adjustment, "write_outputs", fail)
+    monkeypatch.setattr(files, "write_outputs", fail)
     assert main(_args(scene, "--bias", "shift", "--out", str(tmp_path / "o"))) == 4
     cap = capsys.readouterr()
-    assert "RMS_E" in cap.out and "writing --out failed: disk says no" in cap.err
+    assert "RMS_E" in cap.out and "writing -o/--out failed: disk says no" in cap.err
 
 
 def test_gcp_a_kilometre_off_is_named(scene, capsys):

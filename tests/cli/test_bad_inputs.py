@@ -121,15 +121,7 @@ CASES = [
 ]  # fmt: skip
 
 
-# ortho's checks (CRS, resolution, bounds, size, outputs) move to cli._common with the tiled
-# ortho; until they land these rows are known gaps, not passes (strict: a fix makes them fail)
-ORTHO_PENDING = pytest.mark.xfail(
-    strict=True, reason="ortho's pre-flight checks not landed yet (issue 27, in progress)"
-)
-CASES = [
-    pytest.param(*case, marks=ORTHO_PENDING) if case[1][0] == "ortho" else pytest.param(*case)
-    for case in CASES
-]
+CASES = [pytest.param(*case) for case in CASES]
 
 
 @pytest.mark.parametrize("case, argv, status, words", CASES, ids=[c.values[0] for c in CASES])

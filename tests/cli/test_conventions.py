@@ -186,8 +186,10 @@ def test_dem_void_markers_are_nodata_with_a_warning(tmp_path):
 
 
 def test_dem_height_reference_is_described():
-    dem = read_dem(REAL / "ventoux" / "dem" / "N44E005_srtm90.tif",
-                   geoid=REAL / "ventoux" / "dem" / "egm96_15_crop_lon3-8_lat42-47.gtx")
+    dem = read_dem(
+        REAL / "ventoux" / "dem" / "N44E005_srtm90.tif",
+        geoid=REAL / "ventoux" / "dem" / "egm96_15_crop_lon3-8_lat42-47.gtx",
+    )
     assert "orthometric heights + egm96_15_crop_lon3-8_lat42-47.gtx" in dem.describe()
 
 

@@ -247,3 +247,31 @@ def test_gross_error_named_and_removed(strip_dir, adjusted, tmp_path, capsys):
     assert main(["strip", str(d)]) == 0
     text = capsys.readouterr().out
     assert f"level 1: {obs.point_ids[i]}@{obs.images[i]}" in text and "removed" in text
+
+
+def test_cli_conventions(strip_dir, tmp_path, capsys, monkeypatch):
+    """Issue 27: -o/--out, --quiet, --json, exit codes in --help, progress on stderr, the
+    report printed before a failed write (exit 4)."""
+    with pytest.raises(SystemExit):
+        main(["strip", "--help"])
+    text = capsys.readouterr().out
+    assert "exit status:" in text and all(f"\n    {k}  " in text for k in (0, 1, 2, 3, 4))
+    assert "-o DIR, --out DIR" in text and "--quiet" in text
+    out = tmp_path / "o"
+    assert main(["strip", str(strip_dir), "-o", str(out), *FAST]) == 0
+    err = capsys.readouterr().err
+    for stage in ("adjusting 6 sub-scenes", "refitting 6 RPCs and writing"):
+        assert f"jaxgeo strip: {stage}" in err, err
+    assert main(["strip", str(strip_dir), "--quiet", "--json"]) == 0
+    cap = capsys.readouterr()
+    assert "jaxgeo strip: adjusting" not in cap.err and json.loads(cap.out)["exit_status"] == 0
+
+    import jaxgeo.strip
+
+    def fail(*args, **kwargs):
+        raise PermissionError("disk says no")
+
+    monkeypatch.setattr(jaxgeo.strip, "write_strip_outputs", fail)
+    assert main(["strip", str(strip_dir), "-o", str(tmp_path / "o2"), "--quiet", *FAST]) == 4
+    cap = capsys.readouterr()
+    assert "whole strip, level2" in cap.out and "writing -o/--out failed: disk says no" in cap.err

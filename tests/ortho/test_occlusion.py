@@ -6,7 +6,7 @@ import pytest
 import rasterio
 
 import jaxgeo
-from jaxgeo.io import read_dem
+from jaxgeo.io import SensorImage, read_dem
 from jaxgeo.models import DEMGrid, DEMStatus, localize_on_dem
 from jaxgeo.ortho import orthorectify
 from jaxgeo.ortho._occlusion import occluded_pixels
@@ -42,7 +42,10 @@ def ridge(tmp_path_factory, real_data):
 def test_ridge_hides_terrain_behind_it(ridge, tmp_path, real_data):
     rpc, g0, look, dem, _ = ridge
     out = tmp_path / "ortho.tif"
-    rep = orthorectify(real_data / PLEIADES_TIF, rpc, dem, out, occlusion="band", progress=False)
+    # the crop's file carries a flipped pixel-space geotransform open_image refuses: the image
+    # is given with its RPC in its own pixel frame
+    image = SensorImage("crop", rpc, (0.0, 0.0), real_data / PLEIADES_TIF, (128, 128), None, rpc)
+    rep = orthorectify(image, None, dem, out, occlusion="band", progress=False)
     assert rep.occluded_fraction > 0.01
     with rasterio.open(out) as ds:
         mask = ds.read(ds.count)

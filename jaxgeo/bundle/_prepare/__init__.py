@@ -21,6 +21,7 @@ from ...lsq import GroundObs, ImageObs, ModelGroup, Problem, make_structure
 from .._errors import AdjustmentError
 from .checks import (
     Sources,
+    check_distinct,
     check_domains,
     check_duplicates,
     check_ground,
@@ -94,12 +95,16 @@ def prepare(
     sources: Sources | None = None,
     tie_height: Callable[[np.ndarray], np.ndarray] | None = None,
     tie_height_sigma_m: float = 10.0,
+    image_domains: Mapping[str, Any] | None = None,
 ) -> Prepared:
     """Check the input and build the array problem (arguments as :func:`jaxgeo.adjust`;
     ``check_control``: check every image's GCP count against its adjustable parameters;
     ``sources``: the files and lines of the tables, named in messages; ``tie_height``: heights
     ``f(lonlat (n, 2)) -> (n,)`` (m), e.g. a :class:`~jaxgeo.io.DEM`, given to every tie
-    point as a height observation of sigma ``tie_height_sigma_m``)."""
+    point as a height observation of sigma ``tie_height_sigma_m``; ``image_domains``: image
+    name -> ``(x_min, y_min, x_max, y_max)`` px of its raster, bounding its measurements, e.g.
+    :meth:`jaxgeo.io.SensorImage.domain`; images without one are bounded by their RPC's image
+    domain)."""
     src = sources if sources is not None else Sources()
     image_of = check_models(models)
     ground = (
@@ -155,7 +160,8 @@ def prepare(
         name: groups[g].image_model(groups[g].block_at(groups[g].theta0, k), slot)
         for name, (g, k, slot) in image_index.items()
     }
-    check_domains(image_models, obs, ground, lonlath, src)
+    check_distinct(image_models)
+    check_domains(image_models, obs, ground, lonlath, src, image_domains)
     origin = initial_points(
         point_ids, role, initial, lonlath, gindex, obs, xy, sig_px, image_models
     )

@@ -174,7 +174,11 @@ DOMAIN_TOLERANCE = 1.5
 """A ground point whose normalised RPC coordinate exceeds this (1 = the edge of the validity
 cube) is refused: RPCs extrapolate wildly outside their fitting cube."""
 IMAGE_MARGIN = 0.02
-"""Image measurements may lie this fraction of the image size (plus one pixel) outside it."""
+"""Without the image's size, measurements may lie this fraction of the RPC's image domain
+(offset +- scale, plus one pixel) outside it."""
+RASTER_MARGIN_PX = 0.5
+"""With the image's size (its raster), measurements may lie this far (px) beyond the outer
+pixel edges (``-0.5 .. width - 0.5``): sub-pixel measurements on the border."""
 
 
 @dataclasses.dataclass(frozen=True)
@@ -223,33 +227,58 @@ def check_duplicates(obs: Observations, ground: GroundPoints, src: Sources = Sou
         seen[pid] = i
 
 
+def _image_box(rpc, domain):
+    """``(lo (2,), hi (2,), margin (2,), what)`` of the measurements allowed in an image: its
+    raster's extent (``domain``, :meth:`jaxgeo.io.SensorImage.domain`) when known, else its
+    RPC's image domain; ``None`` without either."""
+    if domain is not None:
+        x0, y0, x1, y1 = (float(v) for v in domain)
+        lo, hi = np.array([x0, y0]), np.array([x1, y1])
+        if np.all(np.isfinite(lo)) and np.all(np.isfinite(hi)):
+            w, h = hi - lo
+            return lo, hi, np.full(2, RASTER_MARGIN_PX), f"its raster, {w:.0f} x {h:.0f} px"
+    if rpc is None:
+        return None
+    ioff, iscale = np.asarray(rpc.image_offset, float), np.abs(np.asarray(rpc.image_scale, float))
+    what = "from its RPC's image offset +- scale; give the image raster to check its size"
+    return ioff - iscale, ioff + iscale, iscale * IMAGE_MARGIN + 1.0, what
+
+
 def check_domains(
     image_models: Mapping[str, Any],
     obs: Observations,
     ground: GroundPoints,
     lonlath: np.ndarray,
     src: Sources = Sources(),
+    domains: Mapping[str, Sequence[float]] | None = None,
 ) -> None:
     """Ground points (GCPs, check points) measured in an image lie inside (within
-    ``DOMAIN_TOLERANCE``) the validity cube of its RPC, and every measurement inside the image
-    (``IMAGE_MARGIN``); the messages say by how much."""
+    ``DOMAIN_TOLERANCE``) the validity cube of its RPC, and every measurement inside the image:
+    its raster's extent when ``domains`` gives it (``(x_min, y_min, x_max, y_max)`` px per
+    image name, within ``RASTER_MARGIN_PX``), else the RPC's image domain (within
+    ``IMAGE_MARGIN``); the messages say by how much."""
+    domains = dict(domains or {})
     gindex = {pid: i for i, pid in enumerate(ground.ids)}
     frames = {name: m.base_rpc() for name, m in image_models.items()}
+    boxes = {name: _image_box(frames[name], domains.get(name)) for name in image_models}
     axes = (("longitude", "deg"), ("latitude", "deg"), ("height", "m"))
     # vectorised per image; the messages below for the (few) observations at fault
     xy = np.asarray(obs.xy, dtype=float).reshape(-1, 2)
     names = np.asarray(obs.images, dtype=object)
     gk = np.array([gindex.get(p, -1) for p in obs.point_ids], dtype=np.int64)
     suspect = np.zeros(len(names), dtype=bool)
-    for name, rpc in frames.items():
-        sel = np.flatnonzero(names == name) if rpc is not None else np.zeros(0, int)
+    for name in image_models:
+        sel = np.flatnonzero(names == name)
         if sel.size == 0:
             continue
-        ioff, iscale = np.asarray(rpc.image_offset, float), np.asarray(rpc.image_scale, float)
-        beyond = np.abs(xy[sel] - ioff) - iscale * (1.0 + IMAGE_MARGIN) - 1.0
-        bad = np.any(beyond > 0, axis=1)
+        bad = np.zeros(sel.size, dtype=bool)
+        box = boxes[name]
+        if box is not None:
+            lo, hi, margin, _ = box
+            bad |= np.any((xy[sel] < lo - margin) | (xy[sel] > hi + margin), axis=1)
+        rpc = frames[name]
         has_g = gk[sel] >= 0
-        if np.any(has_g):
+        if rpc is not None and np.any(has_g):
             goff = np.asarray(rpc.ground_offset, float)
             gscale = np.asarray(rpc.ground_scale, float)
             norm = np.abs(lonlath[gk[sel][has_g]] - goff) / gscale
@@ -257,21 +286,20 @@ def check_domains(
         suspect[sel[bad]] = True
     for i in np.flatnonzero(suspect).tolist():
         pid, img = obs.point_ids[i], obs.images[i]
+        box = boxes.get(img)
+        if box is not None:
+            lo, hi, margin, what = box
+            beyond = np.maximum(lo - obs.xy[i], obs.xy[i] - hi)
+            if np.any(beyond > margin):
+                role = ground.role[gindex[pid]] if pid in gindex else "tie"
+                raise AdjustmentError(
+                    f"{src.obs(i)}: point {pid!r} ({role}) at x, y = {obs.xy[i].tolist()} lies "
+                    f"{float(np.max(beyond)):.0f} px outside image {img!r} (x {lo[0]:.1f}.."
+                    f"{hi[0]:.1f}, y {lo[1]:.1f}..{hi[1]:.1f} px: {what})"
+                )
         rpc = frames.get(img)
-        if rpc is None:
-            continue
-        ioff, iscale = np.asarray(rpc.image_offset, float), np.asarray(rpc.image_scale, float)
-        beyond = np.abs(obs.xy[i] - ioff) - iscale * (1.0 + IMAGE_MARGIN) - 1.0
-        if np.any(beyond > 0):
-            lo, hi = ioff - iscale, ioff + iscale
-            out = float(np.max(np.abs(obs.xy[i] - ioff) - iscale))
-            raise AdjustmentError(
-                f"{src.obs(i)}: point {pid!r} at x, y = {obs.xy[i].tolist()} lies {out:.0f} px "
-                f"outside image {img!r} (x {lo[0]:.0f}..{hi[0]:.0f}, y {lo[1]:.0f}..{hi[1]:.0f} px "
-                "from its RPC)"
-            )
         k = gindex.get(pid)
-        if k is None:
+        if k is None or rpc is None:
             continue
         goff, gscale = np.asarray(rpc.ground_offset, float), np.asarray(rpc.ground_scale, float)
         norm = np.abs(lonlath[k] - goff) / gscale
@@ -285,3 +313,21 @@ def check_domains(
                 f"{unit} beyond {goff[a] - gscale[a]:.6g}..{goff[a] + gscale[a]:.6g} {unit} "
                 "(check its coordinates, or the image it is measured in)"
             )
+
+
+def check_distinct(image_models: Mapping[str, Any]) -> None:
+    """No two images have the same RPC (the same file given for two images, or a model given
+    for the wrong image): their rays would be parallel."""
+    seen: dict[bytes, str] = {}
+    for name, model in image_models.items():
+        rpc = model.base_rpc()
+        if rpc is None:
+            continue
+        leaves = (rpc.num, rpc.den, rpc.ground_offset, rpc.image_offset)
+        key = b"".join(np.asarray(leaf, float).tobytes() for leaf in leaves)
+        if key in seen:
+            raise AdjustmentError(
+                f"images {seen[key]!r} and {name!r} have the same RPC: one of them is given the "
+                "other's model (check which model file goes with which image)"
+            )
+        seen[key] = name

@@ -1,0 +1,290 @@
+"""Adjusting files: images, OBS/GROUND tables and a DEM in, a :class:`FileAdjustment` out.
+
+An image is a raster (its RPC in its tags or an ``.RPB``/``_RPC.TXT`` sidecar, or a separate
+model file) or a model file alone (:func:`jaxgeo.io.open_image`). With a raster, its measurements
+are checked against its size and its model works in its pixel frame (a crop's pixel-space
+geotransform, or an origin given, folded in); with a model file alone, against the RPC's image
+domain. The adjusted RPCs written (:meth:`FileAdjustment.write`) refer to the pixels of the
+raster given (GDAL's convention for that raster), or to the model file's frame without one.
+
+Without any GCP the block is a relative orientation: unless bias priors are given, the biases
+get :data:`RELATIVE_PRIOR_SHIFT_PX` and :data:`RELATIVE_PRIOR_MATRIX` (a note says so), which
+hold what the ties leave open (the block's position, the along-track parallax) near the given
+models.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import os
+import pathlib
+from collections.abc import Callable, Mapping, Sequence
+from typing import Any
+
+import numpy as np
+
+from ..io import (
+    DEM,
+    SensorImage,
+    detect_rpc_format,
+    open_image,
+    read_ground,
+    read_observations,
+    table_lines,
+)
+from ..lsq import DEFAULT_SOLVER, SolverConfig
+from ._adjustment import (
+    BIAS_CHOICES,
+    DEFAULT_JITTER,
+    JitterSettings,
+    adjust,
+    bias_prior_sigma,
+    with_bias,
+)
+from ._export import write_outputs
+from ._prepare.checks import Sources
+from ._report import AccuracyReport, direct_georeferencing, format_reports
+from ._result import AdjustResult
+
+RELATIVE_PRIOR_SHIFT_PX = 10.0
+"""Prior sigma (px) of the bias shifts when no GCP is given and no prior either: the given
+models' pointing (a few px for current sensors) holds the block's position."""
+RELATIVE_PRIOR_MATRIX = 1e-4
+"""Prior sigma (px/px) of the bias drift or affine terms in the same case."""
+
+
+def image_inputs(image: SensorImage) -> tuple[pathlib.Path, ...]:
+    """The files ``image`` was (or may have been) read from: its raster, its model file, and
+    the RPC sidecars GDAL reads beside the raster (``<stem>.RPB``, ``<stem>_RPC.TXT``)."""
+    found = list(image.inputs)
+    if image.path is not None:
+        stem = image.path.with_suffix("")
+        for suffix in (".RPB", ".rpb", "_RPC.TXT", "_rpc.txt"):
+            side = stem.parent / (stem.name + suffix)
+            if side.is_file():
+                found.append(side)
+    return tuple(dict.fromkeys(found))
+
+
+def sensor_image(name: str, source: str | os.PathLike | SensorImage) -> SensorImage:
+    """The :class:`~jaxgeo.io.SensorImage` of ``source``: itself, a raster (with its own model),
+    or a model file alone (any format :func:`jaxgeo.io.read_rpc` reads)."""
+    if isinstance(source, SensorImage):
+        return source
+    path = pathlib.Path(source)
+    if detect_rpc_format(path) == "raster":
+        return open_image(path, name=name)
+    return open_image(model=path, name=name)
+
+
+@dataclasses.dataclass(frozen=True)
+class FileAdjustment:
+    """An adjustment of files (:func:`adjust_files`): the result, direct georeferencing with the
+    given models (``None`` without ground points or with one image), what was read (``inputs``,
+    ``images``: name -> :class:`~jaxgeo.io.SensorImage`) and ``notes`` on what was assumed
+    (e.g. the priors of a relative orientation)."""
+
+    result: AdjustResult
+    direct: AccuracyReport | None
+    bias: str
+    inputs: tuple[pathlib.Path, ...]
+    images: Mapping[str, SensorImage] = dataclasses.field(default_factory=dict)
+    notes: tuple[str, ...] = ()
+
+    def rpc_sources(self) -> dict[str, pathlib.Path]:
+        """Image name -> the file its adjusted RPC is named and placed after: the raster when
+        one was given, else the model file."""
+        return {name: img.path or img.model_path for name, img in self.images.items()}
+
+    def summary(self) -> dict[str, Any]:
+        """JSON-ready: s0, redundancy, convergence, check points, per image RMS and parameters
+        with sigmas, blunders, and the direct-georeferencing report."""
+        result, direct = self.result, self.direct
+        rep = result.report.to_dict() if result.report is not None else None
+        rep_all = result.report_all.to_dict() if result.report_all is not None else None
+        empty = {"n": 0, "rms_m": [None] * 3, "min_m": [None] * 3, "max_m": [None] * 3}
+        images = {}
+        for name in result.models:
+            rms = rep["images"].get(name, {}).get("rms_px", [None, None]) if rep else [None] * 2
+            own = result.parameters(name)
+            img = self.images.get(name)
+            images[name] = {
+                "file": str(img.path or img.model_path) if img is not None else None,
+                "size_px": list(img.size) if img is not None and img.size else None,
+                "origin_px": list(img.origin) if img is not None else [0.0, 0.0],
+                "rms_px": rms,
+                "params": {k: v for k, (v, _) in own.items()},
+                "sigmas": {k: s for k, (_, s) in own.items()},
+            }
+        blunders = [
+            {"id": p, "image": img, "w": [float(x) for x in w]}
+            for p, img, w, b in zip(
+                result.observation_ids,
+                result.observation_images,
+                result.standardized,
+                result.blunders,
+                strict=True,
+            )
+            if b
+        ]
+        return {
+            "bias": self.bias,
+            "s0": result.s0 if result.s0 == result.s0 else None,
+            "redundancy": result.redundancy,
+            "converged": result.converged,
+            "message": result.message,
+            "num_steps": result.num_steps,
+            "poor_fit": result.poor_fit or None,
+            "checkpoints": rep["checkpoints"] if rep else empty,
+            "checkpoints_all": rep_all["checkpoints"] if rep_all else empty,
+            "images": images,
+            "blunders": blunders,
+            "removed": int(result.removed.sum()) if result.removed is not None else 0,
+            "gcp_flagged": [
+                {"id": p, "w": w, "removed": p in result.gcp_removed}
+                for p, w in zip(result.gcp_flagged, result.gcp_w, strict=True)
+            ],
+            "checks_excluded": list(result.checks_excluded),
+            "snooping_rounds": result.snooping_rounds,
+            "direct": direct.to_dict() if direct is not None else None,
+            "notes": list(self.notes),
+        }
+
+    def format(self) -> str:
+        """The text report: status, tables 3-4 of 000_ side by side, parameters, blunders."""
+        result = self.result
+        lines = [
+            f"bundle adjustment ({self.bias} bias): {result.message} in {result.num_steps} "
+            f"steps, s0 = {result.s0:.3f}, redundancy {result.redundancy}"
+        ]
+        if not result.converged:
+            lines.append("NOT CONVERGED: the figures below are those of the last state")
+        lines += [f"note: {n}" for n in self.notes]
+        if result.poor_fit:
+            lines.append("POOR FIT: the observations do not fit the models (see the warning)")
+        reports = [r for r in (self.direct, result.report) if r is not None]
+        if result.report_all is not None and result.report_all is not result.report:
+            reports.append(result.report_all)  # the flagged check points too
+        if reports:
+            lines += ["", format_reports(reports)]
+        lines += ["", "adjusted parameters (a posteriori sigma):"]
+        for name, value, sigma in zip(
+            result.param_names, result.params, result.param_sigma, strict=True
+        ):
+            lines.append(f"  {name:<32} {value: .6g} +- {sigma:.2g}")
+        flagged = [
+            f"{p}@{img}"
+            for p, img, b in zip(
+                result.observation_ids, result.observation_images, result.blunders, strict=True
+            )
+            if b
+        ]
+        if flagged:
+            gone = result.removed if result.removed is not None else np.zeros(len(flagged))
+            what = "gross errors removed" if np.any(gone) else "possible gross errors (|w| > k)"
+            lines.append(f"{what} ({len(flagged)} observations): {', '.join(flagged)}")
+        for p, w in zip(result.gcp_flagged, result.gcp_w, strict=True):
+            j = result.gcp_ids.index(p)
+            off = np.linalg.norm(np.nan_to_num(result.ground_residuals_m[j]))
+            how = "removed (adjusted as a tie point)" if p in result.gcp_removed else "flagged"
+            lines.append(
+                f"GCP {p!r}: ground coordinates {off:.1f} m from the adjusted point "
+                f"(w = {w:.1f}): {how}"
+            )
+        if result.checks_excluded:
+            lines.append(
+                f"check points with a flagged observation (in 'adjusted, all checks' only): "
+                f"{len(result.checks_excluded)} ({', '.join(result.checks_excluded[:20])}"
+                + (" ..." if len(result.checks_excluded) > 20 else "")
+                + ")"
+            )
+        return "\n".join(lines)
+
+    def write(
+        self, out_dir: str | os.PathLike, overwrite: bool = False, **rpc_options
+    ) -> list[pathlib.Path]:
+        """Write the adjusted models, points, residuals and report (never over an input, nor
+        over an existing file unless ``overwrite``); returns the paths written. ``rpc_options``:
+        ``rpc_format``, ``copy_images``, ``write_into`` of :func:`~._export.write_outputs`
+        (``images`` defaults to :meth:`rpc_sources`). An image given as a raster gets an RPC in
+        the raster's pixels (its pixel frame folded in): the RPC GDAL needs for that raster."""
+        if self.images:
+            rpc_options.setdefault("images", self.rpc_sources())
+        return write_outputs(
+            out_dir, self.result, self.format(), self.summary(), self.inputs, overwrite=overwrite,
+            **rpc_options,
+        )  # fmt: skip
+
+
+def adjust_files(
+    images: Mapping[str, str | os.PathLike | SensorImage],
+    observations: str | os.PathLike,
+    ground: str | os.PathLike | None = None,
+    *,
+    bias: str = "affine",
+    solver: SolverConfig = DEFAULT_SOLVER,
+    bias_prior_shift_px: float | None = None,
+    bias_prior_matrix: float | None = None,
+    direct_roles: Sequence[str] = ("gcp", "check"),
+    dem: Any = None,
+    tie_height_sigma_m: float = 10.0,
+    progress: Callable[[str], None] | None = None,
+    jitter: JitterSettings = DEFAULT_JITTER,
+) -> FileAdjustment:
+    """Read the images (name -> raster, model file or :class:`~jaxgeo.io.SensorImage`, see the
+    module docstring), OBS.csv and GROUND.csv, adjust with an image bias per image (a name of
+    :data:`BIAS_CHOICES`; optional priors on it, :func:`bias_prior_sigma`; tie heights from
+    ``dem``, a :class:`~jaxgeo.io.DEM`, with sigma ``tie_height_sigma_m``), and intersect the
+    ``direct_roles`` points with the given models for comparison (tables 3 and 4 of 000_).
+    ``progress``: called with a line of text at each stage; ``jitter``: the spline of
+    ``bias="jitter"`` (over each image's lines)."""
+    if bias not in BIAS_CHOICES:
+        raise ValueError(f"unknown bias {bias!r}; expected one of {', '.join(BIAS_CHOICES)}")
+    opened = {name: sensor_image(name, source) for name, source in images.items()}
+    models = {name: img.model for name, img in opened.items()}
+    domains = {name: img.domain() for name, img in opened.items() if img.size is not None}
+    obs = read_observations(observations)
+    points = read_ground(ground) if ground is not None else None
+    sources = Sources(
+        str(observations),
+        table_lines(observations),
+        str(ground) if ground is not None else None,
+        table_lines(ground) if ground is not None else (),
+    )
+    if bias != "none":
+        models = with_bias(models, bias, {n: img.domain() for n, img in opened.items()}, jitter)
+    notes = []
+    measured = set(obs.point_ids)
+    gcps = [] if points is None else [
+        p for p, r in zip(points.ids, points.role, strict=True) if r == "gcp" and p in measured
+    ]  # fmt: skip
+    if not gcps and bias != "none" and bias_prior_shift_px is None and bias_prior_matrix is None:
+        bias_prior_shift_px, bias_prior_matrix = RELATIVE_PRIOR_SHIFT_PX, RELATIVE_PRIOR_MATRIX
+        notes.append(
+            f"no GCP: a relative orientation; the image biases are held near the given models "
+            f"by priors of {bias_prior_shift_px:g} px (shift) and {bias_prior_matrix:g} px/px "
+            "(other terms) (--bias-prior-shift-px, --bias-prior-matrix), so the block keeps "
+            "the given models' absolute position"
+        )
+    for name, img in opened.items():
+        if img.path is not None and img.origin != (0.0, 0.0):
+            notes.append(
+                f"image {name!r} is a crop at model pixel {img.origin[0]:g}, {img.origin[1]:g} "
+                "of its product: its measurements and adjusted RPC are in the crop's pixels"
+            )
+    prior = bias_prior_sigma(models, bias_prior_shift_px, bias_prior_matrix)
+    result = adjust(
+        models, obs, points, prior_sigma=prior, solver=solver, sources=sources, tie_height=dem,
+        tie_height_sigma_m=tie_height_sigma_m, image_domains=domains, progress=progress,
+    )  # fmt: skip
+    direct = None
+    if points is not None and len(models) >= 2:
+        if progress is not None:
+            progress("direct georeferencing: intersecting the control points with the given models")
+        direct = direct_georeferencing(models, obs, points, roles=tuple(direct_roles))
+    inputs = [p for img in opened.values() for p in image_inputs(img)]
+    inputs += [observations] + ([ground] if ground is not None else [])
+    inputs += [dem.path] if isinstance(dem, DEM) else []
+    return FileAdjustment(
+        result, direct, bias, tuple(pathlib.Path(p) for p in inputs), opened, tuple(notes)
+    )

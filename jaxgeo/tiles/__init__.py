@@ -1,0 +1,37 @@
+"""Whole scenes tile by tile: a plan of tiles, a runner over dask.distributed, a COG mosaic.
+
+    plan = plan_tiles("ortho", width, height, tile_px=1024, job={...})
+    run = run_tiles(plan, work, folder, workers=None)    # work(tile, path) -> stats | None
+    mosaic_cog(run, plan, spec, "product.tif")
+
+Generic over what a tile produces: the orthoimage (:mod:`jaxgeo.ortho`) runs on it with its own
+per-tile function (:class:`jaxgeo.ortho.OrthoJob`); other raster products can do the same. By
+default the tiles of a large product run on an embedded dask LocalCluster of spawned worker
+processes, one per core, and a small product's in this process; ``scheduler=`` names an
+existing dask cluster (:mod:`._runner` says how to start one).
+"""
+
+from ._mosaic import COMPRESSIONS as COMPRESSIONS
+from ._mosaic import RasterSpec as RasterSpec
+from ._mosaic import mosaic_cog as mosaic_cog
+from ._mosaic import overview_factors as overview_factors
+from ._mosaic import write_tile as write_tile
+from ._plan import PLAN_FORMAT as PLAN_FORMAT
+from ._plan import PlanError as PlanError
+from ._plan import Tile as Tile
+from ._plan import TilePlan as TilePlan
+from ._plan import plan_tiles as plan_tiles
+from ._plan import read_plan as read_plan
+from ._plan import write_plan as write_plan
+from ._runner import DEFAULT_RETRIES as DEFAULT_RETRIES
+from ._runner import IN_PROCESS_MAX_PX as IN_PROCESS_MAX_PX
+from ._runner import NoData as NoData
+from ._runner import TileError as TileError
+from ._runner import TileResult as TileResult
+from ._runner import TileRun as TileRun
+from ._runner import WorkerPool as WorkerPool
+from ._runner import cores as cores
+from ._runner import prepare_folder as prepare_folder
+from ._runner import resolve_workers as resolve_workers
+from ._runner import run_one_tile as run_one_tile
+from ._runner import run_tiles as run_tiles
