@@ -16,6 +16,7 @@ from typing import Any
 
 import jax
 import numpy as np
+import scipy.sparse
 
 from ..io import (
     atomic_write_text,
@@ -107,7 +108,8 @@ def _leaves(tree) -> dict[str, Any]:
 
 def models_json(result) -> dict[str, Any]:
     """JSON-ready adjusted models: per image the RPC (vendor names) and bias, or the parameters,
-    with a posteriori sigmas of every adjusted parameter."""
+    with a posteriori sigmas of every adjusted parameter; the biases' joint covariance
+    (:func:`bias_covariance`) under ``"covariance"``."""
     images = {}
     delivered = delivered_rpcs(result)
     for name, model in result.models.items():
@@ -121,7 +123,33 @@ def models_json(result) -> dict[str, Any]:
         if isinstance(model, Biased):  # the correction on its own, with its kind
             entry["bias"] = {"kind": type(model.bias).__name__, **_leaves(model.bias)}
         images[name] = entry
-    return {"images": images}
+    out: dict[str, Any] = {"images": images}
+    joint = bias_covariance(result)
+    if joint is not None:
+        out["covariance"] = joint
+    return out
+
+
+JOINT_LEAVES = (".bias.shift_px[", ".bias.matrix[", ".bias.drift[")
+"""The bias parameters whose joint covariance :func:`models_json` writes (not a jitter's
+knots: a spline of a long image has hundreds)."""
+
+
+def bias_covariance(result) -> dict[str, Any] | None:
+    """The joint a posteriori covariance of every image's bias shift and matrix/drift terms,
+    correlations between images included (px^2, px^2/px, ...): ``{"parameters": [names],
+    "matrix": [[...]]}`` with the names of ``result.param_names`` (``left.bias.shift_px[0]``);
+    ``None`` without a bias. What ``jaxgeo dsm --orientation`` propagates to its heights."""
+    names = [n for n in result.param_names if any(leaf in n for leaf in JOINT_LEAVES)]
+    if not names:
+        return None
+    idx = [result.param_names.index(n) for n in names]
+    cov = result.param_cov
+    if scipy.sparse.issparse(cov):  # a banded problem: within the band only
+        sub = cov[idx][:, idx].toarray()
+    else:
+        sub = np.asarray(cov)[np.ix_(idx, idx)]
+    return {"parameters": names, "matrix": [[float(v) for v in row] for row in sub]}
 
 
 FIXED_OUTPUTS = (
@@ -381,6 +409,7 @@ def _place_rpcs(result, images, out, rpc_format, copy_images, write_into, report
 
 __all__ = [
     "adjusted_rpc",
+    "bias_covariance",
     "check_out_dir",
     "delivered_rpcs",
     "format_reports",

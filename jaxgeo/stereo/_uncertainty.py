@@ -13,9 +13,9 @@ Then
 - orientation: ``sigma_orient**2 = G_up C G_up^T`` with ``C`` the ``(2N, 2N)`` covariance
   (px^2) of the images' remaining shifts: an adjustment's posterior, from its result
   (:func:`adjustment_covariance`) or its ``adjusted_models.json``
-  (:func:`orientation_covariances`; per-image sigmas only, unless the file holds the joint
-  covariance, overstate the sigma where the adjustment correlates the images); zero when
-  unknown.
+  (:func:`orientation_covariances`: the joint covariance ``jaxgeo adjust`` writes; a file
+  with per-image sigmas only overstates the sigma where the adjustment correlates the
+  images); zero when unknown.
 
 **Cells** (:func:`cell_sigma`). A cell's height is the median of its ``n`` points. The matching
 errors of neighbouring points are not independent (their correlation windows overlap by most
@@ -84,7 +84,7 @@ def pair_orientation(orientation: Orientation, n_models: int, i: int, j: int) ->
 def adjustment_covariance(result, images: Sequence[str]) -> np.ndarray:
     """The ``(2N, 2N)`` posterior covariance (px^2) of the bias shifts of ``images`` (names in
     the adjustment) from a :class:`jaxgeo.bundle.AdjustResult`, with the correlations between
-    images (which ``adjusted_models.json`` does not hold). :class:`OrientationError` when an
+    images (as ``adjusted_models.json`` holds it). :class:`OrientationError` when an
     image has no adjusted shift."""
     names = list(result.param_names)
     idx = []

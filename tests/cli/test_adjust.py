@@ -66,6 +66,22 @@ def test_adjust_json_and_outputs(scene, tmp_path, capsys):
     np.testing.assert_allclose(
         np.asarray(folded.project(g)), np.asarray(vendor.project(g)) - shift, atol=1e-6
     )
+    # the biases' joint covariance, what `jaxgeo dsm --orientation` propagates: its diagonal
+    # the sigmas written per image, and the shifts of the two images correlated (shared GCPs)
+    joint = json.loads((out / "adjusted_models.json").read_text())["covariance"]
+    cov = np.asarray(joint["matrix"])
+    for i, name in enumerate(joint["parameters"]):
+        image, leaf = name.split(".", 1)
+        assert np.isclose(np.sqrt(cov[i, i]), models[image]["sigmas"]["." + leaf], rtol=1e-9)
+    sx = [joint["parameters"].index(f"{n}.bias.shift_px[0]") for n in ("fore", "aft")]
+    assert abs(cov[sx[0], sx[1]]) > 0.1 * np.sqrt(cov[sx[0], sx[0]] * cov[sx[1], sx[1]])
+    from jaxgeo.stereo import orientation_covariances
+
+    np.testing.assert_allclose(
+        orientation_covariances(out / "adjusted_models.json", ["fore", "aft"]),
+        cov[np.ix_(*[[joint["parameters"].index(f"{n}.bias.shift_px[{k}]")
+                      for n in ("fore", "aft") for k in (0, 1)]] * 2)],
+    )  # fmt: skip
     # never over existing outputs, never over the inputs
     assert main(_args(scene, "--bias", "shift", "--out", str(out))) == 2
     assert "exists" in capsys.readouterr().err
