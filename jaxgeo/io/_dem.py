@@ -293,11 +293,15 @@ def _warn_implausible(path: pathlib.Path, max_cells: int = 4_000_000) -> None:
     void marker such as -32768. They are read as nodata. Large rasters are checked on a
     decimated read."""
     import rasterio
+    from rasterio.errors import RasterioError
 
-    with rasterio.open(path) as src:
-        scale = max(1, math.ceil(math.sqrt(src.width * src.height / max_cells)))
-        shape = (max(src.height // scale, 1), max(src.width // scale, 1))
-        band = src.read(1, out_shape=shape, masked=True)
+    try:
+        with rasterio.open(path) as src:
+            scale = max(1, math.ceil(math.sqrt(src.width * src.height / max_cells)))
+            shape = (max(src.height // scale, 1), max(src.width // scale, 1))
+            band = src.read(1, out_shape=shape, masked=True)
+    except RasterioError as err:  # a truncated or corrupt file: refused when opened
+        raise ValueError(f"{path}: cannot read the DEM's heights ({err})") from None
     z = np.ma.getdata(band).astype(float)
     bad = implausible(z) & ~np.ma.getmaskarray(band) & np.isfinite(z)
     if bad.any():
