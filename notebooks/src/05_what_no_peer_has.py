@@ -217,22 +217,22 @@ fig.tight_layout()
 plt.show()
 
 # %% [markdown]
-# The truth spreads at each line because the two images see a ground point at different lines:
-# the difference of two waves of one period, sampled at a parallax that changes with the
-# terrain's height. The spline follows it to 0.09 px RMS; the affine bias leaves almost all of
-# it (0.68 px of the truth's 0.69 px RMS). The same study on rendered images with SIFT tie points is
-# `benchmarks/accuracy/jitter.py`; `jaxgeo adjust --bias jitter` writes each image's RPC (the
-# affine part) and `<image>_jitter.csv`, the correction along the lines.
+# The truth spreads at each line because the two images see a ground point at different lines: the
+# difference of two waves of one period, sampled at a parallax that changes with the terrain's
+# height. The spline follows it to 0.09 px RMS; the affine bias leaves almost all of it (0.68 px of
+# the truth's 0.69 px RMS). The same study on rendered images with SIFT tie points is
+# `benchmarks/accuracy/jitter.py`; `jaxgeo adjust --bias jitter` writes each image's RPC (the affine
+# part) and `<image>_jitter.csv`, the correction along the lines.
 
 # %% [markdown]
 # ## 2. DEM co-registration (Nuth and Kääb)
 #
-# The reference: the scene's terrain (30-55 m of relief, slopes of 3-14 deg) on its DSM grid
-# (UTM, 0.65 m cells, 640 x 645 m). The DSM to align: the same terrain with its content moved
-# by a known shift (3.4 m east, 2.6 m south, 1.2 m up), plus what a stereo DSM carries: 0.3 m
-# of noise per cell and eight "buildings" of 6-15 m (changes absent from the reference, 0.7 %
-# of the cells), which the fit must reject as outliers. `nuth_kaab` takes the two arrays and the
-# grid's signed steps `(a, e)` (a north-up grid has `e < 0`).
+# The reference: the scene's terrain (54 m of relief, slopes of 3-14 deg over 80 % of it) on its DSM
+# grid (UTM, 0.65 m cells, 640 x 646 m). The DSM to align: the same terrain with its content moved
+# by a known shift (3.4 m east, 2.6 m south, 1.2 m up), plus what a stereo DSM carries: 0.3 m of
+# noise per cell and eight "buildings" of 6-15 m (changes absent from the reference, 0.7 % of the
+# cells), which the fit must reject as outliers. `nuth_kaab` takes the two arrays and the grid's
+# signed steps `(a, e)` (a north-up grid has `e < 0`).
 
 # %%
 SHIFT = (3.4, -2.6, 1.2)  # the DSM's content moved by (east, north, up) m
@@ -308,11 +308,10 @@ plt.show()
 # Before, the difference maps the terrain's slopes (the horizontal shift) on top of the 1.2 m
 # offset; after, only the noise and the buildings are left. The shift is found to within a
 # centimetre per axis (-3.40, +2.60, -1.20 m added to the DSM), in 4 iterations of the
-# coarse-to-fine pyramid, in under a second; the median falls from 1.13 m to 0.00 m, the NMAD
-# from 0.63 m to 0.24 m (the 0.3 m noise, smoothed a little by the bilinear resampling) and the
-# LE90 from 1.9 m to 0.41 m. The RMSE keeps the buildings (0.92 m after, almost four times the
-# NMAD), and so would a least-squares fit: that is what the robust statistics (median, NMAD,
-# LE90) and the outlier rejection of the fit are for.
+# coarse-to-fine pyramid, in under a second; the median falls from 1.13 m to 0.00 m, the NMAD from
+# 0.63 m to 0.24 m (the 0.3 m noise, smoothed a little by the bilinear resampling) and the LE90 from
+# 1.9 m to 0.41 m. The RMSE keeps the buildings (0.92 m after, almost four times the NMAD): that is
+# what the robust statistics (median, NMAD, LE90), and the fit's rejection of outliers, are for.
 
 # %% [markdown]
 # ## 3. Per-cell DSM uncertainty
