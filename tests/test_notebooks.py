@@ -33,12 +33,13 @@ def committed(name):
     return nbformat.read(NOTEBOOKS / f"{name}.ipynb", as_version=4)
 
 
-def test_four_notebooks():
+def test_five_notebooks():
     assert NAMES == [
         "01_cartosat1_sensor_models",
         "02_kepler_rotation_orders",
         "03_full_strip",
         "04_differentiable",
+        "05_what_no_peer_has",
     ]
 
 
