@@ -147,7 +147,8 @@ def shift_heights(
 ) -> np.ndarray:
     """The raster ``z`` (NaN = no data) moved by ``shift_m = (dx, dy, dz)`` on its own grid:
     ``out(p) = z(p - (dx, dy)) + dz`` with bilinear interpolation (float64). A cell is NaN where
-    a neighbour with a non-zero weight is NaN or off the grid."""
+    a neighbour with a non-zero weight is NaN or off the grid. ``step_m = (a, e)``: the signed
+    grid steps (m; ``e < 0`` for a north-up raster), as :func:`nuth_kaab` takes them."""
     dx, dy, dz = (float(v) for v in shift_m)
     drow, dcol = -dy / step_m[1], -dx / step_m[0]  # source position minus target position
     i0, j0 = math.floor(drow), math.floor(dcol)
@@ -274,6 +275,10 @@ def nuth_kaab(
     callback: Callable[..., object] | None = None,
 ) -> Coregistration:
     """Co-register ``dsm`` onto ``ref`` (two height rasters of one grid, m, NaN = no data).
+
+    ``step_m = (a, e)``: the grid's *signed* steps, the geotransform's ``a`` and ``e`` (m);
+    ``e < 0`` for a north-up raster (GDAL's, rasterio's ``transform.e``). Passing ``(res,
+    res)`` for a north-up grid gives the north shift with the wrong sign.
 
     ``stable`` (bool, same shape): cells of stable terrain (default: all); ``settings`` default
     ``NuthKaab()``. ``callback(i, increment_m, shift_m)`` is called after each iteration (of
