@@ -13,6 +13,7 @@ adjusted models (:func:`check_out_dir`, refitted RPCs beside the inputs, never o
 from ._adjustment import BIAS_CHOICES as BIAS_CHOICES
 from ._adjustment import JitterSettings as JitterSettings
 from ._adjustment import adjust as adjust
+from ._adjustment import bias_prior_sigma as bias_prior_sigma
 from ._adjustment import image_lines as image_lines
 from ._adjustment import with_bias as with_bias
 from ._errors import AdjustmentError as AdjustmentError
