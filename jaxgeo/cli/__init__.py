@@ -125,6 +125,24 @@ def main(argv: list[str] | None = None) -> int:
             signal.signal(signal.SIGTERM, previous)
 
 
+def entry() -> None:
+    """The ``jaxgeo`` command (and ``python -m jaxgeo.cli``): :func:`main`, then exit with its
+    status. After an interruption the process ends without the interpreter's teardown: XLA's
+    threads may still run the computation the interruption abandoned, and tearing the runtime
+    down under them can crash the process (exit -11 instead of 130). The outputs were already
+    removed by then (:func:`jaxgeo.io.atomic_output`), and the message printed."""
+    import os
+
+    from ._common import EXIT_INTERRUPTED
+
+    code = main()
+    if code == EXIT_INTERRUPTED:
+        sys.stdout.flush()
+        sys.stderr.flush()
+        os._exit(code)
+    sys.exit(code)
+
+
 def threading_main() -> bool:
     """Whether this is the main thread (signal handlers can only be set there)."""
     import threading
@@ -133,4 +151,4 @@ def threading_main() -> bool:
 
 
 if __name__ == "__main__":  # pragma: no cover
-    sys.exit(main())
+    entry()

@@ -1,7 +1,5 @@
 """``python -m jaxgeo.cli``."""
 
-import sys
+from . import entry
 
-from . import main
-
-sys.exit(main())
+entry()
