@@ -12,6 +12,7 @@ import argparse
 import importlib
 import sys
 
+from .. import _interrupt
 from ..errors import JaxgeoError
 
 COMMANDS = {
@@ -79,50 +80,116 @@ def _one_line(err: BaseException) -> str:
     return text.replace("(pass overwrite=True)", "(pass --overwrite to replace it)")
 
 
-def _terminate(signum, frame):  # pragma: no cover - exercised through a subprocess in the tests
+def _interrupt_handler(signum, frame):  # pragma: no cover - exercised through a subprocess
+    """SIGINT and SIGTERM: record the request, then unwind like Ctrl-C (temporary outputs are
+    removed by :func:`jaxgeo.io.atomic_output`)."""
+    _interrupt.request()
     raise KeyboardInterrupt
+
+
+def _redeliver_lost_interrupt(unraisable, previous=sys.unraisablehook):  # pragma: no cover
+    """``sys.unraisablehook``: an interruption raised inside a garbage-collector callback or a
+    ``__del__`` is dropped by Python; deliver it again to the main thread, where it unwinds the
+    command (instead of printing "Exception ignored" and running on). From another thread, a
+    moment later: delivered now, it would be raised inside this hook and dropped again."""
+    import _thread
+    import signal
+    import threading
+
+    if isinstance(unraisable.exc_value, KeyboardInterrupt) and _interrupt.requested():
+        threading.Timer(0.05, _thread.interrupt_main, args=(signal.SIGINT,)).start()
+        return
+    previous(unraisable)
+
+
+def _install_interrupt_handlers() -> dict:
+    """Our handlers for SIGINT and SIGTERM (main thread only); the previous ones, to restore."""
+    import signal
+
+    _interrupt.reset()
+    if not threading_main():
+        return {}
+    previous = {s: signal.signal(s, _interrupt_handler) for s in (signal.SIGINT, signal.SIGTERM)}
+    previous["unraisablehook"] = sys.unraisablehook
+    sys.unraisablehook = _redeliver_lost_interrupt
+    return previous
+
+
+def _restore_handlers(previous: dict) -> None:
+    import signal
+
+    hook = previous.pop("unraisablehook", None)
+    if hook is not None:
+        sys.unraisablehook = hook
+    for signum, handler in previous.items():
+        signal.signal(signum, handler)
+
+
+def _report_error(name: str, err: Exception) -> int:
+    """Print ``err`` as one line; its exit status (bad input, or a bug)."""
+    import os
+
+    from ._common import EXIT_INPUT, EXIT_INTERNAL
+
+    if isinstance(err, (JaxgeoError, ValueError, FileNotFoundError, FileExistsError, KeyError)):
+        print(f"{name}: error: {_one_line(err)}", file=sys.stderr)
+        return EXIT_INPUT
+    if isinstance(err, OSError):  # permissions, a full disk, a folder where a file is expected
+        where = f"{err.filename}: " if getattr(err, "filename", None) else ""
+        print(f"{name}: error: {where}{err.strerror or _one_line(err)}", file=sys.stderr)
+        return EXIT_INPUT
+    if os.environ.get("JAXGEO_TRACEBACK"):
+        raise err
+    print(f"{name}: internal error ({type(err).__name__}: {_one_line(err)}); this is a bug: "
+          "please report it (JAXGEO_TRACEBACK=1 shows the traceback)", file=sys.stderr)  # fmt: skip
+    return EXIT_INTERNAL
+
+
+def _ignore_signals() -> None:
+    import signal
+
+    if threading_main():
+        for signum in (signal.SIGINT, signal.SIGTERM):
+            signal.signal(signum, lambda signum, frame: None)
 
 
 def main(argv: list[str] | None = None) -> int:
     """Run one sub-command; every error ends as one line on stderr and an exit status (the
-    codes of ``jaxgeo.cli._common``), never as a traceback (``JAXGEO_TRACEBACK=1`` re-raises)."""
-    import os
-    import signal
+    codes of ``jaxgeo.cli._common``), never as a traceback (``JAXGEO_TRACEBACK=1`` re-raises).
+    Ctrl-C and SIGTERM end it with status 130 and no output (:mod:`jaxgeo._interrupt`)."""
+    return _main(argv, restore_handlers=True)
 
-    from ._common import EXIT_INPUT, EXIT_INTERNAL, EXIT_INTERRUPTED
+
+def _main(argv: list[str] | None, restore_handlers: bool) -> int:
+    from ._common import EXIT_INTERRUPTED
 
     argv = sys.argv[1:] if argv is None else list(argv)
     # top-level options take no values: the first word that is not an option is the command
     command = next((a for a in argv if not a.startswith("-")), None)
     parser = build_parser(command if command in COMMANDS else None)
     args = parser.parse_args(argv)
-    previous = None
-    if threading_main():
-        # SIGTERM unwinds like Ctrl-C, so temporary outputs are removed (atomic_output)
-        previous = signal.signal(signal.SIGTERM, _terminate)
     name = f"jaxgeo {args.command}"
+    interrupted = f"{name}: interrupted; no output was written"
+    previous = _install_interrupt_handlers()
     try:
-        return int(args.func(args) or 0)
+        code = int(args.func(args) or 0)
+        if _interrupt.requested():  # its exception was lost after the last output was written
+            print(f"{name}: interrupted after its outputs were written", file=sys.stderr)
+            return EXIT_INTERRUPTED
+        return code
     except KeyboardInterrupt:
-        print(f"{name}: interrupted; no output was written", file=sys.stderr)
+        print(interrupted, file=sys.stderr)
         return EXIT_INTERRUPTED
-    except (JaxgeoError, ValueError, FileNotFoundError, FileExistsError, KeyError) as err:
-        print(f"{name}: error: {_one_line(err)}", file=sys.stderr)
-        return EXIT_INPUT
-    except OSError as err:  # permissions, a full disk, a folder where a file is expected
-        where = f"{err.filename}: " if getattr(err, "filename", None) else ""
-        print(f"{name}: error: {where}{err.strerror or _one_line(err)}", file=sys.stderr)
-        return EXIT_INPUT
     except Exception as err:
-        if os.environ.get("JAXGEO_TRACEBACK"):
-            raise
-        print(f"{name}: internal error ({type(err).__name__}: {_one_line(err)}); this is a "
-              "bug: please report it (JAXGEO_TRACEBACK=1 shows the traceback)",
-              file=sys.stderr)  # fmt: skip
-        return EXIT_INTERNAL
+        if _interrupt.requested():  # a library turned the interruption into its own error
+            print(interrupted, file=sys.stderr)
+            return EXIT_INTERRUPTED
+        return _report_error(name, err)
     finally:
-        if previous is not None:
-            signal.signal(signal.SIGTERM, previous)
+        if restore_handlers:
+            _restore_handlers(previous)
+        elif _interrupt.requested():  # the process is ending: a late signal changes nothing
+            _ignore_signals()
 
 
 def entry() -> None:
@@ -135,7 +202,7 @@ def entry() -> None:
 
     from ._common import EXIT_INTERRUPTED
 
-    code = main()
+    code = _main(None, restore_handlers=False)
     if code == EXIT_INTERRUPTED:
         sys.stdout.flush()
         sys.stderr.flush()

@@ -14,6 +14,8 @@ import pathlib
 import secrets
 from collections.abc import Iterator, Sequence
 
+from .. import _interrupt
+
 
 def refuse_existing(path: str | os.PathLike, overwrite: bool = False) -> pathlib.Path:
     """``path`` as a Path; ``FileExistsError`` naming it if it exists and not ``overwrite``."""
@@ -52,12 +54,15 @@ def atomic_output(
     temporary file exists (empty) when the block starts; on an exception it is removed and
     ``path`` is untouched. ``leftovers`` are suffixes of files a writer may leave beside the
     temporary one (GDAL's ``.aux.xml``), removed either way. ``os.replace`` is atomic on POSIX.
+    Once the process was asked to stop (Ctrl-C, SIGTERM: :mod:`jaxgeo._interrupt`) nothing is
+    committed: the block's end raises ``KeyboardInterrupt`` instead.
     """
     path = refuse_existing(path, overwrite)
     path.parent.mkdir(parents=True, exist_ok=True)
     tmp = _temp_beside(path, suffix)
     try:
         yield tmp
+        _interrupt.check()  # an interruption whose exception was lost commits nothing
         os.replace(tmp, path)
     finally:
         for leftover in (tmp, *(tmp.with_name(tmp.name + s) for s in leftovers)):
