@@ -45,7 +45,8 @@ CHILD = textwrap.dedent(
     sent = []
 
     def callback(phase, info):
-        if phase == "start" and not sent and signal.getsignal(signal.SIGINT) is cli._interrupt_handler:
+        armed = signal.getsignal(signal.SIGINT) is cli._interrupt_handler
+        if phase == "start" and not sent and armed:
             sent.append(1)
             os.kill(os.getpid(), signal.SIGINT)
             for _ in range(10000):  # the Python handler runs here, inside the callback
@@ -63,8 +64,8 @@ def test_an_interruption_lost_in_a_gc_callback_still_ends_the_command(tmp_path, 
     out = tmp_path / "scene"
     child = CHILD
     if not redeliver:  # the last line of defence alone: atomic_output commits nothing
-        child = child.replace("cli.entry()", "cli._redeliver_lost_interrupt = "
-                              "lambda u, previous=sys.unraisablehook: previous(u)\ncli.entry()")  # fmt: skip
+        plain = "cli._redeliver_lost_interrupt = lambda u, previous=sys.unraisablehook: previous(u)"
+        child = child.replace("cli.entry()", f"{plain}\ncli.entry()")
     env = {**os.environ, "JAXGEO_TYPECHECK": "0"}
     proc = subprocess.run([sys.executable, "-c", child, str(out)], capture_output=True, text=True,
                           env=env, timeout=300)  # fmt: skip

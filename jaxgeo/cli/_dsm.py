@@ -34,8 +34,10 @@ from ._common import (
     add_json,
     add_out,
     add_quiet,
+    add_tile_options,
     check_dem_options,
     check_roi,
+    check_tile_options,
     dem_inputs,
     guard_outputs,
     open_dem,
@@ -104,6 +106,7 @@ def register(sub) -> None:
         metavar="N",
         help=f"refuse a DSM larger than N cells (default {MAX_CELLS:.0e})",
     )
+    add_tile_options(parser, 1024, "DSM cells (a scene larger than 2048 px is made tile by tile)")
     add_quiet(parser)
     add_json(parser)
     add_out(parser, "DSM.tif", "the DSM GeoTIFF to write")
@@ -186,7 +189,7 @@ def run(args: argparse.Namespace) -> int:
             orientation = orientation_covariances(args.orientation, [im.name for im in images])
         except OrientationError as err:
             raise CommandError(str(err)) from None
-    guard_outputs([args.out], inputs, args.overwrite)
+    check_tile_options(args, inputs, 64)
     if args.keep is not None:
         guard_outputs([], inputs, True)  # the folder is created; its files are new names
     roi = check_roi(args.roi, images[0]) if args.roi is not None else None
@@ -201,6 +204,8 @@ def run(args: argparse.Namespace) -> int:
             f"the DSM would have about {rows:.1f} x {cols:.1f} cells at --res {args.res:g} m: "
             "lower --res"
         )
+    if _tiled(args, images[0], roi):
+        return _run_tiled(args, images, roi, epsg, orientation)
     dsm, stats = dsm_from_images(
         [im.model for im in images],
         [im.path for im in images],
@@ -253,6 +258,80 @@ def run(args: argparse.Namespace) -> int:
         if "height_offset_removed_m" in pair:
             parts.append(f"height offset {pair['height_offset_removed_m']:+.2f} m removed")
         print(f"  {a} - {b}: " + ", ".join(parts))
+    return 0
+
+
+def _tiled(args, image, roi) -> bool:
+    """Tile by tile: asked for (a tile option), or a reference window over 2048 px a side."""
+    from ..stereo import TILED_MIN_PX
+
+    asked = any(v is not None for v in (args.tile, args.workers, args.scheduler, args.resume,
+                                        args.plan))  # fmt: skip
+    _, _, w, h = roi if roi is not None else (0, 0, *image.size)
+    return asked or max(w, h) > TILED_MIN_PX
+
+
+def _run_tiled(args, images, roi, epsg, orientation) -> int:
+    """The DSM tile by tile (:func:`jaxgeo.stereo.tiled_dsm`), or its plan only (``--plan``)."""
+    from ..stereo import TILE_CELLS, footprint_dem_heights, plan_dsm, tiled_dsm
+    from ..tiles import TileError, write_plan
+    from . import CommandError
+    from ._common import note, tiles_kept
+
+    if args.keep is not None:
+        raise CommandError("--keep writes the products of an untiled DSM: give a --roi of at "
+                           "most 2048 px without tile options")  # fmt: skip
+    dem = open_dem(args)
+    heights = tuple(args.heights) if args.heights else None
+    if heights is None and dem is not None:
+        lo, hi = footprint_dem_heights(images[0].model, dem, roi or (0, 0, *images[0].size))
+        heights = (lo - 50.0, hi + 50.0)
+    setup = plan_dsm(
+        [im.model for im in images], [im.path for im in images], roi=roi, res_m=args.res,
+        epsg=epsg, heights=heights, tie_heights=heights, tile_px=args.tile or TILE_CELLS,
+        method=args.triangulation, register=not args.no_register, band_rows=args.band_rows,
+        max_hole_m=args.max_hole, orientation=orientation,
+    )  # fmt: skip
+    plan = setup.plan
+    if args.plan:
+        write_plan(plan, args.plan, overwrite=args.overwrite)
+        if args.json:
+            print_json({"plan": args.plan, "tiles": len(plan), "width": plan.width,
+                        "height": plan.height, "tile_px": plan.tile_px})  # fmt: skip
+        else:
+            print(f"wrote {args.plan}: {len(plan)} tiles of {plan.tile_px} cells over "
+                  f"{plan.width} x {plan.height} cells of {args.res:g} m "
+                  f"(EPSG:{setup.job.epsg}); nothing computed")  # fmt: skip
+        return 0
+    note(f"jaxgeo dsm: {len(plan)} tiles of {plan.tile_px} cells over {plan.width} x "
+         f"{plan.height} cells", args.quiet)  # fmt: skip
+    try:
+        report = tiled_dsm(setup, args.out, workers=args.workers, scheduler=args.scheduler,
+                           resume=args.resume, retries=args.retries, overwrite=args.overwrite,
+                           progress=not args.quiet)  # fmt: skip
+    except (KeyboardInterrupt, TileError):
+        tiles_kept(args, "dsm")
+        raise
+    empty = {k: v.get("no_data") for k, v in report.tile_stats.items() if "no_data" in v}
+    result = {
+        "output": str(report.path), "epsg": report.epsg, "res_m": report.res_m,
+        "shape": [report.height, report.width], "filled": round(report.filled, 4),
+        "interpolated": round(report.interpolated, 4), "tiles": report.tiles,
+        "empty_tiles": empty, "reused_tiles": report.reused_tiles, "workers": report.workers,
+        "scheduler": report.scheduler, "seconds": round(report.seconds, 1),
+    }  # fmt: skip
+    if args.json:
+        print_json({**result, "tile_stats": report.tile_stats})
+        return 0
+    where = (f"{report.workers} worker(s) at {report.scheduler}" if report.scheduler
+             else "this process")  # fmt: skip
+    print(f"wrote {report.path}: {report.width} x {report.height} cells of {report.res_m:g} m, "
+          f"EPSG:{report.epsg}, {100 * report.filled:.1f}% with a height (ellipsoidal, m), "
+          f"{100 * report.interpolated:.1f}% interpolated (band 'filled'); {report.tiles} tiles "
+          f"({len(empty)} without data, {report.reused_tiles} reused) on {where}; "
+          f"{report.seconds:.1f} s")  # fmt: skip
+    for tile_id, why in list(empty.items())[:5]:
+        print(f"  tile {tile_id}: no data ({why[:160]})")
     return 0
 
 

@@ -22,7 +22,14 @@ import pathlib
 import sys
 import warnings
 
-from ._common import add_command, add_image_options, add_json, add_out, add_quiet
+from ._common import (
+    add_command,
+    add_image_options,
+    add_json,
+    add_out,
+    add_quiet,
+    add_tile_options,
+)
 
 
 def register(sub) -> None:
@@ -94,48 +101,7 @@ def register(sub) -> None:
         metavar="N",
         help="refuse a product of more pixels (default: 2e9; 0: no limit)",
     )
-    parser.add_argument(
-        "--tile",
-        type=int,
-        default=1024,
-        metavar="PX",
-        help="tile size in output pixels (default: 1024)",
-    )
-    parser.add_argument(
-        "--workers",
-        type=int,
-        default=None,
-        metavar="N",
-        help="worker processes (default: one per core for a large product, none "
-        "for a small one; 0: all tiles in this process)",
-    )
-    parser.add_argument(
-        "--scheduler",
-        default=None,
-        metavar="ADDRESS",
-        help="run the tiles on the dask cluster of this scheduler "
-        "(tcp://host:8786) instead of local workers",
-    )
-    parser.add_argument(
-        "--retries",
-        type=int,
-        default=2,
-        metavar="N",
-        help="retries of a failing tile or of a tile whose worker died (default: 2)",
-    )
-    parser.add_argument(
-        "--resume",
-        default=None,
-        metavar="DIR",
-        help="keep finished tiles in DIR (created if needed) and reuse those an "
-        "interrupted run of the same command left there",
-    )
-    parser.add_argument(
-        "--plan",
-        default=None,
-        metavar="FILE",
-        help="write the tile plan (JSON: tiles, windows, job) to FILE and stop, computing nothing",
-    )
+    add_tile_options(parser, 1024, "output pixels")
     add_out(parser, "OUT.tif", "the orthoimage (a COG; written only once complete)")
     add_quiet(parser)
     add_json(parser)
@@ -152,10 +118,6 @@ def _inputs(image, dem) -> list[pathlib.Path]:
 def run(args: argparse.Namespace) -> int:
     from . import CommandError
 
-    for name, value, low in (("--workers", args.workers, 0), ("--retries", args.retries, 0),
-                             ("--tile", args.tile, 64)):  # fmt: skip
-        if value is not None and value < low:
-            raise CommandError(f"{name} must be >= {low}, got {value}")
     if args.max_pixels is not None and args.max_pixels < 0:
         raise CommandError(f"--max-pixels must be >= 0 (0: no limit), got {args.max_pixels:g}")
     with warnings.catch_warnings(record=True) as caught:
@@ -176,28 +138,16 @@ def _run(args: argparse.Namespace) -> int:
     from jaxgeo.ortho import MAX_PIXELS, orthorectify, plan_ortho
     from jaxgeo.tiles import TileError, write_plan
 
-    from . import CommandError
-    from ._common import guard_outputs, note, open_images, print_json
+    from ._common import check_tile_options, note, open_images, print_json, tiles_kept
 
     (image,) = open_images([args.image], args)
     dem = read_dem(args.dem, height=args.dem_height, geoid=args.geoid)
     inputs = _inputs(image, dem)
-    if args.plan:  # the plan is written; the product is only named (never an input)
-        guard_outputs([args.plan], inputs, args.overwrite)
-        guard_outputs([args.out], inputs, overwrite=True)
-    else:
-        guard_outputs([args.out], inputs, args.overwrite)
-    if args.resume:
-        resume = pathlib.Path(args.resume)
-        if resume.exists() and not resume.is_dir():
-            raise CommandError(f"--resume {resume}: exists and is not a folder")
-        for p in inputs:
-            if resume.resolve() == p.resolve():
-                raise CommandError(f"--resume {resume}: is an input; name a folder")
+    check_tile_options(args, inputs, 64)
     note(dem.describe(), args.quiet)
     options = dict(
         crs=args.crs, res_m=args.res, bounds=args.bounds, resampling=args.resampling,
-        occlusion=args.occlusion, tile_px=args.tile, overwrite=args.overwrite,
+        occlusion=args.occlusion, tile_px=args.tile or 1024, overwrite=args.overwrite,
         max_pixels=MAX_PIXELS if args.max_pixels is None else args.max_pixels,
     )  # fmt: skip
     if args.plan:
@@ -219,9 +169,7 @@ def _run(args: argparse.Namespace) -> int:
             progress=not args.quiet,
         )  # fmt: skip
     except (KeyboardInterrupt, TileError):
-        if args.resume and pathlib.Path(args.resume).is_dir():
-            note(f"jaxgeo ortho: the finished tiles are kept in {args.resume}: the same command "
-                 "reuses them")  # fmt: skip
+        tiles_kept(args, "ortho")
         raise
     if args.json:
         print_json({k: (str(v) if isinstance(v, pathlib.Path) else v)

@@ -12,13 +12,11 @@ from __future__ import annotations
 import dataclasses
 import os
 import pathlib
-import shutil
-import tempfile
 import time
 from collections.abc import Sequence
 
 from ..io import DEM, SensorImage
-from ..tiles import mosaic_cog, run_tiles
+from ..tiles import mosaic_cog, remove_work, run_tiles, work_folder
 from ._plan import plan_ortho
 from ._validate import MAX_PIXELS, OrthoError
 
@@ -119,11 +117,7 @@ def orthorectify(
     )  # fmt: skip
     try:
         out = setup.out
-        if resume is not None:
-            folder = pathlib.Path(resume)
-        else:
-            folder = pathlib.Path(tempfile.mkdtemp(prefix=f".{out.name}.", suffix=".tiles",
-                                                   dir=out.parent))  # fmt: skip
+        folder = work_folder(out, resume)
         run = run_tiles(setup.plan, setup.job, folder, workers=workers, scheduler=scheduler,
                         retries=retries, progress=progress)  # fmt: skip
         stats = [r.stats for r in run.results.values() if r.path is not None]
@@ -136,7 +130,7 @@ def orthorectify(
         done = True
     finally:
         if folder is not None and (resume is None or done):
-            _remove_work(folder, created=resume is None)
+            remove_work(folder, created=resume is None)
     total = setup.plan.width * setup.plan.height
     blocks = sum(s.get("blocks", 0) for s in stats)
     return OrthoReport(
@@ -150,18 +144,3 @@ def orthorectify(
         seconds=time.perf_counter() - t_start, tiles=len(setup.plan), empty_tiles=run.empty,
         reused_tiles=run.reused, workers=run.workers, scheduler=run.scheduler,
     )  # fmt: skip
-
-
-def _remove_work(folder: pathlib.Path, created: bool) -> None:
-    """Remove the work folder (a temporary one), or what the runner wrote in a ``resume``
-    folder after success (the folder itself if that leaves it empty)."""
-    if created:
-        shutil.rmtree(folder, ignore_errors=True)
-        return
-    shutil.rmtree(folder / "tiles", ignore_errors=True)
-    for path in (folder / "plan.json", *folder.glob("mosaic*.vrt")):
-        path.unlink(missing_ok=True)
-    try:
-        folder.rmdir()
-    except OSError:
-        pass

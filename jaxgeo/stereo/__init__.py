@@ -49,6 +49,14 @@ from ._ties import TieWarning as TieWarning
 from ._ties import footprint_dem_heights as footprint_dem_heights
 from ._ties import tie_points as tie_points
 from ._ties import validity_heights as validity_heights
+from ._tiled import TILE_CELLS as TILE_CELLS
+from ._tiled import TILED_MIN_PX as TILED_MIN_PX
+from ._tiled import DSMJob as DSMJob
+from ._tiled import DSMSetup as DSMSetup
+from ._tiled import TiledDSMReport as TiledDSMReport
+from ._tiled import plan_dsm as plan_dsm
+from ._tiled import reference_window as reference_window
+from ._tiled import tiled_dsm as tiled_dsm
 from ._triangulation import StereoError as StereoError
 from ._triangulation import disparity_to_matches as disparity_to_matches
 from ._triangulation import los_heights as los_heights

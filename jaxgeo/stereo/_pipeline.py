@@ -336,6 +336,8 @@ def _triangulate(ref, sec, matches, method):
     """Points ``(n, 3)`` and height sigmas ``(n,)`` (NaN for ``los_midpoint``) of ``(n, 2, 2)``
     matches, in chunks of one size (one compilation whatever the band)."""
     n = matches.shape[0]
+    if n == 0:  # a last band without a match (its rows outside the ROI)
+        return np.zeros((0, 3)), np.zeros(0)
     pad = -n % TRIANGULATION_CHUNK
     if pad:
         matches = np.concatenate([matches, np.full((pad, 2, 2), np.nan)])

@@ -32,6 +32,8 @@ from ._runner import TileRun as TileRun
 from ._runner import WorkerPool as WorkerPool
 from ._runner import cores as cores
 from ._runner import prepare_folder as prepare_folder
+from ._runner import remove_work as remove_work
 from ._runner import resolve_workers as resolve_workers
 from ._runner import run_one_tile as run_one_tile
 from ._runner import run_tiles as run_tiles
+from ._runner import work_folder as work_folder

@@ -46,7 +46,8 @@ class RasterSpec:
     and the ``transform`` (affine, 6 numbers ``a, b, c, d, e, f``) of the whole product;
     ``overviews``: the decimations each tile's file carries (computed in the tile, where the
     work is spread over the workers; the mosaic's overviews are made of them) with
-    ``overview_resampling`` (GDAL's name)."""
+    ``overview_resampling`` (GDAL's name). ``descriptions``, ``units`` and ``band_tags`` (per
+    band, ``(key, value)`` pairs) name the bands, ``tags`` are the dataset's (empty: none)."""
 
     count: int
     dtype: str
@@ -55,6 +56,10 @@ class RasterSpec:
     transform: tuple[float, float, float, float, float, float]
     overviews: tuple[int, ...] = ()
     overview_resampling: str = "average"
+    descriptions: tuple[str, ...] = ()
+    units: tuple[str, ...] = ()
+    band_tags: tuple[tuple[tuple[str, str], ...], ...] = ()
+    tags: tuple[tuple[str, str], ...] = ()
 
     def tile_transform(self, row: int, col: int):
         from affine import Affine
@@ -90,6 +95,13 @@ def _nodata_text(nodata) -> str | None:
     return "nan" if isinstance(nodata, float) and math.isnan(nodata) else repr(nodata)
 
 
+def _metadata(pairs, indent: str) -> list[str]:
+    if not pairs:
+        return []
+    items = "".join(f'<MDI key="{escape(k)}">{escape(v)}</MDI>' for k, v in pairs)
+    return [f"{indent}<Metadata>{items}</Metadata>"]
+
+
 def vrt_xml(run: TileRun, plan, spec: RasterSpec, factor: int = 1, overviews=()) -> str:
     """The VRT over the tiles of ``run`` (``plan``'s windows): at full resolution, or the
     ``factor`` overview made of each tile's own overview of that factor; ``overviews``: the
@@ -104,9 +116,16 @@ def vrt_xml(run: TileRun, plan, spec: RasterSpec, factor: int = 1, overviews=())
     ]
     if factor == 1:
         lines.append(f"  <GeoTransform>{c!r}, {a!r}, {b!r}, {f!r}, {d!r}, {e!r}</GeoTransform>")
+        lines += _metadata(spec.tags, "  ")
     level = spec.overviews.index(factor) if factor > 1 else None
     for band in range(1, spec.count + 1):
         lines.append(f'  <VRTRasterBand dataType="{gtype}" band="{band}">')
+        if factor == 1 and band <= len(spec.descriptions):
+            lines.append(f"    <Description>{escape(spec.descriptions[band - 1])}</Description>")
+        if factor == 1 and band <= len(spec.units) and spec.units[band - 1]:
+            lines.append(f"    <UnitType>{escape(spec.units[band - 1])}</UnitType>")
+        if factor == 1 and band <= len(spec.band_tags):
+            lines += _metadata(spec.band_tags[band - 1], "    ")
         if nd is not None:
             lines.append(f"    <NoDataValue>{nd}</NoDataValue>")
         for tile in plan.tiles:

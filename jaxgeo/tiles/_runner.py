@@ -343,6 +343,34 @@ def run_tiles(
     return TileRun(folder, results, n, address, time.perf_counter() - t0)
 
 
+def work_folder(out: str | os.PathLike, resume: str | os.PathLike | None) -> pathlib.Path:
+    """The folder of a product's tiles: ``resume`` (kept after an interruption), else a new
+    temporary folder beside ``out`` (same file system: the tiles' renames stay atomic)."""
+    import tempfile
+
+    if resume is not None:
+        return pathlib.Path(resume)
+    out = pathlib.Path(out)
+    return pathlib.Path(tempfile.mkdtemp(prefix=f".{out.name}.", suffix=".tiles", dir=out.parent))
+
+
+def remove_work(folder: pathlib.Path, created: bool) -> None:
+    """Remove the work folder (a temporary one, ``created``), or what the runner wrote in a
+    ``resume`` folder after success (the folder itself if that leaves it empty)."""
+    import shutil
+
+    if created:
+        shutil.rmtree(folder, ignore_errors=True)
+        return
+    shutil.rmtree(folder / "tiles", ignore_errors=True)
+    for path in (folder / "plan.json", *folder.glob("mosaic*.vrt")):
+        path.unlink(missing_ok=True)
+    try:
+        folder.rmdir()
+    except OSError:
+        pass
+
+
 def _attempts(retries: int) -> str:
     return f"{retries + 1} attempt" + ("s" if retries else "")
 
@@ -372,8 +400,9 @@ def _local_cluster(n: int, retries: int):
     flags = " ".join(filter(None, [os.environ.get("XLA_FLAGS", ""), WORKER_XLA_FLAGS]))
     # MALLOC_ARENA_MAX: glibc's per-thread arenas (XLA's threads) held 0.1 GB a worker more,
     # measured on the 12 000 px benchmark (peak RSS of the tree 1.66 -> 1.47 GB)
+    # OPENCV_FOR_THREADS_NUM: OpenCV's own pool (SIFT, SGM) one thread too, as XLA's
     env = {"XLA_FLAGS": flags, "XLA_PYTHON_CLIENT_PREALLOCATE": "false", "OMP_NUM_THREADS": "1",
-           "MALLOC_ARENA_MAX": "2"}  # fmt: skip
+           "MALLOC_ARENA_MAX": "2", "OPENCV_FOR_THREADS_NUM": "1"}  # fmt: skip
     config = {
         "distributed.worker.multiprocessing-method": "spawn",
         "distributed.scheduler.allowed-failures": retries,

@@ -123,3 +123,12 @@ def test_rasterize_median_count_spread_and_gaps(tmp_path):
         np.testing.assert_array_equal(f.read(1), dsm.height)
     with pytest.raises(FileExistsError):
         write_dsm(dsm, out)
+
+
+def test_a_band_without_matches_triangulates_to_no_point():
+    """The last band of a ROI's epipolar rows may hold no match after a full chunk was
+    triangulated (a 1000 px ROI of a 2000 px scene failed with a TypeError from jax.tree.map)."""
+    from jaxgeo.stereo._pipeline import _triangulate
+
+    points, sigma = _triangulate(None, None, np.zeros((0, 2, 2)), "intersect")
+    assert points.shape == (0, 3) and sigma.shape == (0,)

@@ -1,0 +1,412 @@
+"""A DSM of a whole scene, tile by tile, on the tile runner (:mod:`jaxgeo.tiles`).
+
+The DSM's grid (map cells of ``res_m`` in a projected CRS) is cut into tiles of ``tile_px`` cells.
+A tile is one call of :class:`DSMJob`: the reference-image window that sees the tile's ground
+box (its outline, widened by ``margin_m``, projected at the lowest and highest terrain heights),
+then, per pair (reference, i), the whole stereo chain of :func:`~jaxgeo.stereo.stereo_pair` on
+that window alone: its own tie points, rectification at its own elevation (epipolar lines of a
+pushbroom scene are not straight over tens of kilometres), its own vertical disparity and
+disparity range, dense matching, triangulation. The points within ``margin_m`` of the tile are
+rasterised (:func:`~jaxgeo.stereo.rasterize`: footprints, holes, the height sigma) on the tile's
+cells and that margin, and the tile's own cells are written; the mosaic is a COG with the bands of
+:data:`~jaxgeo.stereo.DSM_BANDS`. Memory per tile follows the tile, time the scene's area.
+
+A tile where a pair fails (no texture, water, clouds: too few tie points) keeps the other pairs;
+a tile where every pair fails is nodata (named in the report), not an error of the scene. With
+three or more images each tile removes its pairs' relative height offsets (as the untiled DSM).
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import hashlib
+import math
+import os
+import pathlib
+import warnings
+from collections.abc import Sequence
+
+import numpy as np
+
+from ..models import AbstractSensorModel
+from ..tiles import (
+    NoData,
+    RasterSpec,
+    Tile,
+    TilePlan,
+    cores,
+    mosaic_cog,
+    overview_factors,
+    plan_tiles,
+    remove_work,
+    run_tiles,
+    work_folder,
+    write_tile,
+)
+from ._dense import DEFAULT_SGM, SGMSettings
+from ._dsm import DSM_BANDS, MAX_HOLE_M, local_utm_epsg, rasterize, to_map
+from ._pipeline import BAND_ROWS, _height_offsets, _spacing, image_size, stereo_pair
+from ._triangulation import StereoError, los_heights
+from ._uncertainty import Orientation, pair_orientation
+
+TILE_CELLS = 1024
+"""Cells a side of a DSM tile (at 0.5 m cells on a 0.5 m GSD image: about 1 000 image px)."""
+TILED_MIN_PX = 2048
+"""A reference window larger than this (px, either side) is made tile by tile by default."""
+CONTEXT_M = 16.0
+"""Metres around a tile's box that its window adds for the matching's context (on top of the
+margin whose points it keeps)."""
+
+
+def _margin_m(res_m: float, max_hole_m: float) -> float:
+    """Points kept around a tile (m): the footprint of a point and the holes interpolated need
+    the neighbours' heights."""
+    return float(max_hole_m + 8.0 * res_m)
+
+
+@dataclasses.dataclass(frozen=True)
+class DSMJob:
+    """The per-tile work of one DSM (called as ``job(tile, path)`` by the tile runner).
+
+    ``models``/``paths``: the images, the reference first, each model in its raster's pixels;
+    ``epsg``, ``res_m``, ``x0``, ``y0``: the DSM's grid (upper-left corner, m); ``heights``:
+    the terrain's lowest and highest height (m, ellipsoidal) the windows are projected at;
+    ``tie_heights``: the tie points' height range (``None``: each tile finds it by a coarse
+    matching); ``margin_m`` (points kept around a tile); the options of
+    :func:`~jaxgeo.stereo.dsm_from_images`."""
+
+    models: tuple[AbstractSensorModel, ...]
+    paths: tuple[str, ...]
+    epsg: int
+    res_m: float
+    x0: float
+    y0: float
+    heights: tuple[float, float]
+    tie_heights: tuple[float, float] | None
+    margin_m: float
+    spec: RasterSpec
+    method: str = "intersect"
+    register: bool = True
+    band_rows: int | None = BAND_ROWS
+    max_hole_m: float = MAX_HOLE_M
+    sgm: SGMSettings = DEFAULT_SGM
+    orientation: tuple | None = None
+    """Per pair (reference, i) the ``(4, 4)`` shift covariance (px^2), or ``None``."""
+
+    def box(self, tile: Tile, margin_m: float = 0.0) -> tuple[float, float, float, float]:
+        """``(xmin, ymin, xmax, ymax)`` of the tile's cells (map m), widened by ``margin_m``."""
+        xmin = self.x0 + tile.col * self.res_m - margin_m
+        ymax = self.y0 - tile.row * self.res_m + margin_m
+        xmax = self.x0 + (tile.col + tile.cols) * self.res_m + margin_m
+        ymin = self.y0 - (tile.row + tile.rows) * self.res_m - margin_m
+        return xmin, ymin, xmax, ymax
+
+    def window(self, tile: Tile) -> tuple[int, int, int, int] | None:
+        """The reference image's window ``(col, row, w, h)`` that sees the tile and its margins
+        at every height of ``heights`` (clipped; ``None``: it sees none of it)."""
+        box = self.box(tile, self.margin_m + CONTEXT_M)
+        return reference_window(self.models[0], self.paths[0], self.epsg, box, self.heights)
+
+    def __call__(self, tile: Tile, path) -> dict:
+        roi = self.window(tile)
+        if roi is None:
+            raise NoData("the reference image does not see this tile")
+        ref, ref_path = self.models[0], self.paths[0]
+        kept, sigmas, pairs = [], [], []
+        xmin, ymin, xmax, ymax = self.box(tile, self.margin_m)
+        for i in range(1, len(self.models)):
+            name = pathlib.Path(self.paths[i]).name
+            try:
+                with warnings.catch_warnings():  # warned once, by the planner
+                    warnings.simplefilter("ignore")
+                    pair = stereo_pair(
+                        ref, self.models[i], ref_path, self.paths[i], roi, method=self.method,
+                        band_rows=self.band_rows, height_range_m=self.tie_heights,
+                        sgm=self.sgm,
+                        orientation=None if self.orientation is None else self.orientation[i - 1],
+                    )  # fmt: skip
+            except StereoError as err:  # this pair sees nothing to match here: the others may
+                pairs.append({"image": name, "failed": " ".join(str(err).split())})
+                continue
+            xyh = to_map(pair.points, self.epsg)
+            inside = (np.all(np.isfinite(xyh), axis=1) & (xyh[:, 0] >= xmin)
+                      & (xyh[:, 0] < xmax) & (xyh[:, 1] >= ymin) & (xyh[:, 1] < ymax))  # fmt: skip
+            kept.append(pair.points[inside])
+            sigmas.append((pair.match_sigma_m[inside], pair.orientation_sigma_m[inside]))
+            pairs.append({"image": name, **_small(pair.stats), "points": int(inside.sum())})
+        usable = [k for k, p in enumerate(kept) if len(p)]
+        if not usable:
+            reasons = "; ".join(f"{p['image']}: {p['failed']}" for p in pairs if "failed" in p)
+            raise NoData(reasons or "no point of any pair falls in this tile")
+        kept = [kept[k] for k in usable]
+        sigmas = [sigmas[k] for k in usable]
+        if self.register and len(kept) > 1:
+            offsets = _height_offsets(kept, self.res_m, self.epsg)
+            for pts, off in zip(kept, offsets, strict=True):
+                pts[:, 2] -= off
+        pad = int(math.ceil(self.margin_m / self.res_m))
+        x0 = self.x0 + (tile.col - pad) * self.res_m
+        y0 = self.y0 - (tile.row - pad) * self.res_m
+        footprint = max(_spacing(p, self.epsg) for p in kept)
+        dsm = rasterize(
+            np.concatenate(kept), self.res_m, epsg=self.epsg, origin=(x0, y0),
+            shape=(tile.rows + 2 * pad, tile.cols + 2 * pad), footprint_m=footprint,
+            max_hole_m=self.max_hole_m,
+            sigmas=tuple(np.concatenate(s) for s in zip(*sigmas, strict=True)),
+        )  # fmt: skip
+        bands = np.stack([b[pad : pad + tile.rows, pad : pad + tile.cols]
+                          for b in dsm.bands().values()])  # fmt: skip
+        valid = int(np.isfinite(bands[0]).sum())
+        if valid == 0:
+            raise NoData("no cell of this tile got a height")
+        write_tile(path, self.spec, tile.row, tile.col, bands)
+        return {"cells": valid, "filled": int((bands[3] == 1).sum()), "window": list(roi),
+                "pairs": pairs}  # fmt: skip
+
+
+def _small(stats: dict) -> dict:
+    """The numbers of a pair's stats worth keeping per tile (JSON)."""
+    keys = ("n_ties", "h_ref_m", "vertical_disparity_px", "disparity_range_px", "disparity_fill")
+    out = {}
+    for k in keys:
+        if k in stats:
+            v = stats[k]
+            out[k] = [float(x) for x in v] if isinstance(v, (tuple, list)) else float(v)
+    return out
+
+
+def reference_window(model, path, epsg, box, heights) -> tuple[int, int, int, int] | None:
+    """The window ``(col, row, w, h)`` of the image ``path`` (its ``model``) that sees the map
+    ``box = (xmin, ymin, xmax, ymax)`` (EPSG ``epsg``) at the heights ``(lo, hi)``: its outline
+    projected at both (clipped to the image; ``None``: none of it)."""
+    import pyproj
+
+    t = np.linspace(0.0, 1.0, 9)
+    xmin, ymin, xmax, ymax = box
+    xs = np.concatenate([xmin + t * (xmax - xmin), xmin + t * (xmax - xmin),
+                         np.full_like(t, xmin), np.full_like(t, xmax)])  # fmt: skip
+    ys = np.concatenate([np.full_like(t, ymin), np.full_like(t, ymax),
+                         ymin + t * (ymax - ymin), ymin + t * (ymax - ymin)])  # fmt: skip
+    lon, lat = pyproj.Transformer.from_crs(epsg, 4326, always_xy=True).transform(xs, ys)
+    ground = np.concatenate([np.stack([lon, lat, np.full_like(xs, h)], -1) for h in heights])
+    xy = np.asarray(model.project(ground))
+    xy = xy[np.all(np.isfinite(xy), axis=1)]
+    if not len(xy):
+        return None
+    w, h = image_size(path)
+    c0, r0 = (int(v) for v in np.floor(xy.min(0)))
+    c1, r1 = (int(v) for v in np.ceil(xy.max(0)) + 1)
+    c0, r0, c1, r1 = max(c0, 0), max(r0, 0), min(c1, w), min(r1, h)
+    if c1 - c0 < 32 or r1 - r0 < 32:  # a sliver at the image's edge: nothing to match
+        return None
+    return c0, r0, c1 - c0, r1 - r0
+
+
+@dataclasses.dataclass(frozen=True)
+class DSMSetup:
+    """A tiled DSM ready to run: the per-tile ``job`` and the tile ``plan``."""
+
+    job: DSMJob
+    plan: TilePlan
+
+
+def _file_id(path) -> dict:
+    st = os.stat(path)
+    return {"path": str(path), "bytes": st.st_size, "mtime": st.st_mtime}
+
+
+def _model_digest(models) -> str:
+    import jax
+
+    h = hashlib.sha256()
+    for model in models:
+        h.update(type(model).__qualname__.encode())
+        for leaf in jax.tree.leaves(model):
+            h.update(np.ascontiguousarray(np.asarray(leaf)).tobytes())
+    return h.hexdigest()
+
+
+def plan_dsm(
+    models: Sequence[AbstractSensorModel],
+    paths: Sequence[str | os.PathLike],
+    roi: tuple[int, int, int, int] | None = None,
+    res_m: float = 0.5,
+    epsg: int | None = None,
+    *,
+    heights: tuple[float, float] | None = None,
+    tie_heights: tuple[float, float] | None = None,
+    tile_px: int = TILE_CELLS,
+    method: str = "intersect",
+    register: bool = True,
+    band_rows: int | None = BAND_ROWS,
+    max_hole_m: float = MAX_HOLE_M,
+    orientation: Orientation = None,
+) -> DSMSetup:
+    """The tile plan and per-tile job of the DSM of ``roi`` of the first image (whole image by
+    default) from the pairs (first, i).
+
+    ``heights``: the terrain's lowest and highest height (m, ellipsoidal; default the reference
+    model's validity range): the grid covers the ROI's footprint between them, and each tile
+    reads the reference window that sees it at both. ``tie_heights``: the tie points' height
+    range (default: each tile's coarse matching). Other arguments: :func:`dsm_from_images`.
+    """
+    if len(models) != len(paths) or len(paths) < 2:
+        raise StereoError(f"dsm: give at least two images, each with its model ({len(paths)} "
+                          f"images, {len(models)} models)")  # fmt: skip
+    if tile_px < 64:
+        raise ValueError(f"dsm: tile size {tile_px} cells: expected >= 64")
+    ref = models[0]
+    w, h = image_size(paths[0])
+    col, row, rw, rh = roi if roi is not None else (0, 0, w, h)
+    lo, hi = heights if heights is not None else los_heights(ref)
+    t = np.linspace(0.0, 1.0, 17)
+    c, r, one = col - 0.5 + t * rw, row - 0.5 + t * rh, np.ones_like(t)
+    edge = np.concatenate([np.stack(xy, -1) for xy in ((c, one * (row - 0.5)),
+                           (c, one * (row + rh - 0.5)), (one * (col - 0.5), r),
+                           (one * (col + rw - 0.5), r))])  # fmt: skip
+    mid = 0.5 * (lo + hi)
+    ground = np.asarray(ref.localize(edge, np.full(len(edge), mid)))
+    if not np.all(np.isfinite(ground)):
+        raise StereoError(f"dsm: the model of {paths[0]} cannot localise the edges of the ROI")
+    if epsg is None:
+        epsg = local_utm_epsg(float(np.median(ground[:, 0])), float(np.median(ground[:, 1])))
+    xyh = to_map(ground, epsg)
+    x0 = float(np.floor(xyh[:, 0].min() / res_m) * res_m)
+    y0 = float(np.ceil(xyh[:, 1].max() / res_m) * res_m)
+    cols = int(np.ceil((xyh[:, 0].max() - x0) / res_m))
+    rows = int(np.ceil((y0 - xyh[:, 1].min()) / res_m))
+    tile = int(tile_px)
+    factors = overview_factors(cols, rows)
+    if factors and tile % factors[-1]:
+        factors = ()
+    names = list(DSM_BANDS)
+    spec = RasterSpec(len(names), "float32", float("nan"), _wkt(epsg),
+                      (res_m, 0.0, x0, 0.0, -res_m, y0), factors, "average",
+                      descriptions=tuple(names),
+                      units=tuple(DSM_BANDS[n][0] for n in names),
+                      band_tags=tuple((("meaning", DSM_BANDS[n][1]),) for n in names),
+                      tags=(("heights", "ellipsoidal (WGS84), m"),))  # fmt: skip
+    per_pair = None
+    if orientation is not None:
+        per_pair = tuple(pair_orientation(orientation, len(paths), 0, i)
+                         for i in range(1, len(paths)))  # fmt: skip
+    job = DSMJob(
+        models=tuple(models), paths=tuple(str(p) for p in paths), epsg=int(epsg),
+        res_m=float(res_m), x0=x0, y0=y0, heights=(float(lo), float(hi)),
+        tie_heights=None if tie_heights is None else tuple(float(v) for v in tie_heights),
+        margin_m=_margin_m(res_m, max_hole_m), spec=spec, method=method, register=register,
+        band_rows=band_rows, max_hole_m=float(max_hole_m), orientation=per_pair,
+    )  # fmt: skip
+    digest = _model_digest(models)
+    fields = [f.name for f in dataclasses.fields(job) if f.name not in ("models", "spec")]
+    job_text = repr({f: getattr(job, f) for f in fields}) + digest
+    job_dict = {
+        "images": [_file_id(p) for p in paths],
+        "models_sha256": digest,
+        "roi": [col, row, rw, rh],
+        "epsg": int(epsg),
+        "res_m": float(res_m),
+        "transform": list(spec.transform),
+        "width": cols,
+        "height": rows,
+        "heights_m": [float(lo), float(hi)],
+        "tie_heights_m": None if tie_heights is None else [float(v) for v in tie_heights],
+        "margin_m": job.margin_m,
+        "method": method,
+        "register": register,
+        "bands": names,
+        "job_sha256": hashlib.sha256(job_text.encode()).hexdigest(),
+    }
+    plan0 = plan_tiles("dsm", cols, rows, tile)
+    windows = {t.id: job.window(t) for t in plan0.tiles}
+    plan = plan_tiles("dsm", cols, rows, tile, 0, job=job_dict,
+                      inputs=lambda t: {"reference_window": _listed(windows[t.id]),
+                                        "box_m": list(job.box(t))})  # fmt: skip
+    return DSMSetup(job, plan)
+
+
+def _listed(window):
+    return None if window is None else [int(v) for v in window]
+
+
+def _wkt(epsg: int) -> str:
+    import pyproj
+
+    return pyproj.CRS.from_epsg(epsg).to_wkt()
+
+
+@dataclasses.dataclass(frozen=True)
+class TiledDSMReport:
+    """What :func:`tiled_dsm` made: ``path``, its grid (``epsg``, ``res_m``, ``width`` x
+    ``height`` cells), ``filled`` (share of cells with a height), ``interpolated`` (share of
+    cells interpolated), the run (``tiles``, ``empty_tiles``: nodata, ``reused_tiles``,
+    ``workers``, ``scheduler``, ``seconds``) and per tile its pairs' numbers or why it is
+    empty (``tile_stats``)."""
+
+    path: pathlib.Path
+    epsg: int
+    res_m: float
+    width: int
+    height: int
+    filled: float
+    interpolated: float
+    seconds: float
+    tiles: int
+    empty_tiles: int
+    reused_tiles: int
+    workers: int
+    scheduler: str | None
+    tile_stats: dict
+
+
+def tiled_dsm(
+    setup: DSMSetup,
+    out: str | os.PathLike,
+    *,
+    workers: int | None = None,
+    scheduler: str | None = None,
+    resume: str | os.PathLike | None = None,
+    retries: int = 2,
+    overwrite: bool = False,
+    progress: bool = True,
+    compress: str = "deflate",
+) -> TiledDSMReport:
+    """Run the tiles of ``setup`` (:func:`plan_dsm`) and write the DSM as one COG at ``out``
+    (atomic: complete or absent). ``workers``, ``scheduler``, ``retries``: where the tiles run
+    (:func:`jaxgeo.tiles.run_tiles`; by default one worker process per core when there are
+    several tiles: a tile takes tens of seconds, a worker's start a few); ``resume``: a folder
+    for the finished tiles, kept after an interruption and reused by the next run (default: a
+    temporary folder beside ``out``).
+    :class:`StereoError` when no tile gets a height."""
+    import time
+
+    from ..io import refuse_existing
+
+    t0 = time.perf_counter()
+    out = refuse_existing(out, overwrite)
+    if workers is None and not scheduler:  # a DSM tile is tens of seconds: workers pay off
+        workers = cores() if len(setup.plan) > 1 and cores() > 1 else 0
+    folder, done = None, False
+    try:
+        folder = work_folder(out, resume)
+        run = run_tiles(setup.plan, setup.job, folder, workers=workers, scheduler=scheduler,
+                        retries=retries, progress=progress)  # fmt: skip
+        stats = {k: r.stats for k, r in run.results.items()}
+        if all(r.path is None for r in run.results.values()):
+            why = sorted({str(s.get("no_data", "")) for s in stats.values() if s})
+            raise StereoError(f"dsm: no tile of {setup.job.paths[0]} got a height"
+                              + (f" ({'; '.join(why)[:300]})" if why else ""))  # fmt: skip
+        mosaic_cog(run, setup.plan, setup.job.spec, out, overwrite=overwrite, compress=compress)
+        done = True
+    finally:
+        if folder is not None and (resume is None or done):
+            remove_work(folder, created=resume is None)
+    cells = setup.plan.width * setup.plan.height
+    return TiledDSMReport(
+        path=pathlib.Path(out), epsg=setup.job.epsg, res_m=setup.job.res_m,
+        width=setup.plan.width, height=setup.plan.height,
+        filled=sum(s.get("cells", 0) for s in stats.values() if s) / cells,
+        interpolated=sum(s.get("filled", 0) for s in stats.values() if s) / cells,
+        seconds=time.perf_counter() - t0, tiles=len(setup.plan), empty_tiles=run.empty,
+        reused_tiles=run.reused, workers=run.workers, scheduler=run.scheduler, tile_stats=stats,
+    )  # fmt: skip

@@ -1,0 +1,162 @@
+"""A DSM tile by tile (``jaxgeo.stereo.plan_dsm`` / ``tiled_dsm``) on a simulated pair with its
+truth: equal to the untiled DSM to the matching's noise, as accurate against the truth; the same
+on 2 spawned dask workers as in this process; ``resume`` reuses the tiles a failed run finished;
+a tile the reference image does not see is nodata, a scene without texture an error naming the
+image; ``jaxgeo dsm --plan`` lists the tiles and computes nothing.
+
+Scene: :func:`jaxgeo.simulate.stereo_scene`, 400 x 400 px, seed 3, exact RPCs (the vendor's
+pointing error would shift every height alike), 0.65 m cells in tiles of 256 cells (4 tiles)."""
+
+import dataclasses
+import json
+
+import numpy as np
+import pytest
+import rasterio
+from rasterio.warp import Resampling, reproject
+
+from jaxgeo.cli import main
+from jaxgeo.io import open_image
+from jaxgeo.simulate import stereo_scene
+from jaxgeo.stereo import StereoError, dsm_from_images, plan_dsm, tiled_dsm, write_dsm
+from jaxgeo.tiles import NoData, Tile, TileError, WorkerPool, mosaic_cog, run_tiles
+
+SIZE, SEED, RES, TILE = 400, 3, 0.65, 256
+
+
+@pytest.fixture(scope="module")
+def scene(tmp_path_factory):
+    folder = tmp_path_factory.mktemp("scene")
+    stereo_scene(folder, SIZE, SEED, exact_rpc=True)
+    images = [open_image(folder / name) for name in ("left.tif", "right.tif")]
+    return folder, [im.model for im in images], [im.path for im in images]
+
+
+@pytest.fixture(scope="module")
+def setup(scene):
+    _, models, paths = scene
+    return plan_dsm(models, paths, res_m=RES, tile_px=TILE)
+
+
+@pytest.fixture(scope="module")
+def tiled(setup, tmp_path_factory):
+    out = tmp_path_factory.mktemp("tiled") / "dsm.tif"
+    report = tiled_dsm(setup, out, workers=0, progress=False)
+    return out, report
+
+
+def _height_on(grid_path, path) -> np.ndarray:
+    """Band 1 of ``path`` on the grid of ``grid_path`` (nearest cell)."""
+    with rasterio.open(grid_path) as g, rasterio.open(path) as s:
+        out = np.full((g.height, g.width), np.nan)
+        reproject(rasterio.band(s, 1), out, dst_transform=g.transform, dst_crs=g.crs,
+                  resampling=Resampling.nearest, src_nodata=np.nan, dst_nodata=np.nan)  # fmt: skip
+    return out
+
+
+def test_tiled_dsm_equals_the_untiled_one_and_the_truth(scene, setup, tiled, tmp_path):
+    folder, models, paths = scene
+    out, report = tiled
+    assert report.tiles == len(setup.plan) == 4 and report.empty_tiles == 0
+    with rasterio.open(out) as ds:
+        assert (
+            ds.count == 5
+            and ds.descriptions[0] == "height"
+            and ds.descriptions[4] == ("height_sigma")
+        )
+        assert ds.units[0] == "m" and "meaning" in ds.tags(1)
+        assert ds.res == (RES, RES)
+    full, _ = dsm_from_images(models, paths, res_m=RES, epsg=setup.job.epsg)
+    write_dsm(full, tmp_path / "full.tif")
+    a = _height_on(out, out)
+    b = _height_on(out, tmp_path / "full.tif")
+    truth = _height_on(out, folder / "truth_dsm.tif")
+    both = np.isfinite(a) & np.isfinite(b)
+    assert both.sum() > 0.8 * np.isfinite(b).sum()
+    assert np.median(np.abs(a[both] - b[both])) < 0.15  # SGM's noise at the tiles' edges
+    seen = np.isfinite(truth)
+    for h in (a, b):
+        assert np.isfinite(h[seen]).mean() > 0.9
+        ok = seen & np.isfinite(h)
+        assert np.median(np.abs(h[ok] - truth[ok])) < 0.5
+
+
+def test_tiles_on_two_spawned_workers_equal_those_made_here(setup, tiled, tmp_path):
+    out, _ = tiled
+    with WorkerPool(2, retries=1, warm=("jaxgeo.stereo",)) as pool:
+        run = run_tiles(setup.plan, setup.job, tmp_path / "work", pool=pool, progress=False)
+    assert run.workers == 2
+    mosaic_cog(run, setup.plan, setup.job.spec, tmp_path / "dask.tif")
+    with rasterio.open(out) as a, rasterio.open(tmp_path / "dask.tif") as b:
+        np.testing.assert_allclose(b.read(), a.read(), atol=1e-3, equal_nan=True)
+
+
+@dataclasses.dataclass(frozen=True)
+class FailOn:
+    """The DSM job, failing on one tile."""
+
+    job: object
+    tile_id: str
+
+    def __call__(self, tile, path):
+        if tile.id == self.tile_id:
+            raise RuntimeError("injected failure")
+        return self.job(tile, path)
+
+
+def test_resume_reuses_the_tiles_a_failed_run_finished(setup, tiled, tmp_path):
+    out, _ = tiled
+    work = tmp_path / "work"
+    last = setup.plan.tiles[-1].id
+    with pytest.raises(TileError, match=last):
+        run_tiles(setup.plan, FailOn(setup.job, last), work, workers=0, retries=0,
+                  progress=False)  # fmt: skip
+    report = tiled_dsm(setup, tmp_path / "dsm.tif", workers=0, resume=work, progress=False)
+    assert report.reused_tiles == len(setup.plan) - 1
+    assert not work.exists()  # after success the work folder is removed
+    with rasterio.open(out) as a, rasterio.open(tmp_path / "dsm.tif") as b:
+        np.testing.assert_array_equal(b.read(), a.read())
+
+
+def test_a_tile_the_reference_does_not_see_is_nodata(setup, tmp_path):
+    far = Tile("far", -100_000, -100_000, 64, 64)
+    with pytest.raises(NoData, match="does not see"):
+        setup.job(far, tmp_path / "far.tif")
+
+
+def test_a_scene_without_texture_is_an_error_naming_the_image(scene, tmp_path):
+    _, models, paths = scene
+    flat = []
+    for p in paths:
+        with rasterio.open(p) as src:
+            profile, data = src.profile, src.read()
+        target = tmp_path / p.name
+        with rasterio.open(target, "w", **profile) as dst:
+            dst.write(np.full_like(data, 1000))
+        flat.append(target)
+    setup = plan_dsm(models, flat, res_m=RES, tile_px=TILE)
+    with pytest.raises(StereoError, match="left.tif"):
+        tiled_dsm(setup, tmp_path / "dsm.tif", workers=0, progress=False)
+    assert not (tmp_path / "dsm.tif").exists()
+
+
+def test_plan_lists_the_tiles_and_computes_nothing(scene, setup, tmp_path, capsys):
+    folder, _, _ = scene
+    plan = tmp_path / "plan.json"
+    out = tmp_path / "dsm.tif"
+    code = main(["dsm", str(folder / "left.tif"), str(folder / "right.tif"), "--res", str(RES),
+                 "--tile", str(TILE), "--plan", str(plan), "-o", str(out), "--quiet"])  # fmt: skip
+    assert code == 0 and not out.exists()
+    data = json.loads(plan.read_text())
+    assert data["kind"] == "dsm" and len(data["tiles"]) == len(setup.plan)
+    windows = [t["inputs"]["reference_window"] for t in data["tiles"]]
+    assert all(w is None or (w[2] > 0 and w[3] > 0) for w in windows)
+    assert f"{len(setup.plan)} tiles" in capsys.readouterr().out
+
+
+def test_keep_is_refused_for_a_tiled_dsm(scene, tmp_path, capsys):
+    folder, _, _ = scene
+    code = main(["dsm", str(folder / "left.tif"), str(folder / "right.tif"), "--tile", "256",
+                 "--keep", str(tmp_path / "keep"), "-o", str(tmp_path / "dsm.tif")])  # fmt: skip
+    assert code == 2 and "--keep" in capsys.readouterr().err
+    assert not (tmp_path / "dsm.tif").exists()
