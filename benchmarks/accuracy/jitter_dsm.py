@@ -23,6 +23,17 @@ cells included):
   to them;
 - the tie residual across the epipolar direction after each adjustment (as in ``jitter``).
 
+Can height information remove what the ties alone leave (the along-track jitter looks like a
+height change to them)? Two more cases, ``jitter_dem_<name>``: the same jitter adjustment with
+every tie's height from a DEM as an observation (:func:`jaxgeo.bundle.adjust`'s
+``tie_height``, ``tie_height_sigma_m``). Both DEMs are made from ``truth_dsm.tif`` (its voids
+filled with the nearest height, 2 cells of margin), block-averaged to ``--srtm-res-m`` (sigma
+``--srtm-sigma-m``: SRTM-like) and ``--lidar-res-m`` (sigma ``--lidar-sigma-m``: lidar-like),
+written as GeoTIFF and read with :func:`jaxgeo.io.read_dem` (ellipsoidal, as the truth). They
+carry no error but their resolution's: ``dems.<name>.error_m`` is theirs at the scene's truth
+points. ``corrugation`` gathers, per DSM, the interior RMSE, ``line_std_m`` and
+``period_amplitude_m``.
+
 One JSON object on stdout (the machine last, :func:`benchmarks.harness.emit`) and, with
 ``--save``, in ``benchmarks/results/jitter_dsm-<size>px_seed<seed>-<machine>.json``::
 
@@ -117,6 +128,50 @@ def errors(dsm_h, truth_h, lines, size, args) -> dict:
     return out
 
 
+def make_dem(truth, res_m: float, path) -> pathlib.Path:
+    """A GeoTIFF DEM of the truth block-averaged to ``res_m`` (whole truth cells per block):
+    the truth's voids filled with the nearest height first, then 2 cells of margin (edge
+    heights) all round."""
+    import rasterio
+    from rasterio.transform import Affine
+    from scipy import ndimage
+
+    h, _, _, res, epsg, (x0, y0) = truth
+    void = ~np.isfinite(h)
+    idx = ndimage.distance_transform_edt(void, return_distances=False, return_indices=True)
+    filled = h[tuple(idx)]
+    f = max(1, round(res_m / res))
+    rows, cols = -(-filled.shape[0] // f), -(-filled.shape[1] // f)
+    pad = ((0, rows * f - filled.shape[0]), (0, cols * f - filled.shape[1]))
+    blocks = np.pad(filled, pad, mode="edge").reshape(rows, f, cols, f).mean(axis=(1, 3))
+    margin = 2
+    dem = np.pad(blocks, margin, mode="edge").astype(np.float32)
+    cell = res * f
+    transform = Affine(cell, 0.0, x0 - margin * cell, 0.0, -cell, y0 + margin * cell)
+    profile = {"driver": "GTiff", "width": dem.shape[1], "height": dem.shape[0], "count": 1,
+               "dtype": "float32", "crs": f"EPSG:{epsg}", "transform": transform}  # fmt: skip
+    with rasterio.open(path, "w", **profile) as dst:
+        dst.write(dem, 1)
+    return pathlib.Path(path)
+
+
+def dems(truth, scene, args, folder) -> dict:
+    """``name -> (DEM, sigma_m, description)`` for the SRTM-like and lidar-like DEMs."""
+    from jaxgeo.io import read_dem
+
+    out = {}
+    for name, res_m, sigma in (("srtm", args.srtm_res_m, args.srtm_sigma_m),
+                               ("lidar", args.lidar_res_m, args.lidar_sigma_m)):  # fmt: skip
+        path = make_dem(truth, res_m, pathlib.Path(folder) / f"dem_{name}.tif")
+        dem = read_dem(path, height="ellipsoidal")
+        e = dem(scene.points[:, :2]) - scene.points[:, 2]
+        error = {("points" if k == "cells" else k): v for k, v in stats(e).items()}
+        info = {"cell_m": round(truth[3] * max(1, round(res_m / truth[3])), 3), "sigma_m": sigma,
+                "shape": list(dem.shape), "error_m": error}  # fmt: skip
+        out[name] = (dem, sigma, info)
+    return out
+
+
 def true_models(scene) -> dict:
     """The true jittered models, as fast as RPCs: each image's jitter
     (:class:`~jaxgeo.simulate._stereo_scene_models.JitteredModel`) on its exact RPC (the
@@ -174,6 +229,17 @@ def run(directory, args) -> dict:
     truth_h, xx, yy, _, epsg, _ = truth
     lines = cell_lines(scene.rpcs["left"], xx, yy, truth_h, epsg)
     cases = {"given": given, "affine": m_affine, "jitter": m_jitter}
+    adjusted = {"affine": affine, "jitter": jitter}
+    dem_info = {}
+    with tempfile.TemporaryDirectory(prefix="jaxgeo_jitter_dsm_dem_") as folder:
+        for name, (dem, sigma, info) in dems(truth, scene, args, folder).items():
+            print(f"[jitter_dsm] adjustment with {name} heights", file=sys.stderr, flush=True)
+            case = f"jitter_dem_{name}"
+            dem_info[name] = info
+            adjusted[case], cases[case] = adjust_case(
+                scene, ties, lambda rpc: JitterBias(span, **kw), h_range, tie_height=dem,
+                tie_height_sigma_m=sigma,
+            )  # fmt: skip
     if args.truth_models:
         cases["true_models"] = true_models(scene)
     dsms = {}
@@ -189,12 +255,16 @@ def run(directory, args) -> dict:
         "smoothness_px": args.smoothness_px,
         "bin_lines": args.bin_lines,
         "edge_lines": args.edge_lines,
-        "adjust": {
-            "given": {"ties": across_rms(given, ties.xy1, ties.xy2, h_range)},
-            "affine": affine,
-            "jitter": jitter,
-        },
+        "adjust": {"given": {"ties": across_rms(given, ties.xy1, ties.xy2, h_range)}} | adjusted,
+        "dems": dem_info,
         "dsm": dsms,
+        "corrugation": {
+            name: {
+                k: round(v["interior"][k], 4)
+                for k in ("rmse_m", "line_std_m", "period_amplitude_m")
+            }
+            for name, v in dsms.items()
+        },
         "interior_rmse_ratio_affine_over_jitter": round(a["rmse_m"] / j["rmse_m"], 3),
         "line_std_ratio_affine_over_jitter": round(a["line_std_m"] / j["line_std_m"], 3),
     }
@@ -213,6 +283,10 @@ def main() -> None:
                         help="lines left out at the top and bottom of the line bins")  # fmt: skip
     parser.add_argument("--no-truth-models", dest="truth_models", action="store_false",
                         help="skip the DSM with the true models")  # fmt: skip
+    parser.add_argument("--srtm-res-m", type=float, default=30.0, help="SRTM-like DEM cell")
+    parser.add_argument("--srtm-sigma-m", type=float, default=5.0, help="its tie height sigma")
+    parser.add_argument("--lidar-res-m", type=float, default=2.0, help="lidar-like DEM cell")
+    parser.add_argument("--lidar-sigma-m", type=float, default=0.3, help="its tie height sigma")
     parser.add_argument("--scene", help="an existing stereo-scene folder (else simulated)")
     parser.add_argument("--save", action="store_true", help="also write benchmarks/results/")
     args = parser.parse_args()
