@@ -89,15 +89,16 @@ def across_rms(models, xy1, xy2, h_range) -> dict:
     }
 
 
-def adjust_case(scene, ties, bias, h_range) -> dict:
+def adjust_case(scene, ties, bias, h_range, **adjust_kw) -> dict:
     """Adjust the pair's RPCs with ``bias`` (a function ``rpc -> AbstractBias``) from the ties;
-    the across-epipolar residuals of the ties and of the true points after."""
+    the across-epipolar residuals of the ties and of the true points after. ``adjust_kw`` go to
+    :func:`jaxgeo.bundle.adjust` (e.g. ``tie_height``, ``tie_height_sigma_m``)."""
     from jaxgeo.bundle import adjust
     from jaxgeo.models import Biased
 
     models = {n: Biased(scene.rpcs[n], bias(scene.rpcs[n])) for n in ("left", "right")}
     t = time.perf_counter()
-    res = adjust(models, tie_observations(ties), prior_sigma=bias_priors(models))
+    res = adjust(models, tie_observations(ties), prior_sigma=bias_priors(models), **adjust_kw)
     dt = time.perf_counter() - t
     adj = {n: res.models[n] for n in ("left", "right")}
     out = {

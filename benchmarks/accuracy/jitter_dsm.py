@@ -23,6 +23,20 @@ cells included):
   to them;
 - the tie residual across the epipolar direction after each adjustment (as in ``jitter``).
 
+Can height information remove what the ties alone leave (the along-track jitter looks like a
+height change to them)? Two more cases, ``jitter_dem_<name>``: the same jitter adjustment with
+every tie's height from a DEM as an observation (:func:`jaxgeo.bundle.adjust`'s
+``tie_height``, ``tie_height_sigma_m``). Both DEMs are made from ``truth_dsm.tif`` (its voids
+filled with the nearest height, 2 cells of margin), block-averaged to ``--srtm-res-m`` (sigma
+``--srtm-sigma-m``: SRTM-like) and ``--lidar-res-m`` (sigma ``--lidar-sigma-m``: lidar-like),
+written as GeoTIFF and read with :func:`jaxgeo.io.read_dem` (ellipsoidal, as the truth). They
+carry no error but their resolution's; a third, ``srtm_noisy``, is the SRTM-like one plus a
+correlated error as a real SRTM has (a Gaussian random field of standard deviation
+``--srtm-noise-m`` and correlation ``NOISE_CORRELATION_M``, one draw seeded by the scene's
+seed; ``--srtm-noise-m 0``: no such case). ``dems.<name>.error_m`` is each DEM's error at the
+scene's truth points. ``corrugation`` gathers, per DSM, the interior RMSE, median,
+``line_std_m`` and ``period_amplitude_m``.
+
 One JSON object on stdout (the machine last, :func:`benchmarks.harness.emit`) and, with
 ``--save``, in ``benchmarks/results/jitter_dsm-<size>px_seed<seed>-<machine>.json``::
 
@@ -47,6 +61,9 @@ from benchmarks.accuracy.jitter import HEIGHT_MARGIN_M, across_rms, adjust_case 
 from benchmarks.harness import emit, result_name  # noqa: E402
 
 RESULTS = pathlib.Path(__file__).resolve().parents[1] / "results"
+NOISE_CORRELATION_M = 90.0
+"""Standard deviation (m on the ground) of the Gaussian kernel that correlates the noisy
+SRTM-like DEM's error (a white field smoothed by it, then scaled)."""
 
 
 def read_truth(directory):
@@ -117,6 +134,61 @@ def errors(dsm_h, truth_h, lines, size, args) -> dict:
     return out
 
 
+def make_dem(truth, res_m: float, path, noise_m: float = 0.0, seed: int = 0) -> pathlib.Path:
+    """A GeoTIFF DEM of the truth block-averaged to ``res_m`` (whole truth cells per block):
+    the truth's voids filled with the nearest height first, then 2 cells of margin (edge
+    heights) all round; plus, with ``noise_m``, a random field of that standard deviation
+    correlated over ``NOISE_CORRELATION_M`` (drawn with ``seed``)."""
+    import rasterio
+    from rasterio.transform import Affine
+    from scipy import ndimage
+
+    h, _, _, res, epsg, (x0, y0) = truth
+    void = ~np.isfinite(h)
+    idx = ndimage.distance_transform_edt(void, return_distances=False, return_indices=True)
+    filled = h[tuple(idx)]
+    f = max(1, round(res_m / res))
+    rows, cols = -(-filled.shape[0] // f), -(-filled.shape[1] // f)
+    pad = ((0, rows * f - filled.shape[0]), (0, cols * f - filled.shape[1]))
+    blocks = np.pad(filled, pad, mode="edge").reshape(rows, f, cols, f).mean(axis=(1, 3))
+    margin = 2
+    dem = np.pad(blocks, margin, mode="edge")
+    cell = res * f
+    if noise_m > 0:
+        white = np.random.default_rng(seed).standard_normal(dem.shape)
+        field = ndimage.gaussian_filter(white, NOISE_CORRELATION_M / cell, mode="wrap")
+        dem = dem + field * (noise_m / field.std())
+    dem = dem.astype(np.float32)
+    transform = Affine(cell, 0.0, x0 - margin * cell, 0.0, -cell, y0 + margin * cell)
+    profile = {"driver": "GTiff", "width": dem.shape[1], "height": dem.shape[0], "count": 1,
+               "dtype": "float32", "crs": f"EPSG:{epsg}", "transform": transform}  # fmt: skip
+    with rasterio.open(path, "w", **profile) as dst:
+        dst.write(dem, 1)
+    return pathlib.Path(path)
+
+
+def dems(truth, scene, args, folder) -> dict:
+    """``name -> (DEM, sigma_m, description)`` for the SRTM-like, lidar-like and noisy
+    SRTM-like DEMs."""
+    from jaxgeo.io import read_dem
+
+    out = {}
+    todo = [("srtm", args.srtm_res_m, args.srtm_sigma_m, 0.0),
+            ("lidar", args.lidar_res_m, args.lidar_sigma_m, 0.0)]  # fmt: skip
+    if args.srtm_noise_m > 0:
+        todo.append(("srtm_noisy", args.srtm_res_m, args.srtm_sigma_m, args.srtm_noise_m))
+    for name, res_m, sigma, noise in todo:
+        path = pathlib.Path(folder) / f"dem_{name}.tif"
+        make_dem(truth, res_m, path, noise, int(scene.info["params"]["seed"]))
+        dem = read_dem(path, height="ellipsoidal")
+        e = dem(scene.points[:, :2]) - scene.points[:, 2]
+        error = {("points" if k == "cells" else k): v for k, v in stats(e).items()}
+        info = {"cell_m": round(truth[3] * max(1, round(res_m / truth[3])), 3), "sigma_m": sigma,
+                "noise_m": noise, "shape": list(dem.shape), "error_m": error}  # fmt: skip
+        out[name] = (dem, sigma, info)
+    return out
+
+
 def true_models(scene) -> dict:
     """The true jittered models, as fast as RPCs: each image's jitter
     (:class:`~jaxgeo.simulate._stereo_scene_models.JitteredModel`) on its exact RPC (the
@@ -174,6 +246,17 @@ def run(directory, args) -> dict:
     truth_h, xx, yy, _, epsg, _ = truth
     lines = cell_lines(scene.rpcs["left"], xx, yy, truth_h, epsg)
     cases = {"given": given, "affine": m_affine, "jitter": m_jitter}
+    adjusted = {"affine": affine, "jitter": jitter}
+    dem_info = {}
+    with tempfile.TemporaryDirectory(prefix="jaxgeo_jitter_dsm_dem_") as folder:
+        for name, (dem, sigma, info) in dems(truth, scene, args, folder).items():
+            print(f"[jitter_dsm] adjustment with {name} heights", file=sys.stderr, flush=True)
+            case = f"jitter_dem_{name}"
+            dem_info[name] = info
+            adjusted[case], cases[case] = adjust_case(
+                scene, ties, lambda rpc: JitterBias(span, **kw), h_range, tie_height=dem,
+                tie_height_sigma_m=sigma,
+            )  # fmt: skip
     if args.truth_models:
         cases["true_models"] = true_models(scene)
     dsms = {}
@@ -189,12 +272,16 @@ def run(directory, args) -> dict:
         "smoothness_px": args.smoothness_px,
         "bin_lines": args.bin_lines,
         "edge_lines": args.edge_lines,
-        "adjust": {
-            "given": {"ties": across_rms(given, ties.xy1, ties.xy2, h_range)},
-            "affine": affine,
-            "jitter": jitter,
-        },
+        "adjust": {"given": {"ties": across_rms(given, ties.xy1, ties.xy2, h_range)}} | adjusted,
+        "dems": dem_info,
         "dsm": dsms,
+        "corrugation": {
+            name: {
+                k: round(v["interior"][k], 4)
+                for k in ("rmse_m", "median_m", "line_std_m", "period_amplitude_m")
+            }
+            for name, v in dsms.items()
+        },
         "interior_rmse_ratio_affine_over_jitter": round(a["rmse_m"] / j["rmse_m"], 3),
         "line_std_ratio_affine_over_jitter": round(a["line_std_m"] / j["line_std_m"], 3),
     }
@@ -213,6 +300,12 @@ def main() -> None:
                         help="lines left out at the top and bottom of the line bins")  # fmt: skip
     parser.add_argument("--no-truth-models", dest="truth_models", action="store_false",
                         help="skip the DSM with the true models")  # fmt: skip
+    parser.add_argument("--srtm-res-m", type=float, default=30.0, help="SRTM-like DEM cell")
+    parser.add_argument("--srtm-sigma-m", type=float, default=5.0, help="its tie height sigma")
+    parser.add_argument("--srtm-noise-m", type=float, default=3.0,
+                        help="error of the noisy SRTM-like DEM (0: no such case)")  # fmt: skip
+    parser.add_argument("--lidar-res-m", type=float, default=2.0, help="lidar-like DEM cell")
+    parser.add_argument("--lidar-sigma-m", type=float, default=0.3, help="its tie height sigma")
     parser.add_argument("--scene", help="an existing stereo-scene folder (else simulated)")
     parser.add_argument("--save", action="store_true", help="also write benchmarks/results/")
     args = parser.parse_args()
