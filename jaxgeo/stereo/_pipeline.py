@@ -250,7 +250,8 @@ def stereo_pair(
         epipolar_shape=grids.epipolar_shape,
     )
     right = resample_epipolar(img2, grids, "right", origin_xy=win2[:2], y_shift_px=shift)
-    a2, b2 = epipolar_matches(left8, to_uint8(right), left_features=left_features)
+    a2, b2 = epipolar_matches(left8, to_uint8(right), left_features=left_features,
+                              tol_px=epipolar_tol_px)  # fmt: skip
     dy2 = b2[:, 1] - a2[:, 1]
     ok2 = np.abs(dy2) < epipolar_tol_px
     if ok2.any():
