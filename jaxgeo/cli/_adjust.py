@@ -339,6 +339,11 @@ def run(args: argparse.Namespace) -> int:
         if dem.vertical_crs and not args.dem_offset_m:
             say(f"note: {args.dem} declares vertical CRS {dem.vertical_crs!r}; heights are used "
                 "as ellipsoidal")  # fmt: skip
+        if args.bias == "jitter":  # printed even with --quiet: it decides what the DSM gets
+            note(f"jaxgeo adjust: note: with --bias jitter the heights of {args.dem} fix the "
+                 "along-track jitter the ties leave open: the DEM's own errors at the jitter's "
+                 "scale go into the models (use a DEM more accurate than the corrugation to "
+                 "remove: docs/getting-started.md, jitter)")  # fmt: skip
     with warnings.catch_warnings(record=True) as caught:
         warnings.simplefilter("always")
         run = bundle.adjust_files(

@@ -93,3 +93,30 @@ def test_written_rpcs_and_grids_remove_the_waves(adjusted):
     assert without > 0.5
     assert corrected < 0.2
     assert without / corrected > 3.0
+
+
+def test_a_dem_with_the_jitter_bias_is_noted(adjusted, tmp_path, capsys):
+    """The DEM's heights fix the along-track jitter the ties leave open, its own errors
+    included (benchmarks/accuracy/jitter_dsm.py): the command says so, even with --quiet."""
+    import rasterio
+    from rasterio.transform import from_bounds
+
+    _, out, *_ = adjusted
+    folder = out.parent
+    rpc = read_rpc(folder / "left_RPC.TXT")
+    lon, lat, h = (float(v) for v in rpc.ground_offset)
+    dem = tmp_path / "flat.tif"
+    profile = dict(driver="GTiff", width=8, height=8, count=1, dtype="float32",
+                   crs="EPSG:4326", transform=from_bounds(lon - 0.05, lat - 0.05, lon + 0.05,
+                                                          lat + 0.05, 8, 8))  # fmt: skip
+    with rasterio.open(dem, "w", **profile) as dst:
+        dst.write(np.full((1, 8, 8), h, np.float32))
+    code = main([
+        "adjust", "--image", f"left={folder / 'left_RPC.TXT'}",
+        "--image", f"right={folder / 'right_RPC.TXT'}", "--observations", str(folder / "obs.csv"),
+        "--bias", "jitter", "--jitter-knot-lines", str(PERIOD / 8), "--dem", str(dem),
+        "--tie-height-sigma-m", "100", "--loss", "l2", "--keep-blunders", "--quiet",
+    ])  # fmt: skip
+    err = capsys.readouterr().err
+    assert code == 0, err
+    assert "with --bias jitter the heights of" in err and "own errors" in err
