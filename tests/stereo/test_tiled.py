@@ -7,7 +7,6 @@ image; ``jaxgeo dsm --plan`` lists the tiles and computes nothing.
 Scene: :func:`jaxgeo.simulate.stereo_scene`, 400 x 400 px, seed 3, exact RPCs (the vendor's
 pointing error would shift every height alike), 0.65 m cells in tiles of 256 cells (4 tiles)."""
 
-import dataclasses
 import json
 
 import numpy as np
@@ -20,6 +19,7 @@ from jaxgeo.io import open_image
 from jaxgeo.simulate import stereo_scene
 from jaxgeo.stereo import StereoError, dsm_from_images, plan_dsm, tiled_dsm, write_dsm
 from jaxgeo.tiles import NoData, Tile, TileError, WorkerPool, mosaic_cog, run_tiles
+from tests.tiles.test_ortho_tiles import FailOn  # a job failing on one tile
 
 SIZE, SEED, RES, TILE = 400, 3, 0.65, 256
 
@@ -89,19 +89,6 @@ def test_tiles_on_two_spawned_workers_equal_those_made_here(setup, tiled, tmp_pa
     mosaic_cog(run, setup.plan, setup.job.spec, tmp_path / "dask.tif")
     with rasterio.open(out) as a, rasterio.open(tmp_path / "dask.tif") as b:
         np.testing.assert_allclose(b.read(), a.read(), atol=1e-3, equal_nan=True)
-
-
-@dataclasses.dataclass(frozen=True)
-class FailOn:
-    """The DSM job, failing on one tile."""
-
-    job: object
-    tile_id: str
-
-    def __call__(self, tile, path):
-        if tile.id == self.tile_id:
-            raise RuntimeError("injected failure")
-        return self.job(tile, path)
 
 
 def test_resume_reuses_the_tiles_a_failed_run_finished(setup, tiled, tmp_path):
