@@ -301,6 +301,37 @@ def strip_gross(d: dict) -> list[str]:
     ]  # fmt: skip
 
 
+def dsm_scene(d: dict) -> list[str]:
+    rows = []
+    for name, m in d.get("jaxgeo", {}).items():
+        acc, rep = m.get("accuracy", {}), m.get("report", {})
+        rows.append(
+            [
+                name,
+                str(rep.get("tiles", DASH)),
+                seconds(m.get("wall_s")),
+                seconds(m.get("cpu_s")),
+                f"{num(m.get('peak_pss_gb'))} GB",
+                num(m.get("scene_mpx_per_s")),
+                num(acc.get("fill_of_truth")),
+                f"{num(acc.get('median_abs_dh_m'))} m",
+                f"{num(acc.get('nmad_m'))} m",
+            ]
+        )
+    extra = d.get("extrapolation_40000px_16cores_h", {})
+    return [
+        f"{d['scene']}; warm-up (a {d.get('warmup_roi_px')} px ROI, untiled) "
+        f"{seconds(d.get('warmup_s'))}.",
+        "",
+        *table(["", "tiles", "wall", "CPU", "peak PSS (tree)", "scene Mpx/s", "fill of truth",
+                "median abs dh", "NMAD"], rows),
+        "",
+        f"1 -> 2 workers: {ratio(d.get('scaling_1_to_2_workers'))}; largest difference between "
+        f"the worker counts {num(d.get('max_abs_difference_between_worker_counts_m'))} m; a "
+        f"40 000 px pair on 16 cores by the measured scaling: {num(extra.get('hours'))} h.",
+    ]  # fmt: skip
+
+
 def generic(d: dict) -> list[str]:
     """Any study: its numbers, strings and booleans, those of nested objects as ``a.b``."""
 
@@ -327,4 +358,5 @@ SUMMARIES: dict[str, Callable[[dict], list[str]]] = {
     "stereo_triplet": stereo_triplet,
     "cars_triplet": cars_triplet,
     "strip_gross": strip_gross,
+    "dsm_scene": dsm_scene,
 }

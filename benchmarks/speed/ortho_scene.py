@@ -102,7 +102,7 @@ def measure(cmd: list[str], env: dict | None = None, interval: float = 0.2) -> d
         raise RuntimeError(f"{' '.join(cmd)} failed ({proc.returncode}):\n{err[-3000:]}")
     cpu = (after.ru_utime - before.ru_utime) + (after.ru_stime - before.ru_stime)
     return {"wall_s": wall, "cpu_s": cpu, "peak_rss_gb": peak[0] / 1e9,
-            "peak_pss_gb": peak[1] / 1e9, "stdout": out.strip()[-2000:]}  # fmt: skip
+            "peak_pss_gb": peak[1] / 1e9, "stdout": out.strip()}  # fmt: skip
 
 
 def _mean_abs_diff(a_path, b_path) -> dict:
