@@ -130,7 +130,7 @@ class DSMJob:
                         sgm=self.sgm,
                         orientation=None if self.orientation is None else self.orientation[i - 1],
                     )  # fmt: skip
-            except StereoError as err:  # this pair sees nothing to match here: the others may
+            except (StereoError, TieError) as err:  # nothing to match here: the others may
                 pairs.append({"image": name, "failed": " ".join(str(err).split())})
                 continue
             xyh = to_map(pair.points, self.epsg)
