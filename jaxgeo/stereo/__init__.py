@@ -56,6 +56,7 @@ from ._tiled import DSMSetup as DSMSetup
 from ._tiled import TiledDSMReport as TiledDSMReport
 from ._tiled import plan_dsm as plan_dsm
 from ._tiled import reference_window as reference_window
+from ._tiled import scene_heights as scene_heights
 from ._tiled import tiled_dsm as tiled_dsm
 from ._triangulation import StereoError as StereoError
 from ._triangulation import disparity_to_matches as disparity_to_matches

@@ -46,6 +46,7 @@ from ..tiles import (
 from ._dense import DEFAULT_SGM, SGMSettings
 from ._dsm import DSM_BANDS, MAX_HOLE_M, local_utm_epsg, rasterize, to_map
 from ._pipeline import BAND_ROWS, _height_offsets, _spacing, image_size, stereo_pair
+from ._ties import TieError, tie_points
 from ._triangulation import StereoError, los_heights
 from ._uncertainty import Orientation, pair_orientation
 
@@ -53,6 +54,10 @@ TILE_CELLS = 1024
 """Cells a side of a DSM tile (at 0.5 m cells on a 0.5 m GSD image: about 1 000 image px)."""
 TILED_MIN_PX = 2048
 """A reference window larger than this (px, either side) is made tile by tile by default."""
+SAMPLE_WINDOW_PX = 512
+"""Side (px) of the five reference windows whose tie points give a scene's height range."""
+HEIGHT_MARGIN_M = 50.0
+"""Metres (at least; a quarter of the span if more) added on both sides of the sampled heights."""
 CONTEXT_M = 16.0
 """Metres around a tile's box that its window adds for the matching's context (on top of the
 margin whose points it keeps)."""
@@ -125,7 +130,7 @@ class DSMJob:
                         sgm=self.sgm,
                         orientation=None if self.orientation is None else self.orientation[i - 1],
                     )  # fmt: skip
-            except StereoError as err:  # this pair sees nothing to match here: the others may
+            except (StereoError, TieError) as err:  # nothing to match here: the others may
                 pairs.append({"image": name, "failed": " ".join(str(err).split())})
                 continue
             xyh = to_map(pair.points, self.epsg)
@@ -202,6 +207,38 @@ def reference_window(model, path, epsg, box, heights) -> tuple[int, int, int, in
     return c0, r0, c1 - c0, r1 - r0
 
 
+def scene_heights(models, paths, roi) -> tuple[float, float] | None:
+    """The terrain's height range (m) under ``roi = (col, row, w, h)`` of the first image, from
+    the tie points of the pair (first, second) in five windows of :data:`SAMPLE_WINDOW_PX` (the
+    centre and the four quarters' centres): their 0.5-99.5 percentiles widened by
+    :data:`HEIGHT_MARGIN_M` or a quarter of the span; ``None`` with fewer than 20 ties. A tile's
+    reference window is projected at these heights: the models' whole validity range instead
+    (hundreds of metres) widens every window by its parallax (a 1 Mpx tile read 1.7 Mpx)."""
+    col, row, w, h = roi
+    side = min(SAMPLE_WINDOW_PX, w, h)
+    found = []
+    for fx, fy in ((0.5, 0.5), (0.25, 0.25), (0.75, 0.25), (0.25, 0.75), (0.75, 0.75)):
+        c0 = int(min(max(col + fx * w - side / 2, col), col + w - side))
+        r0 = int(min(max(row + fy * h - side / 2, row), row + h - side))
+        try:
+            with warnings.catch_warnings():
+                warnings.simplefilter("ignore")
+                ties = tie_points(models[0], models[1], paths[0], paths[1],
+                                  roi=(c0, r0, side, side))  # fmt: skip
+        except (TieError, StereoError):  # no texture there: the other windows
+            continue
+        found.append(np.asarray(ties.ground)[:, 2])
+    heights = np.concatenate(found) if found else np.zeros(0)
+    heights = heights[np.isfinite(heights)]
+    if heights.size < 20:
+        return None
+    lo, hi = (float(v) for v in np.percentile(heights, [0.5, 99.5]))
+    margin = max(HEIGHT_MARGIN_M, 0.25 * (hi - lo))
+    v_lo, v_hi = los_heights(models[0])
+    lo, hi = max(lo - margin, v_lo), min(hi + margin, v_hi)
+    return (lo, hi) if lo < hi else None
+
+
 @dataclasses.dataclass(frozen=True)
 class DSMSetup:
     """A tiled DSM ready to run: the per-tile ``job`` and the tile ``plan``."""
@@ -245,10 +282,11 @@ def plan_dsm(
     """The tile plan and per-tile job of the DSM of ``roi`` of the first image (whole image by
     default) from the pairs (first, i).
 
-    ``heights``: the terrain's lowest and highest height (m, ellipsoidal; default the reference
-    model's validity range): the grid covers the ROI's footprint between them, and each tile
-    reads the reference window that sees it at both. ``tie_heights``: the tie points' height
-    range (default: each tile's coarse matching). Other arguments: :func:`dsm_from_images`.
+    ``heights``: the terrain's lowest and highest height (m, ellipsoidal; default: sampled by
+    :func:`scene_heights`, else the reference model's validity range): the grid covers the
+    ROI's footprint between them, and each tile reads the reference window that sees it at
+    both. ``tie_heights``: the tie points' height range (default: each tile's coarse
+    matching). Other arguments: :func:`dsm_from_images`.
     """
     if len(models) != len(paths) or len(paths) < 2:
         raise StereoError(f"dsm: give at least two images, each with its model ({len(paths)} "
@@ -258,7 +296,12 @@ def plan_dsm(
     ref = models[0]
     w, h = image_size(paths[0])
     col, row, rw, rh = roi if roi is not None else (0, 0, w, h)
-    lo, hi = heights if heights is not None else los_heights(ref)
+    source = "given"
+    if heights is None:
+        heights, source = scene_heights(models, paths, (col, row, rw, rh)), "tie points"
+    if heights is None:
+        heights, source = los_heights(ref), "the model's validity range"
+    lo, hi = heights
     t = np.linspace(0.0, 1.0, 17)
     c, r, one = col - 0.5 + t * rw, row - 0.5 + t * rh, np.ones_like(t)
     edge = np.concatenate([np.stack(xy, -1) for xy in ((c, one * (row - 0.5)),
@@ -310,6 +353,7 @@ def plan_dsm(
         "width": cols,
         "height": rows,
         "heights_m": [float(lo), float(hi)],
+        "heights_from": source,
         "tie_heights_m": None if tie_heights is None else [float(v) for v in tie_heights],
         "margin_m": job.margin_m,
         "method": method,

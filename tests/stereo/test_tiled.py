@@ -147,3 +147,18 @@ def test_keep_is_refused_for_a_tiled_dsm(scene, tmp_path, capsys):
                  "--keep", str(tmp_path / "keep"), "-o", str(tmp_path / "dsm.tif")])  # fmt: skip
     assert code == 2 and "--keep" in capsys.readouterr().err
     assert not (tmp_path / "dsm.tif").exists()
+
+
+def test_scene_heights_cover_the_terrain(scene):
+    """The height range the tiles' windows are projected at holds the truth's heights (and
+    stays within the models' validity range)."""
+    from jaxgeo.stereo import los_heights, scene_heights
+
+    folder, models, paths = scene
+    lo, hi = scene_heights(models, paths, (0, 0, SIZE, SIZE))
+    with rasterio.open(folder / "truth_dsm.tif") as src:
+        truth = src.read(1)
+    truth = truth[np.isfinite(truth)]
+    p1, p99 = np.percentile(truth, [1, 99])
+    v_lo, v_hi = los_heights(models[0])
+    assert v_lo <= lo <= p1 and p99 <= hi <= v_hi, (lo, hi, p1, p99, v_lo, v_hi)
