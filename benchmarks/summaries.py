@@ -319,6 +319,11 @@ def dsm_scene(d: dict) -> list[str]:
             ]
         )
     extra = d.get("extrapolation_40000px_16cores_h", {})
+    one = d.get("jaxgeo", {}).get("workers1", {})
+    size = re.search(r"--size (\d+)", d.get("scene", ""))
+    by_cpu = None
+    if one.get("cpu_s") and size:  # CPU seconds per Mpx of the scene, 16 cores kept busy
+        by_cpu = one["cpu_s"] / (int(size.group(1)) ** 2 / 1e6) * 1600 / 16 / 3600
     return [
         f"{d['scene']}; warm-up (a {d.get('warmup_roi_px')} px ROI, untiled) "
         f"{seconds(d.get('warmup_s'))}.",
@@ -327,8 +332,10 @@ def dsm_scene(d: dict) -> list[str]:
                 "median abs dh", "NMAD"], rows),
         "",
         f"1 -> 2 workers: {ratio(d.get('scaling_1_to_2_workers'))}; largest difference between "
-        f"the worker counts {num(d.get('max_abs_difference_between_worker_counts_m'))} m; a "
-        f"40 000 px pair on 16 cores by the measured scaling: {num(extra.get('hours'))} h.",
+        f"the worker counts {num(d.get('max_abs_difference_between_worker_counts_m'))} m. A "
+        f"40 000 px pair on 16 cores: {num(extra.get('hours'))} h by the measured 1 -> 2 "
+        f"scaling (meaningless on a loaded machine), {num(by_cpu)} h by one worker's CPU time "
+        "with every core busy.",
     ]  # fmt: skip
 
 
