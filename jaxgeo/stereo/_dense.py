@@ -23,7 +23,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from ._matching import sift_features, to_uint8
+from ._matching import to_uint8
 from ._rectification import EpipolarGrids
 from ._triangulation import StereoError
 
@@ -287,42 +287,6 @@ MAX_TREND_PX = 2.0
 median over the epipolar image (otherwise the matches do not determine it: a constant)."""
 
 
-MATCH_STRIP_ROWS = 64
-"""Epipolar rows per strip of SIFT matching: a left keypoint is compared with the right
-keypoints of its strip (widened by the tolerance across the lines) only."""
-
-
-def epipolar_matches(left8, right8, ratio=0.8, left_features=None, tol_px=10.0):
-    """SIFT matches between the rectified images: ``(n, 2)`` left and right epipolar xy
-    (``left_features``: the left image's keypoints and descriptors, if already detected).
-
-    Matches of a rectified pair lie on the same line, to the models' relative bias across the
-    lines (``tol_px``): each strip of :data:`MATCH_STRIP_ROWS` left rows is matched against the
-    right keypoints within ``tol_px`` of it (the ratio test among them). Brute force over the
-    whole images was quadratic in their area: 120 of a 1 Mpx tile's 160 s."""
-    import cv2
-
-    xl, dl = sift_features(left8) if left_features is None else left_features
-    xr, dr = sift_features(right8)
-    if len(xl) < 2 or len(xr) < 2:
-        return np.zeros((0, 2)), np.zeros((0, 2))
-    matcher = cv2.BFMatcher(cv2.NORM_L2)
-    reach = float(tol_px) + 1.0
-    a, b = [], []
-    top = float(min(xl[:, 1].min(), xr[:, 1].min()))
-    bottom = float(max(xl[:, 1].max(), xr[:, 1].max()))
-    for y0 in np.arange(top, bottom + 1.0, MATCH_STRIP_ROWS):
-        il = np.flatnonzero((xl[:, 1] >= y0) & (xl[:, 1] < y0 + MATCH_STRIP_ROWS))
-        ir = np.flatnonzero((xr[:, 1] >= y0 - reach) & (xr[:, 1] < y0 + MATCH_STRIP_ROWS + reach))
-        if len(il) == 0 or len(ir) < 2:
-            continue
-        knn = matcher.knnMatch(dl[il], dr[ir], k=2)
-        good = [m[0] for m in knn if len(m) == 2 and m[0].distance < ratio * m[1].distance]
-        a += [il[m.queryIdx] for m in good]
-        b += [ir[m.trainIdx] for m in good]
-    return xl[np.array(a, dtype=int)].reshape(-1, 2), xr[np.array(b, dtype=int)].reshape(-1, 2)
-
-
 def robust_inliers(values, k=3.5, floor=0.5):
     """True where ``values`` lie within ``max(k sigma, floor)`` of their median (sigma from the
     MAD)."""
@@ -331,16 +295,21 @@ def robust_inliers(values, k=3.5, floor=0.5):
     return np.abs(values - med) <= max(k * sigma, floor)
 
 
-def vertical_disparity(left8, right8, left_features, paths, tol_px):
-    """The right image's :data:`YShift` (the models' relative bias across the epipolar lines,
-    measured with SIFT on the rectified pair: a constant, or an affine trend when it is
-    well determined), the stats and the along-line offsets ``dx`` of the inlier matches."""
+def vertical_disparity(a, b, epipolar_shape, paths, tol_px):
+    """The right image's :data:`YShift` (the models' relative bias across the epipolar lines:
+    a constant, or an affine trend when it is well determined) from matches of the pair in
+    epipolar coordinates (``a`` left, ``b`` right, ``(n, 2)``: the tie points carried through
+    the grids), the stats and the along-line offsets ``dx`` of the inlier matches. The stats'
+    ``vertical_disparity_after_px`` / ``_std_px`` are the inliers' residual offsets across the
+    lines once the shift is applied."""
     pair = f"{paths[0]} and {paths[1]}"
-    a, b = epipolar_matches(left8, right8, left_features=left_features, tol_px=tol_px)
+    a, b = np.asarray(a, dtype=float), np.asarray(b, dtype=float)
+    finite = np.all(np.isfinite(a), axis=1) & np.all(np.isfinite(b), axis=1)
+    a, b = a[finite], b[finite]
     dy = b[:, 1] - a[:, 1]
     if len(dy) < MIN_MATCHES:
         raise StereoError(
-            f"stereo: only {len(dy)} SIFT matches between the rectified {pair} (need "
+            f"stereo: only {len(dy)} tie points between {pair} in the epipolar frame (need "
             f"{MIN_MATCHES}): no common texture, or models that do not fit the images"
         )
     ok = np.abs(dy - np.median(dy)) < tol_px
@@ -349,23 +318,26 @@ def vertical_disparity(left8, right8, left_features, paths, tol_px):
     if ok.sum() < MIN_MATCHES or abs(dy_med) > tol_px:
         raise StereoError(
             f"stereo: the rectified {pair} are offset by {dy_med:+.1f} px across the epipolar "
-            f"lines ({ok.sum()} consistent matches of {len(dy)}; a relative bias of the models "
-            f"is within {tol_px:g} px): the models do not fit the images"
+            f"lines ({ok.sum()} consistent tie points of {len(dy)}; a relative bias of the "
+            f"models is within {tol_px:g} px): the models do not fit the images"
         )
     shift: YShift = dy_med
     trend = (0.0, 0.0)
     if ok.sum() >= MIN_AFFINE_MATCHES:
         design = np.column_stack([np.ones(ok.sum()), b[ok]])
         coef = np.linalg.lstsq(design, dy[ok], rcond=None)[0]
-        rows, cols = left8.shape
+        rows, cols = epipolar_shape
         corners = np.array([[1, 0, 0], [1, cols, 0], [1, 0, rows], [1, cols, rows]], float)
         if np.max(np.abs(corners @ coef - dy_med)) <= MAX_TREND_PX:
             shift, trend = tuple(float(c) for c in coef), (1e3 * coef[1], 1e3 * coef[2])
+    after = dy[ok] - y_shift_at(shift, b[ok, 0], a[ok, 1])
     stats = dict(
         vertical_disparity_px=dy_med,
         vertical_disparity_std_px=float(np.std(dy[ok])),
         vertical_disparity_trend_px_per_1000px=tuple(round(float(t), 4) for t in trend),
         n_epipolar_matches=int(ok.sum()),
+        vertical_disparity_after_px=float(np.median(after)),
+        vertical_disparity_after_std_px=float(np.std(after)),
     )
     return shift, stats, (b[:, 0] - a[:, 0])[ok]
 

@@ -8,10 +8,11 @@ For a pair (reference image, secondary image) and a ROI of the reference image (
    an error naming the images (the models do not fit them).
 2. Epipolar grids at that elevation (:mod:`._rectification`) and resampling of both images.
 3. The residual vertical disparity (the models' relative bias across the epipolar lines) is
-   measured with SIFT matches on the rectified pair and removed by shifting the right sampling
-   (s2p's "relative pointing correction": a translation, or an affine trend when the matches
-   determine one); it is reported before and after. The same matches give SGM's disparity
-   range (their 0.5-99.5 percentiles, widened).
+   measured on the tie points carried into the epipolar frame through the grids (s2p's
+   "relative pointing correction" from its sensor-space matches) and removed by shifting the
+   right sampling (a translation, or an affine trend when the ties determine one); it is
+   reported before and after (the ties' residual). The same ties give SGM's disparity range
+   (their 0.5-99.5 percentiles, widened).
 4. Semi-global matching over bands of epipolar rows (:mod:`._dense`), masked where either
    epipolar image has no data, then a correlation refinement of the sub-pixel disparities.
 5. Triangulation of every valid disparity (:mod:`._triangulation`); points outside the models'
@@ -39,14 +40,11 @@ from ._dense import (
     BandMatcher,
     SGMSettings,
     disparity_range,
-    epipolar_matches,
-    resample_epipolar,
-    robust_inliers,
     vertical_disparity,
     y_shift_at,
 )
 from ._dsm import MAX_HOLE_M, DSMGrid, local_utm_epsg, point_spacing, rasterize, to_map
-from ._matching import sift_features, stretch_limits, to_uint8
+from ._matching import sift_features_raster, stretch_limits
 from ._rectification import EpipolarGrids, epipolar_grids
 from ._ties import tie_points
 from ._triangulation import (
@@ -64,6 +62,10 @@ CONTEXT_PX = 16
 BAND_ROWS = 512
 """Epipolar rows per band of dense matching (memory grows with the band, not the image)."""
 TRIANGULATION_CHUNK = 65536
+TIE_KEYPOINTS = 10_000
+"""Reference keypoints matched per pair (a random subset of them when there are more): the tie
+points give the rectification's height, the vertical disparity and the disparity range, for
+which thousands are plenty (a 1 Mpx window has ~60 000 keypoints; matching them all took 3 s)."""
 
 
 def read_window(path: str | os.PathLike, window: tuple[int, int, int, int]) -> np.ndarray:
@@ -147,6 +149,16 @@ def _sec_window(ref, sec, window, h_range, size, paths, margin=64):
     return c0, r0, c1 - c0, r1 - r0
 
 
+def _reference_keypoints(path, window):
+    """SIFT keypoints of the reference image over ``window``: a random subset (seeded) of
+    :data:`TIE_KEYPOINTS` when there are more."""
+    xy, desc = sift_features_raster(path, window)
+    if len(xy) > TIE_KEYPOINTS:
+        pick = np.sort(np.random.default_rng(0).choice(len(xy), TIE_KEYPOINTS, replace=False))
+        xy, desc = xy[pick], desc[pick]
+    return xy, desc
+
+
 def _in_window(xy, window):
     """``(n,)`` True where pixel ``xy`` falls in ``window = (col, row, w, h)`` (pixel edges)."""
     col, row, w, h = window
@@ -217,7 +229,7 @@ def stereo_pair(
     log("tie points")
     ties = tie_points(
         ref, sec, ref_path, sec_path, roi=data_win, dem=dem, height_range_m=height_range_m,
-        epipolar_tol_px=epipolar_tol_px,
+        epipolar_tol_px=epipolar_tol_px, features1=_reference_keypoints(ref_path, data_win),
     )  # fmt: skip
     if len(ties) < MIN_TIE_POINTS:
         raise StereoError(
@@ -234,14 +246,12 @@ def stereo_pair(
     lap("ties")
     log(f"{len(ties)} tie points, reference height {h0:.1f} m; rectification")
     grids = epipolar_grids(ref, sec, grid_win, elevation=h0, epi_step=epi_step)
-    left = resample_epipolar(img1, grids, "left", origin_xy=data_win[:2])
-    right = resample_epipolar(img2, grids, "right", origin_xy=win2[:2])
-    lap("rectification")
-    left8 = to_uint8(left)
-    left_features = sift_features(left8)
+    # the tie points in the epipolar frame measure the vertical disparity and the disparity
+    # range (s2p's pointing correction from its sensor-space SIFT matches): no second matching
     shift, vstats, dx = vertical_disparity(
-        left8, to_uint8(right), left_features, paths, epipolar_tol_px
-    )
+        grids.to_epipolar("left", ties.xy1), grids.to_epipolar("right", ties.xy2),
+        grids.epipolar_shape, paths, epipolar_tol_px,
+    )  # fmt: skip
     dmin, dmax = disparity_range(dx)
     stats.update(
         vstats,
@@ -249,15 +259,6 @@ def stereo_pair(
         mean_baseline_ratio_px_per_m=grids.mean_baseline_ratio,
         epipolar_shape=grids.epipolar_shape,
     )
-    right = resample_epipolar(img2, grids, "right", origin_xy=win2[:2], y_shift_px=shift)
-    a2, b2 = epipolar_matches(left8, to_uint8(right), left_features=left_features,
-                              tol_px=epipolar_tol_px)  # fmt: skip
-    dy2 = b2[:, 1] - a2[:, 1]
-    ok2 = np.abs(dy2) < epipolar_tol_px
-    if ok2.any():
-        ok2[ok2] = robust_inliers(dy2[ok2])
-    stats["vertical_disparity_after_px"] = float(np.median(dy2[ok2])) if ok2.any() else np.nan
-    stats["vertical_disparity_after_std_px"] = float(np.std(dy2[ok2])) if ok2.any() else np.nan
     lap("vertical_disparity")
     log(f"vertical disparity {vstats['vertical_disparity_px']:+.2f} px removed; "
         f"SGM over [{dmin:.0f}, {dmax:.0f}] px")  # fmt: skip
@@ -265,8 +266,7 @@ def stereo_pair(
     # edge columns lie outside its own epipolar extent
     rows_e, cols_e = grids.epipolar_shape
     x0, x1 = min(0, int(np.floor(dmin))), cols_e + max(0, int(np.ceil(dmax)))
-    lims = (stretch_limits(left), stretch_limits(right))
-    del left, right
+    lims = (stretch_limits(img1[::2, ::2]), stretch_limits(img2[::2, ::2]))
     band = rows_e if band_rows is None else max(int(band_rows), 1)
     starts = list(range(0, rows_e, band))
     dense = BandMatcher(
@@ -285,9 +285,8 @@ def stereo_pair(
         n_disp += int(sel.sum())
         xr_e = xe[sel] + disp[sel]
         yr_e = ye[sel] + y_shift_at(shift, xr_e, ye[sel])
-        xr = grids.to_sensor("right", np.stack([xr_e, yr_e], axis=-1))
-        step = [grids.to_sensor("right", np.stack([xr_e + o, yr_e], axis=-1)) for o in (-0.5, 0.5)]
-        direction.append(step[1] - step[0])
+        xr, along = grids.along("right", np.stack([xr_e, yr_e], axis=-1))
+        direction.append(along)
         sigma_d.append(disp_sigma[sel])
         matches.append(np.stack([xl[sel], xr], axis=1))
         if keep:

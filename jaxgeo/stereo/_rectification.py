@@ -83,6 +83,18 @@ class EpipolarGrids:
         grid = {"left": self.left, "right": self.right}[side]
         return interpolate_grid(grid, self.step_px, epi_xy)
 
+    def along(self, side: str, epi_xy: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """:meth:`to_sensor` and the sensor step ``(..., 2)`` per epipolar pixel along the
+        lines (the derivative in ``xe``) at the same points."""
+        grid = {"left": self.left, "right": self.right}[side]
+        return interpolate_grid(grid, self.step_px, epi_xy, along=True)
+
+    def to_epipolar(self, side: str, sensor_xy: np.ndarray) -> np.ndarray:
+        """Sensor ``(..., 2)`` ``(x, y)`` of ``side`` -> epipolar ``(xe, ye)`` (the inverse of
+        :meth:`to_sensor`; NaN where it has none)."""
+        grid = {"left": self.left, "right": self.right}[side]
+        return invert_grid(grid, self.step_px, sensor_xy)
+
 
 def node_xy(shape: tuple[int, int], step: float) -> np.ndarray:
     """``(rows, cols, 2)`` epipolar ``(xe, ye)`` of grid nodes: ``(step j, step i)``."""
@@ -91,23 +103,71 @@ def node_xy(shape: tuple[int, int], step: float) -> np.ndarray:
     return np.stack(np.meshgrid(xe, ye), axis=-1)
 
 
-def interpolate_grid(grid: np.ndarray, step: float, epi_xy: np.ndarray) -> np.ndarray:
+def _cells(grid: np.ndarray, step: float, epi_xy: np.ndarray):
+    """Corner values ``g00, g01, g10, g11`` ``(n, k)`` and fractions ``fu, fv`` ``(n, 1)`` of
+    the grid cells under epipolar ``(n, 2)`` points (border cells extended; NaN points give NaN
+    fractions)."""
+    rows, cols, k = grid.shape
+    u = epi_xy[:, 0] * (1.0 / step)
+    v = epi_xy[:, 1] * (1.0 / step)
+    j0 = np.clip(np.floor(np.nan_to_num(u)), 0, cols - 2).astype(np.intp)
+    i0 = np.clip(np.floor(np.nan_to_num(v)), 0, rows - 2).astype(np.intp)
+    flat = grid.reshape(-1, k)
+    idx = i0 * cols + j0
+    corners = [flat.take(i, axis=0) for i in (idx, idx + 1, idx + cols, idx + cols + 1)]
+    return corners, (u - j0)[:, None], (v - i0)[:, None]
+
+
+def interpolate_grid(
+    grid: np.ndarray, step: float, epi_xy: np.ndarray, along: bool = False
+) -> np.ndarray | tuple[np.ndarray, np.ndarray]:
     """Bilinear interpolation of a ``(rows, cols, k)`` node grid at epipolar ``(..., 2)`` points,
     nodes at ``step * index``; outside the nodes the border cells are extended linearly. NaN
-    points give NaN."""
+    points give NaN. ``along``: also the derivative along the epipolar lines (per epipolar
+    pixel of ``xe``)."""
     epi_xy = np.asarray(epi_xy, dtype=float)
-    rows, cols = grid.shape[:2]
-    u = epi_xy[..., 0] / step
-    v = epi_xy[..., 1] / step
-    finite = np.isfinite(u) & np.isfinite(v)
-    u, v = np.where(finite, u, np.nan), np.where(finite, v, np.nan)
-    j0 = np.clip(np.floor(np.nan_to_num(u)).astype(np.int64), 0, cols - 2)
-    i0 = np.clip(np.floor(np.nan_to_num(v)).astype(np.int64), 0, rows - 2)
-    fu = (u - j0)[..., None]
-    fv = (v - i0)[..., None]
-    g00, g01 = grid[i0, j0], grid[i0, j0 + 1]
-    g10, g11 = grid[i0 + 1, j0], grid[i0 + 1, j0 + 1]
-    return (g00 * (1 - fu) + g01 * fu) * (1 - fv) + (g10 * (1 - fu) + g11 * fu) * fv
+    shape = (*epi_xy.shape[:-1], grid.shape[2])
+    (g00, g01, g10, g11), fu, fv = _cells(grid, step, epi_xy.reshape(-1, 2))
+    top = g00 + (g01 - g00) * fu
+    bottom = g10 + (g11 - g10) * fu
+    value = (top + (bottom - top) * fv).reshape(shape)
+    if not along:
+        return value
+    d_top, d_bottom = g01 - g00, g11 - g10
+    return value, ((d_top + (d_bottom - d_top) * fv) * (1.0 / step)).reshape(shape)
+
+
+def invert_grid(
+    grid: np.ndarray, step: float, sensor_xy: np.ndarray, iterations: int = 8
+) -> np.ndarray:
+    """Epipolar ``(..., 2)`` ``(xe, ye)`` whose bilinear grid value (:func:`interpolate_grid`)
+    is the sensor ``(..., 2)`` point: Newton's method from the nodes' least-squares affine map
+    (the grids are smooth: it converges to 1e-9 px in a few steps). NaN where it does not."""
+    sensor_xy = np.asarray(sensor_xy, dtype=float)
+    shape = sensor_xy.shape
+    target = sensor_xy.reshape(-1, 2)
+    nodes = node_xy(grid.shape[:2], step).reshape(-1, 2)
+    design = np.column_stack([np.ones(len(nodes)), grid.reshape(-1, 2)])
+    affine = np.linalg.lstsq(design, nodes, rcond=None)[0]
+    epi = np.column_stack([np.ones(len(target)), target]) @ affine
+    for _ in range(iterations):
+        (g00, g01, g10, g11), fu, fv = _cells(grid, step, epi)
+        top, bottom = g00 + (g01 - g00) * fu, g10 + (g11 - g10) * fu
+        residual = target - (top + (bottom - top) * fv)
+        # Jacobian columns: d/dxe and d/dye of the bilinear value (per epipolar pixel)
+        jx = ((g01 - g00) * (1 - fv) + (g11 - g10) * fv) / step
+        jy = (bottom - top) / step
+        det = jx[:, 0] * jy[:, 1] - jy[:, 0] * jx[:, 1]
+        dxe = (jy[:, 1] * residual[:, 0] - jy[:, 0] * residual[:, 1]) / det
+        dye = (jx[:, 0] * residual[:, 1] - jx[:, 1] * residual[:, 0]) / det
+        epi = epi + np.column_stack([dxe, dye])
+        if np.nanmax(np.abs(residual), initial=0.0) < 1e-9:
+            break
+    (g00, g01, g10, g11), fu, fv = _cells(grid, step, epi)
+    top, bottom = g00 + (g01 - g00) * fu, g10 + (g11 - g10) * fu
+    residual = np.abs(target - (top + (bottom - top) * fv)).max(axis=1)
+    epi[~(residual < 1e-6)] = np.nan
+    return epi.reshape(shape)
 
 
 @jax.jit

@@ -114,3 +114,30 @@ def test_grids_of_a_biased_model(ventoux, grids0):
         g.right - grids0.right, np.broadcast_to([-1.25, 0.75], g.right.shape), atol=1e-8
     )
     assert g.epipolar_shape == grids0.epipolar_shape
+
+
+def test_to_epipolar_inverts_to_sensor(ventoux, grids0):
+    """Sensor -> epipolar (Newton on the bilinear grid) is the inverse of epipolar -> sensor,
+    inside the nodes and in the extrapolated border, both sides; NaN stays NaN."""
+    rng = np.random.default_rng(3)
+    rows, cols = grids0.epipolar_shape
+    epi = np.column_stack([rng.uniform(-40, cols + 40, 2000), rng.uniform(-40, rows + 40, 2000)])
+    epi[5] = np.nan
+    for side in ("left", "right"):
+        back = grids0.to_epipolar(side, grids0.to_sensor(side, epi))
+        assert np.isnan(back[5]).all()
+        np.testing.assert_allclose(np.delete(back, 5, 0), np.delete(epi, 5, 0), atol=1e-8)
+
+
+def test_along_is_the_derivative_along_the_lines(grids0):
+    """The sensor step per epipolar pixel along the lines: the bilinear grid's x derivative
+    (central differences inside a cell agree to rounding)."""
+    rng = np.random.default_rng(4)
+    rows, cols = grids0.epipolar_shape
+    epi = np.column_stack([rng.uniform(0, cols, 500), rng.uniform(0, rows, 500)])
+    epi[:, 0] = np.floor(epi[:, 0] / 30) * 30 + 15  # cell centres: differences stay in a cell
+    value, step = grids0.along("right", epi)
+    np.testing.assert_array_equal(value, grids0.to_sensor("right", epi))
+    fd = grids0.to_sensor("right", epi + [0.5, 0]) - grids0.to_sensor("right", epi - [0.5, 0])
+    np.testing.assert_allclose(step, fd, atol=1e-9)
+    assert np.all(np.hypot(*step.T) > 0.5)  # about one sensor pixel per epipolar pixel
