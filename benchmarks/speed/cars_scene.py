@@ -53,6 +53,7 @@ def main(argv=None) -> int:
     folder = pathlib.Path(a.folder)
     scene = folder / "scene"
     truth = json.loads((scene / "truth.json").read_text())
+    label = f"{scene} ({truth['params']['size']} px, GSD {truth['gsd_m']:.3f} m)"
     import rasterio
 
     with rasterio.open(scene / "truth_dsm.tif") as f:
@@ -81,7 +82,7 @@ def main(argv=None) -> int:
     cars["accuracy"] = accuracy(cars_dsm, scene / "truth_dsm.tif")
     meta = next((out / "out").rglob("*.json"), None)
     emit({
-        "scene": f"{scene} ({truth['size']} px, GSD {truth['gsd_m']:.3f} m)",
+        "scene": label,
         "workers": a.workers,
         "jaxgeo": {"res_m": res, **jx},
         "cars": {"dsm": str(cars_dsm), "metadata": str(meta), **cars},
