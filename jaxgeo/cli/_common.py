@@ -178,7 +178,7 @@ def add_tile_options(parser: argparse.ArgumentParser, tile: int, unit: str) -> N
         default=None,
         metavar="N",
         help="worker processes (default: one per core for a large product, none "
-        "for a small one; 0: all tiles in this process)",
+        "for a small one or on 1-2 cores; 0: all tiles in this process)",
     )
     parser.add_argument(
         "--scheduler",

@@ -12,15 +12,16 @@ and records the tile in ``<folder>/tiles/<id>.json`` (both atomic, on the worker
 tile is never half-written and a second run on the same folder reuses it (``--resume``):
 ``<folder>/plan.json`` holds the plan, and a folder of another plan is refused.
 
-Where tiles run (``workers``, ``scheduler``): ``workers=0``, or a small plan with ``workers=None``
-(below :data:`IN_PROCESS_MAX_PX` px, or one core), runs them one after the other in this
-process; otherwise an embedded dask.distributed ``LocalCluster`` of ``workers`` (default: one per
-core) worker processes started with ``spawn`` (JAX and ``fork`` deadlock), one thread each, that
-live for the whole run so compiled programs stay warm (and across runs, XLA's compilation cache on
-disk, :mod:`jaxgeo._jaxconfig`). ``scheduler="tcp://host:8786"`` sends the same tasks to an
-existing dask cluster instead (dask-jobqueue on SLURM/PBS, dask-kubernetes, ``dask scheduler`` +
-``dask worker``; the workers need jaxgeo installed and the same view of the input files and of
-the work folder, e.g. a shared file system). On SLURM, for example::
+Where tiles run (``workers``, ``scheduler``): ``workers=0``, or with ``workers=None`` a small plan
+(below :data:`IN_PROCESS_MAX_PX` px) or a machine of fewer than :data:`MIN_CORES_FOR_WORKERS` cores,
+runs them one after the other in this process; otherwise an embedded dask.distributed
+``LocalCluster`` of ``workers`` (default: one per core) worker processes started with ``spawn`` (JAX
+and ``fork`` deadlock), one thread each, that live for the whole run so compiled programs stay warm
+(and across runs, XLA's compilation cache on disk, :mod:`jaxgeo._jaxconfig`).
+``scheduler="tcp://host:8786"`` sends the same tasks to an existing dask cluster instead
+(dask-jobqueue on SLURM/PBS, dask-kubernetes, ``dask scheduler`` + ``dask worker``; the workers need
+jaxgeo installed and the same view of the input files and of the work folder, e.g. a shared file
+system). On SLURM, for example::
 
     dask scheduler --scheduler-file $HOME/sched.json &            # on the login node
     sbatch --array=1-8 --cpus-per-task=16 --wrap \
@@ -62,6 +63,10 @@ IN_PROCESS_MAX_PX = 25_000_000
 """Products up to this many pixels run in this process when ``workers=None``: starting worker
 processes (Python, jax, the first compilation in each) costs seconds, more than a small job takes
 on one core."""
+MIN_CORES_FOR_WORKERS = 3
+"""With ``workers=None``, worker processes only on a machine of at least this many cores: on 2
+cores a 12 000 px orthoimage (159 Mpx, tiles of ~0.2 s) took 38 s in this process, whose COG
+writer already uses both cores, and 43 s on 2 workers (benchmarks/speed/ortho_scene.py)."""
 WORKER_XLA_FLAGS = "--xla_cpu_multi_thread_eigen=false intra_op_parallelism_threads=1"
 """Each worker process is one core's worth of work: XLA's own thread pools stay single-threaded
 so that ``workers`` processes do not fight over the cores."""
@@ -198,8 +203,9 @@ def cores() -> int:
 
 def resolve_workers(plan: TilePlan, workers: int | None, scheduler: str | None) -> int:
     """Worker processes to start: 0 (in this process) for ``workers=0``, or with ``workers=None``
-    for one core or a product of at most :data:`IN_PROCESS_MAX_PX` px; else ``workers`` or one
-    per core. With a ``scheduler`` nothing is started (the cluster's workers run the tiles)."""
+    with fewer than :data:`MIN_CORES_FOR_WORKERS` cores or a product of at most
+    :data:`IN_PROCESS_MAX_PX` px; else ``workers`` or one per core. With a ``scheduler`` nothing
+    is started (the cluster's workers run the tiles)."""
     if workers is not None and workers < 0:
         raise ValueError(f"workers must be >= 0, got {workers}")
     if scheduler:
@@ -207,7 +213,7 @@ def resolve_workers(plan: TilePlan, workers: int | None, scheduler: str | None) 
     if workers is None:
         n = cores()
         small = plan.width * plan.height <= IN_PROCESS_MAX_PX or len(plan.tiles) < 2
-        return 0 if n == 1 or small else n
+        return 0 if n < MIN_CORES_FOR_WORKERS or small else n
     return int(workers)
 
 

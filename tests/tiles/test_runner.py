@@ -91,7 +91,7 @@ def test_small_plans_stay_in_process_by_default():
     assert resolve_workers(small, None, None) == 0
     large = plan_tiles("demo", 10_000, 10_000, 1024)
     assert large.width * large.height > IN_PROCESS_MAX_PX
-    assert resolve_workers(large, None, None) == (cores() if cores() > 1 else 0)
+    assert resolve_workers(large, None, None) == (cores() if cores() >= 3 else 0)
     assert resolve_workers(large, 0, None) == 0 and resolve_workers(small, 3, None) == 3
     assert resolve_workers(large, None, "tcp://somewhere:8786") == 0
     with pytest.raises(ValueError, match="workers must be >= 0"):
