@@ -103,10 +103,9 @@ def node_xy(shape: tuple[int, int], step: float) -> np.ndarray:
     return np.stack(np.meshgrid(xe, ye), axis=-1)
 
 
-def _cells(grid: np.ndarray, step: float, epi_xy: np.ndarray):
-    """Corner values ``g00, g01, g10, g11`` ``(n, k)`` and fractions ``fu, fv`` ``(n, 1)`` of
-    the grid cells under epipolar ``(n, 2)`` points (border cells extended; NaN points give NaN
-    fractions)."""
+def _bilinear(grid: np.ndarray, step: float, epi_xy: np.ndarray):
+    """Bilinear value ``(n, k)`` of the grid at epipolar ``(n, 2)`` points and its derivatives
+    in ``xe`` and ``ye`` (per epipolar pixel); border cells extended, NaN points give NaN."""
     rows, cols, k = grid.shape
     u = epi_xy[:, 0] * (1.0 / step)
     v = epi_xy[:, 1] * (1.0 / step)
@@ -114,8 +113,12 @@ def _cells(grid: np.ndarray, step: float, epi_xy: np.ndarray):
     i0 = np.clip(np.floor(np.nan_to_num(v)), 0, rows - 2).astype(np.intp)
     flat = grid.reshape(-1, k)
     idx = i0 * cols + j0
-    corners = [flat.take(i, axis=0) for i in (idx, idx + 1, idx + cols, idx + cols + 1)]
-    return corners, (u - j0)[:, None], (v - i0)[:, None]
+    g00, g01, g10, g11 = (flat.take(i, axis=0) for i in (idx, idx + 1, idx + cols, idx + cols + 1))
+    fu, fv = (u - j0)[:, None], (v - i0)[:, None]
+    top, bottom = g00 + (g01 - g00) * fu, g10 + (g11 - g10) * fu
+    d_top, d_bottom = g01 - g00, g11 - g10
+    d_xe = (d_top + (d_bottom - d_top) * fv) * (1.0 / step)
+    return top + (bottom - top) * fv, d_xe, (bottom - top) * (1.0 / step)
 
 
 def interpolate_grid(
@@ -127,14 +130,8 @@ def interpolate_grid(
     pixel of ``xe``)."""
     epi_xy = np.asarray(epi_xy, dtype=float)
     shape = (*epi_xy.shape[:-1], grid.shape[2])
-    (g00, g01, g10, g11), fu, fv = _cells(grid, step, epi_xy.reshape(-1, 2))
-    top = g00 + (g01 - g00) * fu
-    bottom = g10 + (g11 - g10) * fu
-    value = (top + (bottom - top) * fv).reshape(shape)
-    if not along:
-        return value
-    d_top, d_bottom = g01 - g00, g11 - g10
-    return value, ((d_top + (d_bottom - d_top) * fv) * (1.0 / step)).reshape(shape)
+    value, d_xe, _ = _bilinear(grid, step, epi_xy.reshape(-1, 2))
+    return (value.reshape(shape), d_xe.reshape(shape)) if along else value.reshape(shape)
 
 
 def invert_grid(
@@ -150,23 +147,16 @@ def invert_grid(
     design = np.column_stack([np.ones(len(nodes)), grid.reshape(-1, 2)])
     affine = np.linalg.lstsq(design, nodes, rcond=None)[0]
     epi = np.column_stack([np.ones(len(target)), target]) @ affine
-    for _ in range(iterations):
-        (g00, g01, g10, g11), fu, fv = _cells(grid, step, epi)
-        top, bottom = g00 + (g01 - g00) * fu, g10 + (g11 - g10) * fu
-        residual = target - (top + (bottom - top) * fv)
-        # Jacobian columns: d/dxe and d/dye of the bilinear value (per epipolar pixel)
-        jx = ((g01 - g00) * (1 - fv) + (g11 - g10) * fv) / step
-        jy = (bottom - top) / step
+    for k in range(iterations + 1):
+        value, jx, jy = _bilinear(grid, step, epi)
+        residual = target - value
+        if k == iterations or np.nanmax(np.abs(residual), initial=0.0) < 1e-9:
+            break
         det = jx[:, 0] * jy[:, 1] - jy[:, 0] * jx[:, 1]
         dxe = (jy[:, 1] * residual[:, 0] - jy[:, 0] * residual[:, 1]) / det
         dye = (jx[:, 0] * residual[:, 1] - jx[:, 1] * residual[:, 0]) / det
         epi = epi + np.column_stack([dxe, dye])
-        if np.nanmax(np.abs(residual), initial=0.0) < 1e-9:
-            break
-    (g00, g01, g10, g11), fu, fv = _cells(grid, step, epi)
-    top, bottom = g00 + (g01 - g00) * fu, g10 + (g11 - g10) * fu
-    residual = np.abs(target - (top + (bottom - top) * fv)).max(axis=1)
-    epi[~(residual < 1e-6)] = np.nan
+    epi[~(np.abs(residual).max(axis=1) < 1e-6)] = np.nan
     return epi.reshape(shape)
 
 
