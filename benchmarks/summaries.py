@@ -381,6 +381,44 @@ def cars_scene(d: dict) -> list[str]:
     ]  # fmt: skip
 
 
+DEVICE_CASES = (
+    "device",
+    "device_columns",
+    "device_interleaved",
+    "device_columns_div",
+    "copy",
+    "numpy",
+    "numpy_whole",
+    "numpy_pinned",
+    "localize_device",
+    "localize_numpy",
+)
+
+
+def device(d: dict) -> list[str]:
+    """One row per case, one column per size: M points/s, the fraction of the copy bound."""
+    rows_in = d["results"]
+    head = ["case", *(f"{r['points']:.0e} points: M pts/s (of copy, of nominal)" for r in rows_in)]
+    rows = []
+    for case in DEVICE_CASES:
+        cells = []
+        for r in rows_in:
+            rate = r.get(f"{case}_points_per_s")
+            of_copy, of_nominal = (r.get(f"{case}_fraction_of_{k}") for k in ("copy", "nominal"))
+            fractions = (f" ({of_copy:.0%}, {of_nominal:.0%})" if of_copy is not None
+                         and of_nominal is not None else "")  # fmt: skip
+            cells.append(mpts(rate) + (fractions if rate is not None else ""))
+        if any(c != DASH for c in cells):
+            rows.append([f"`{case}`", *cells])
+    nominal = d.get("bandwidth_nominal_bytes_per_s")
+    return [
+        *table(head, rows),
+        "",
+        f"Backend {d.get('backend', DASH)}; nominal bound {num(nominal)} B/s at 40 B a point. "
+        "Localisation rows: a tenth of the points.",
+    ]
+
+
 def generic(d: dict) -> list[str]:
     """Any study: its numbers, strings and booleans, those of nested objects as ``a.b``."""
 
@@ -397,6 +435,7 @@ def generic(d: dict) -> list[str]:
 
 SUMMARIES: dict[str, Callable[[dict], list[str]]] = {
     "projection": points,
+    "device": device,
     "localization": points,
     "batch": batch,
     "cli_times": cli_times,

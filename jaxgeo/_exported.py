@@ -36,6 +36,7 @@ import contextlib
 import ctypes
 import functools
 import hashlib
+import importlib.metadata
 import logging
 import os
 import pickle
@@ -82,7 +83,10 @@ QUICK_COMPILE = {
 optimisations and XLA's legacy CPU emitters. ``jaxgeo demo`` cold: 32.5 -> 19.3 s of CPU time
 (2-core AVX-512 CPU, same output); an elementwise 1e6-point kernel runs 10 % slower with them,
 which is why large programs keep XLA's defaults. The test suite sets the same flags for every
-program (tests/conftest.py)."""
+program (tests/conftest.py). jaxlib 0.11 has no fusion-emitter option (XLA refuses an option it
+does not know): there it is left out."""
+if tuple(int(v) for v in importlib.metadata.version("jaxlib").split(".")[:2]) >= (0, 11):
+    del QUICK_COMPILE["xla_cpu_use_fusion_emitters"]
 MAX_ENTRIES = 200
 """Exported programs kept on disk (~0.3 MB each); older ones are removed when more are written."""
 

@@ -26,6 +26,15 @@ _SUITE_XLA_FLAGS = {
     "xla_llvm_disable_expensive_passes": "true",
     "xla_cpu_use_fusion_emitters": "false",
 }
+# jaxlib 0.11 removed the last flag, and XLA aborts the process on a flag it does not know (seen
+# on the GPU machine's jaxlib 0.11.2: every xdist worker died at start-up)
+try:
+    from importlib.metadata import version as _version
+
+    if tuple(int(v) for v in _version("jaxlib").split(".")[:2]) >= (0, 11):
+        del _SUITE_XLA_FLAGS["xla_cpu_use_fusion_emitters"]
+except Exception:  # noqa: BLE001  (no jaxlib metadata: keep the flags)
+    pass
 _xla_flags = os.environ.get("XLA_FLAGS", "")
 for _name, _value in _SUITE_XLA_FLAGS.items():
     if _name not in _xla_flags:
@@ -178,3 +187,12 @@ def cube_points(rpc, n, seed=0, fraction=1.0):
     rng = np.random.default_rng(seed)
     u = rng.uniform(-fraction, fraction, (n, 3))
     return np.asarray(rpc.ground_offset) + u * np.asarray(rpc.ground_scale)
+
+
+def pytest_runtest_logreport(report):
+    """With ``JAXGEO_FAILURES_LOG`` set (``.ci/gpu``), each failure is appended to that file as it
+    happens (by xdist's controller only): a run stopped by its time limit still says why."""
+    path = os.environ.get("JAXGEO_FAILURES_LOG")
+    if path and report.failed and "PYTEST_XDIST_WORKER" not in os.environ:
+        with open(path, "a") as f:
+            f.write(f"=== {report.nodeid} ({report.when})\n{report.longreprtext[-4000:]}\n")

@@ -81,12 +81,12 @@ def test_a_child_of_a_jaxgeo_process_keeps_its_own_setting(tmp_path):
     assert json.loads(run.stdout.strip().splitlines()[-1]) == {child: child, "off": None}
 
 
-DEVICES = "import json, jaxgeo, jax; print(json.dumps(jax.local_device_count()))"
+DEVICES = "import json, jaxgeo, jax; print(json.dumps(len(jax.local_devices(backend='cpu'))))"
 
 
 def _devices(taskset: str | None = None, drop=(), **env) -> int:
-    """``jax.local_device_count()`` in a fresh interpreter that imports jaxgeo first, without
-    the suite's own XLA flags (a user's environment) unless ``env`` gives some."""
+    """The CPU devices (on a GPU machine too) of a fresh interpreter that imports jaxgeo first,
+    without the suite's own XLA flags (a user's environment) unless ``env`` gives some."""
     full = {k: v for k, v in os.environ.items() if k not in ("XLA_FLAGS", *drop)}
     full = {k: v for k, v in full.items() if not k.startswith(("JAXGEO_CPU", "JAX_NUM_CPU"))}
     full.update(env, PYTHONPATH=str(REPO), JAXGEO_CACHE_DIR="off")

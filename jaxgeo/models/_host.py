@@ -43,6 +43,19 @@ PROGRAMS_MAX = 8
 """Size-specific programs kept (least recently used dropped: bounded memory)."""
 
 
+def runs_on_cpu() -> bool:
+    """True when arrays not placed on a device (numpy inputs) are computed on a CPU here."""
+    device = jax.config.jax_default_device
+    if device is None:
+        return jax.default_backend() == "cpu"
+    return (device if isinstance(device, str) else device.platform) == "cpu"
+
+
+def host_device():
+    """This process's first CPU device (jax always has one, beside any GPU)."""
+    return jax.local_devices(backend="cpu")[0]
+
+
 class _Memory:
     """``__array_interface__`` over raw float64 memory, keeping ``owner`` alive."""
 
@@ -80,6 +93,8 @@ def writable(x: jax.Array) -> np.ndarray:
     """``x`` (a CPU array nobody else references) as a writable numpy array over its memory,
     which keeps ``x`` alive (``x.delete()``, e.g. over ``jax.live_arrays()``, would free it
     under the numpy array: the one way to break it)."""
+    if any(d.platform != "cpu" for d in x.devices()):  # a device pointer: numpy would crash
+        raise ValueError("writable needs an array in the CPU's memory")
     x.block_until_ready()
     return np.asarray(_Memory(x.unsafe_buffer_pointer(), tuple(x.shape), False, x))
 
@@ -125,10 +140,10 @@ def call_exact(
 ) -> np.ndarray | None:
     """``body(treedef, leaves, *arrays)`` compiled for these exact shapes, with the inputs used in
     place and the output returned without a copy; ``None`` (the caller takes its chunked path)
-    when the backend is not the CPU, ``n`` is below :data:`EXACT_MIN`, an input is not
+    when the computation would not run on a CPU, ``n`` is below :data:`EXACT_MIN`, an input is not
     :func:`eligible`, or this call's key (kernel, shapes, offsets) is new. The last
     :data:`PROGRAMS_MAX` programs are kept (compiled ahead of time, outside jit's cache)."""
-    if n < EXACT_MIN or jax.default_backend() != "cpu" or not all(map(eligible, arrays)):
+    if n < EXACT_MIN or not runs_on_cpu() or not all(map(eligible, arrays)):
         return None
     views = [aligned_flat(a) for a in arrays]
     flats = tuple(v for v, _ in views)

@@ -11,7 +11,11 @@ no ``eqx.filter_jit``): a small call costs ~0.1 ms (dispatch and XLA's latency) 
 tracing every time, and numpy inputs are processed in chunks of ``CHUNK`` points (padded to a
 bucket size, so that every size reuses a few compiled programs) written into one numpy output,
 which keeps the working set in cache. A projection of a size used before runs whole instead,
-with no copy in or out (:func:`._host.call_exact`).
+with no copy in or out (:func:`._host.call_exact`). Where jax's default device is a GPU, numpy
+projections run on the host's CPU device all the same (0.61 against 0.07 G points/s through an
+H100 at 1e6-1e8 points: the copies cost more than the projection), and jax arrays on the GPU
+run there (:func:`_project_body_direct`); localisation, compute-bound, runs on the default
+device either way.
 
 Localisation runs one iteration everywhere (:func:`localize_lph`: Newton, then chord steps with
 the Jacobian frozen, over whole arrays): the numpy kernel, and under ``jit``/``vmap``/``grad``
@@ -29,7 +33,7 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
-from ._host import call_exact, writable
+from ._host import call_exact, host_device, runs_on_cpu, writable
 
 if TYPE_CHECKING:
     from ._base import AbstractSensorModel
@@ -65,8 +69,12 @@ def _normalized(rpc, lon, lat, h):
     go, gs = rpc.ground_offset, rpc.ground_scale
     # lon - lon_off into (-180, 180] (antimeridian; see RPC.normalize_ground): whole turns come
     # off the longitude itself, so lon and lon +- 360 give bit-identical values
-    lon = lon - 360.0 * jnp.ceil((lon - go[0] - 180.0) / 360.0)
-    return (lon - go[0]) / gs[0], (lat - go[1]) / gs[1], (h - go[2]) / gs[2]
+    lon = lon - 360.0 * jnp.ceil((lon - go[0] - 180.0) * (1.0 / 360.0))
+    # reciprocals, not a float64 division per point: XLA's GPU fusion counts f64 division as
+    # expensive and will not recompute it for both x and y, so the normalised values went
+    # through memory in a second kernel
+    inv = 1.0 / gs
+    return (lon - go[0]) * inv[0], (lat - go[1]) * inv[1], (h - go[2]) * inv[2]
 
 
 def project_stacked(rpc, lon, lat, h):
@@ -100,6 +108,22 @@ def _project_body(treedef, leaves, ground):
 
 
 _project_kernel = jax.jit(_project_body, static_argnums=0)
+
+
+def _project_body_direct(treedef, leaves, ground):
+    # on a GPU: the columns read in place and (n, 2) written as one elementwise loop, element
+    # (i, k) evaluating image axis k's two polynomials. Measured on an H100 (1e8 points): the
+    # transposing CPU body, and x and y computed apart then stacked, both ran as three kernels
+    # (XLA's fusion splits around the stack) at 24 G points/s, where separate x, y outputs ran
+    # as one at 48 G/s; this form's speed there is not measured yet (benchmarks/speed/device.py)
+    rpc = jax.tree.unflatten(treedef, leaves)
+    g = ground.reshape(-1, 3)
+    ln, pn, hn = (v[:, None] for v in _normalized(rpc, g[:, 0], g[:, 1], g[:, 2]))
+    xy = rational(rpc.num.T, ln, pn, hn) / rational(rpc.den.T, ln, pn, hn)
+    return (rpc.image_offset + rpc.image_scale * xy).reshape(*ground.shape[:-1], 2)
+
+
+_project_kernel_direct = jax.jit(_project_body_direct, static_argnums=0)
 
 
 @functools.partial(jax.jit, static_argnums=0)
@@ -345,7 +369,7 @@ def chunked(kernel, args_np: tuple[np.ndarray, ...], n: int, out_width: int) -> 
     ``(n, width)``. Up to ``IN_FLIGHT`` chunks are dispatched before the first is collected,
     so that XLA computes one while the host copies another."""
     size = min(_bucket(n), CHUNK)
-    if WRITABLE_MIN <= n <= size and jax.default_backend() == "cpu":
+    if WRITABLE_MIN <= n <= size and runs_on_cpu():
         # one chunk: its output without a copy (10 % faster at 1e4 points, slower below 1e3)
         return writable(kernel(*(_padded(a, size) for a in args_np)))[:n]
     out = np.empty((n, out_width))
@@ -369,7 +393,15 @@ def chunked(kernel, args_np: tuple[np.ndarray, ...], n: int, out_width: int) -> 
 def project_concrete(rpc, ground) -> np.ndarray | jax.Array:
     """``rpc.project(ground)`` for concrete inputs: numpy out for numpy/list in, else jax."""
     if isinstance(ground, jax.Array):
-        return _project_kernel(*_flat(rpc), jnp.asarray(ground, dtype=float))
+        on_cpu = all(d.platform == "cpu" for d in ground.devices())
+        kernel = _project_kernel if on_cpu else _project_kernel_direct
+        return kernel(*_flat(rpc), jnp.asarray(ground, dtype=float))
+    if not runs_on_cpu():
+        # numpy in and out on a GPU machine: computed on the host's CPU, where the data are (a
+        # projection moves 40 B a point; over PCIe that costs more than computing it: 1e6
+        # points 0.07-0.19 G/s through an H100 against 0.80 G/s on its 16-core host)
+        with jax.default_device(host_device()):
+            return project_concrete(rpc, ground)
     g = np.asarray(ground, dtype=float)
     if g.shape[-1:] != (3,):
         raise ValueError(f"ground coordinates must have a last axis of size 3, got {g.shape}")

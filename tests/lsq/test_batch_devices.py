@@ -15,9 +15,11 @@ REPO = pathlib.Path(__file__).resolve().parents[2]
 def _run(mode: str) -> dict:
     env = {k: v for k, v in os.environ.items() if k not in ("JAX_NUM_CPU_DEVICES",)}
     # the suite's XLA flags (tests/conftest.py) ask for one thread, which keeps one device;
-    # the count is given explicitly instead, as a user may
+    # the count is given explicitly instead, as a user may; the CPU's devices on a GPU machine too
     env.update(
-        JAXGEO_CPU_DEVICES="2", PYTHONPATH=os.pathsep.join([str(REPO), env.get("PYTHONPATH", "")])
+        JAXGEO_CPU_DEVICES="2",
+        JAX_PLATFORMS="cpu",
+        PYTHONPATH=os.pathsep.join([str(REPO), env.get("PYTHONPATH", "")]),
     )
     run = subprocess.run(
         [sys.executable, str(WORKER), mode], capture_output=True, text=True, env=env,

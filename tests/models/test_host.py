@@ -12,6 +12,13 @@ import pytest
 from jaxgeo.models import _host as host
 
 
+@pytest.fixture(autouse=True)
+def _on_the_cpu():
+    """These are the CPU's paths (numpy memory used in place): on the CPU on a GPU machine too."""
+    with jax.default_device(jax.local_devices(backend="cpu")[0]):
+        yield
+
+
 def _at_offset(values: np.ndarray, offset: int) -> np.ndarray:
     """A copy of ``values`` whose first element lies ``offset`` elements past a 64-byte
     boundary."""

@@ -47,3 +47,29 @@ def test_localize_flags_what_the_chord_steps_cannot_reach(pleiades):
     out = rpc.localize(xy, ground[:, 2])
     assert np.all(np.isnan(out[1, :2])) and np.all(np.isnan(out[2, :2]))
     np.testing.assert_allclose(out[0, :2], ground[0, :2], rtol=0, atol=1e-9)
+
+
+def test_the_gpu_kernel_gives_the_cpu_kernel_numbers(pleiades):
+    """The projection body for jax arrays on a GPU (one (n, 2) elementwise loop, no transposing
+    copies) runs here on the CPU: it must give the CPU body's numbers, batch shape kept."""
+    rpc, _ = pleiades
+    rng = np.random.default_rng(3)
+    go, gs = np.asarray(rpc.ground_offset), np.asarray(rpc.ground_scale)
+    ground = jax.numpy.asarray(go + gs * rng.uniform(-0.9, 0.9, (4, 250, 3)))
+    flat = rpc_eval._flat(rpc)
+    gpu = np.asarray(rpc_eval._project_kernel_direct(*flat, ground))
+    cpu = np.asarray(rpc_eval._project_kernel(*flat, ground))
+    assert gpu.shape == (4, 250, 2)
+    np.testing.assert_allclose(gpu, cpu, rtol=0, atol=1e-9)
+
+
+def test_numpy_calls_run_on_the_cpu_device_when_it_is_the_default(pleiades):
+    """On a GPU machine numpy projections are computed on the host's CPU device (the copies
+    cost more than the projection): the same path as a CPU machine's, the same numbers."""
+    rpc, _ = pleiades
+    ground = np.asarray(rpc.ground_offset) + np.zeros((5, 3))
+    assert rpc_eval.runs_on_cpu() == (jax.default_backend() == "cpu")
+    expected = rpc.project(ground)
+    with jax.default_device(rpc_eval.host_device()):
+        assert rpc_eval.runs_on_cpu()
+        np.testing.assert_array_equal(rpc.project(ground), expected)
