@@ -365,8 +365,14 @@ def plan_dsm(
     windows = {t.id: job.window(t) for t in plan0.tiles}
     plan = plan_tiles("dsm", cols, rows, tile, 0, job=job_dict,
                       inputs=lambda t: {"reference_window": _listed(windows[t.id]),
-                                        "box_m": list(job.box(t))})  # fmt: skip
+                                        "box_m": list(job.box(t)),
+                                        "cost": _area(windows[t.id])})  # fmt: skip
     return DSMSetup(job, plan)
+
+
+def _area(window) -> int:
+    """Reference pixels a tile reads (its work: ties, matching, triangulation): 0 for none."""
+    return 0 if window is None else int(window[2]) * int(window[3])
 
 
 def _listed(window):

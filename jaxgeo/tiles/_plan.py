@@ -42,6 +42,13 @@ class Tile:
     cols: int
     inputs: dict = dataclasses.field(default_factory=dict, compare=False)
 
+    @property
+    def cost(self) -> float:
+        """The tile's expected work, relative to the others': ``inputs["cost"]`` where the job
+        gives one (a DSM tile: the reference image's pixels it reads), else its output pixels.
+        The runner starts the costliest tiles first (the run then ends on small ones)."""
+        return float(self.inputs.get("cost", self.rows * self.cols))
+
     def describe(self) -> str:
         """``tile r0001c0002 (rows 1024..2047, cols 2048..3071)``: for messages."""
         return (

@@ -444,10 +444,14 @@ def _on_dask(client, plan, work, todo, folder, suffix, retries, done, bar) -> No
     token = secrets.token_hex(4)
     futures = {}
     try:
-        for tile in todo:
+        # the costliest first (dask runs higher priorities first): the workers then finish
+        # together on small tiles, not one of them on a large last tile while the others wait
+        ranked = sorted(todo, key=lambda t: -t.cost)
+        for rank, tile in enumerate(ranked):
             key = f"{plan.kind}-{tile.id}-{token}"
             fut = client.submit(run_one_tile, work, tile, str(folder), suffix, key=key,
-                                retries=retries, pure=False)  # fmt: skip
+                                retries=retries, pure=False,
+                                priority=len(ranked) - rank)  # fmt: skip
             futures[fut] = tile
         for fut in as_completed(list(futures), loop=client.loop):
             tile = futures[fut]

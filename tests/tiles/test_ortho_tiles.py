@@ -10,6 +10,7 @@ import json
 import os
 import pathlib
 import signal
+import time
 
 import numpy as np
 import pytest
@@ -122,6 +123,33 @@ def test_two_spawned_workers_give_the_in_process_product(setup, pool, in_process
     methods = pool.client().run(lambda: __import__("multiprocessing").get_start_method())
     assert set(methods.values()) == {"spawn"}
     assert np.array_equal(_product(setup, run, tmp_path / "ortho.tif"), in_process)
+
+
+@dataclasses.dataclass(frozen=True)
+class Stamp:
+    """The ortho job, recording when each tile started (the clock every process shares)."""
+
+    job: object
+
+    def __call__(self, tile, path):
+        started = time.time()
+        stats = self.job(tile, path)
+        time.sleep(0.2)  # a tile long enough for both workers to be busy
+        return {**(stats or {}), "started": started}
+
+
+def test_the_costliest_tiles_start_first(setup, pool, tmp_path):
+    """Tiles run in the order of their ``cost`` (here the reverse of the plan's), so that the
+    run ends on cheap tiles: the two first started are the two costliest, the last the cheapest
+    or next to it."""
+    n = len(setup.plan.tiles)
+    tiles = tuple(dataclasses.replace(t, inputs={**t.inputs, "cost": k})
+                  for k, t in enumerate(setup.plan.tiles))  # fmt: skip
+    plan = dataclasses.replace(setup.plan, tiles=tiles)
+    run = run_tiles(plan, Stamp(setup.job), tmp_path / "work", pool=pool, progress=False)
+    started = sorted(run.results, key=lambda k: run.results[k].stats["started"])
+    costs = [plan.tiles[[t.id for t in plan.tiles].index(k)].cost for k in started]
+    assert sorted(costs[:2]) == [n - 2, n - 1] and costs[-1] <= 1, costs
 
 
 def test_a_worker_killed_mid_run_leaves_a_complete_identical_product(setup, pool, in_process,
