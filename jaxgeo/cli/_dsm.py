@@ -25,6 +25,7 @@ from __future__ import annotations
 
 import argparse
 import math
+import time
 
 from ._common import (
     add_command,
@@ -286,6 +287,7 @@ def _run_tiled(args, images, roi, epsg, orientation) -> int:
     if heights is None and dem is not None:
         lo, hi = footprint_dem_heights(images[0].model, dem, roi or (0, 0, *images[0].size))
         heights = (lo - 50.0, hi + 50.0)
+    t_plan = time.perf_counter()
     setup = plan_dsm(
         [im.model for im in images], [im.path for im in images], roi=roi, res_m=args.res,
         epsg=epsg, heights=heights, tie_heights=heights, tile_px=args.tile or TILE_CELLS,
@@ -293,6 +295,7 @@ def _run_tiled(args, images, roi, epsg, orientation) -> int:
         max_hole_m=args.max_hole, orientation=orientation,
     )  # fmt: skip
     plan = setup.plan
+    plan_s = time.perf_counter() - t_plan
     if args.plan:
         write_plan(plan, args.plan, overwrite=args.overwrite)
         if args.json:
@@ -319,6 +322,8 @@ def _run_tiled(args, images, roi, epsg, orientation) -> int:
         "interpolated": round(report.interpolated, 4), "tiles": report.tiles,
         "empty_tiles": empty, "reused_tiles": report.reused_tiles, "workers": report.workers,
         "scheduler": report.scheduler, "seconds": round(report.seconds, 1),
+        "plan_s": round(plan_s, 1), "tiles_s": round(report.tiles_s, 1),
+        "mosaic_s": round(report.mosaic_s, 1),
     }  # fmt: skip
     if args.json:
         print_json({**result, "tile_stats": report.tile_stats})

@@ -390,8 +390,9 @@ class TiledDSMReport:
     """What :func:`tiled_dsm` made: ``path``, its grid (``epsg``, ``res_m``, ``width`` x
     ``height`` cells), ``filled`` (share of cells with a height), ``interpolated`` (share of
     cells interpolated), the run (``tiles``, ``empty_tiles``: nodata, ``reused_tiles``,
-    ``workers``, ``scheduler``, ``seconds``) and per tile its pairs' numbers or why it is
-    empty (``tile_stats``)."""
+    ``workers``, ``scheduler``, ``seconds``: of which ``tiles_s`` running the tiles and
+    ``mosaic_s`` writing the COG) and per tile its pairs' numbers or why it is empty
+    (``tile_stats``)."""
 
     path: pathlib.Path
     epsg: int
@@ -407,6 +408,8 @@ class TiledDSMReport:
     workers: int
     scheduler: str | None
     tile_stats: dict
+    tiles_s: float = 0.0
+    mosaic_s: float = 0.0
 
 
 def tiled_dsm(
@@ -446,7 +449,9 @@ def tiled_dsm(
             why = sorted({str(s.get("no_data", "")) for s in stats.values() if s})
             raise StereoError(f"dsm: no tile of {setup.job.paths[0]} got a height"
                               + (f" ({'; '.join(why)[:300]})" if why else ""))  # fmt: skip
+        t_mosaic = time.perf_counter()
         mosaic_cog(run, setup.plan, setup.job.spec, out, overwrite=overwrite, compress=compress)
+        mosaic_s = time.perf_counter() - t_mosaic
         done = True
     finally:
         if folder is not None and (resume is None or done):
@@ -459,4 +464,5 @@ def tiled_dsm(
         interpolated=sum(s.get("filled", 0) for s in stats.values() if s) / cells,
         seconds=time.perf_counter() - t0, tiles=len(setup.plan), empty_tiles=run.empty,
         reused_tiles=run.reused, workers=run.workers, scheduler=run.scheduler, tile_stats=stats,
+        tiles_s=run.seconds, mosaic_s=mosaic_s,
     )  # fmt: skip

@@ -45,7 +45,10 @@ def test_queue_gives_each_problem_its_own_solution(batch, loss):
         if not bool(want.result == RESULTS.successful):
             continue
         np.testing.assert_allclose(got.theta[0][k], want.theta[0], rtol=1e-9, atol=1e-10)
-        np.testing.assert_allclose(got.ground[k], want.ground, rtol=1e-12, atol=1e-10)
+        # lon, lat (deg) to 1e-12 relative (~5e-6 m); heights to 1 nm: the batched and the single
+        # program round differently (one CI run: 0.66 nm apart on a 459 m height)
+        np.testing.assert_allclose(got.ground[k][:, :2], want.ground[:, :2], rtol=1e-12)
+        np.testing.assert_allclose(got.ground[k][:, 2], want.ground[:, 2], rtol=0, atol=1e-9)
         np.testing.assert_allclose(got.weight_image[k], want.weight_image, atol=1e-9)
         np.testing.assert_allclose(got.s0[k], want.s0, rtol=1e-9)
     codes = np.asarray(got.result._value)

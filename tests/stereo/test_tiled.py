@@ -58,6 +58,9 @@ def test_tiled_dsm_equals_the_untiled_one_and_the_truth(scene, setup, tiled, tmp
     folder, models, paths = scene
     out, report = tiled
     assert report.tiles == len(setup.plan) == 4 and report.empty_tiles == 0
+    # where the time went: the tiles and the mosaic, within the whole
+    assert 0 < report.mosaic_s < report.tiles_s < report.seconds
+    assert report.tiles_s + report.mosaic_s <= report.seconds
     with rasterio.open(out) as ds:
         assert (
             ds.count == 5
