@@ -274,14 +274,38 @@ def _tiled(args, image, roi) -> bool:
 
 def _run_tiled(args, images, roi, epsg, orientation) -> int:
     """The DSM tile by tile (:func:`jaxgeo.stereo.tiled_dsm`), or its plan only (``--plan``)."""
-    from ..stereo import TILE_CELLS, footprint_dem_heights, plan_dsm, tiled_dsm
-    from ..tiles import TileError, write_plan
     from . import CommandError
-    from ._common import note, tiles_kept
 
     if args.keep is not None:
         raise CommandError("--keep writes the products of an untiled DSM: give a --roi of at "
                            "most 2048 px without tile options")  # fmt: skip
+    pool = _early_pool(args)
+    try:
+        return _plan_and_run(args, images, roi, epsg, orientation, pool)
+    finally:
+        if pool is not None:
+            pool.close()
+
+
+def _early_pool(args):
+    """The worker processes, started now so that their start (importing jax and jaxgeo) overlaps
+    the planning (~10 s); ``None`` where the tiles run here (``--workers 0``, one core) or
+    nothing runs (``--plan``)."""
+    from ..tiles import WorkerPool, cores
+
+    if args.plan or args.workers == 0:
+        return None
+    if args.scheduler:
+        return WorkerPool(0, args.scheduler, args.retries, warm=("jaxgeo.stereo",))
+    n = args.workers or (cores() if cores() > 1 else 0)
+    return WorkerPool(n, retries=args.retries, warm=("jaxgeo.stereo",)) if n else None
+
+
+def _plan_and_run(args, images, roi, epsg, orientation, pool) -> int:
+    from ..stereo import TILE_CELLS, footprint_dem_heights, plan_dsm, tiled_dsm
+    from ..tiles import TileError, write_plan
+    from ._common import note, tiles_kept
+
     dem = open_dem(args)
     heights = tuple(args.heights) if args.heights else None
     if heights is None and dem is not None:
@@ -309,9 +333,12 @@ def _run_tiled(args, images, roi, epsg, orientation) -> int:
     note(f"jaxgeo dsm: {len(plan)} tiles of {plan.tile_px} cells over {plan.width} x "
          f"{plan.height} cells", args.quiet)  # fmt: skip
     try:
+        # a single tile runs here unless workers were asked for (as tiled_dsm decides)
+        asked = args.workers or args.scheduler
         report = tiled_dsm(setup, args.out, workers=args.workers, scheduler=args.scheduler,
                            resume=args.resume, retries=args.retries, overwrite=args.overwrite,
-                           progress=not args.quiet)  # fmt: skip
+                           progress=not args.quiet,
+                           pool=pool if asked or len(plan) > 1 else None)  # fmt: skip
     except (KeyboardInterrupt, TileError):
         tiles_kept(args, "dsm")
         raise

@@ -34,6 +34,7 @@ from ..tiles import (
     RasterSpec,
     Tile,
     TilePlan,
+    WorkerPool,
     cores,
     mosaic_cog,
     overview_factors,
@@ -423,13 +424,15 @@ def tiled_dsm(
     overwrite: bool = False,
     progress: bool = True,
     compress: str = "deflate",
+    pool: WorkerPool | None = None,
 ) -> TiledDSMReport:
     """Run the tiles of ``setup`` (:func:`plan_dsm`) and write the DSM as one COG at ``out``
     (atomic: complete or absent). ``workers``, ``scheduler``, ``retries``: where the tiles run
     (:func:`jaxgeo.tiles.run_tiles`; by default one worker process per core when there are
     several tiles: a tile takes tens of seconds, a worker's start a few); ``resume``: a folder
     for the finished tiles, kept after an interruption and reused by the next run (default: a
-    temporary folder beside ``out``).
+    temporary folder beside ``out``); ``pool``: workers started earlier (:class:`WorkerPool`,
+    e.g. before the planning, left open), used instead of ``workers`` and ``scheduler``.
     :class:`StereoError` when no tile gets a height."""
     import time
 
@@ -443,7 +446,7 @@ def tiled_dsm(
     try:
         folder = work_folder(out, resume)
         run = run_tiles(setup.plan, setup.job, folder, workers=workers, scheduler=scheduler,
-                        retries=retries, progress=progress)  # fmt: skip
+                        pool=pool, retries=retries, progress=progress)  # fmt: skip
         stats = {k: r.stats for k, r in run.results.items()}
         if all(r.path is None for r in run.results.values()):
             why = sorted({str(s.get("no_data", "")) for s in stats.values() if s})

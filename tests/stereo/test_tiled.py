@@ -1,6 +1,7 @@
 """A DSM tile by tile (``jaxgeo.stereo.plan_dsm`` / ``tiled_dsm``) on a simulated pair with its
 truth: equal to the untiled DSM to the matching's noise, as accurate against the truth; the same
-on 2 spawned dask workers as in this process; ``resume`` reuses the tiles a failed run finished;
+on 2 spawned dask workers as in this process (also through ``jaxgeo dsm --workers 2``, whose
+workers start before the planning); ``resume`` reuses the tiles a failed run finished;
 a tile the reference image does not see is nodata, a scene without texture an error naming the
 image; ``jaxgeo dsm --plan`` lists the tiles and computes nothing.
 
@@ -91,6 +92,21 @@ def test_tiles_on_two_spawned_workers_equal_those_made_here(setup, tiled, tmp_pa
     assert run.workers == 2
     mosaic_cog(run, setup.plan, setup.job.spec, tmp_path / "dask.tif")
     with rasterio.open(out) as a, rasterio.open(tmp_path / "dask.tif") as b:
+        np.testing.assert_allclose(b.read(), a.read(), atol=1e-3, equal_nan=True)
+
+
+def test_cli_with_two_workers_started_before_the_plan(scene, tiled, tmp_path, capsys):
+    """``jaxgeo dsm --workers 2``: the workers start while the tiles are planned, run them, and
+    the DSM equals the one made in this process; the report says where the time went."""
+    folder, _, _ = scene
+    out = tmp_path / "dsm.tif"
+    code = main(["dsm", str(folder / "left.tif"), str(folder / "right.tif"), "--res", str(RES),
+                 "--tile", str(TILE), "--workers", "2", "-o", str(out), "--json"])  # fmt: skip
+    assert code == 0
+    report = json.loads(capsys.readouterr().out)
+    assert report["workers"] == 2 and report["scheduler"].startswith("tcp://")
+    assert report["plan_s"] > 0 and 0 <= report["mosaic_s"] < report["tiles_s"]  # 0.1 s steps
+    with rasterio.open(tiled[0]) as a, rasterio.open(out) as b:
         np.testing.assert_allclose(b.read(), a.read(), atol=1e-3, equal_nan=True)
 
 
