@@ -13,6 +13,7 @@ more than one tile's scale space. Image coordinates: jaxgeo (integer = pixel cen
 
 from __future__ import annotations
 
+import contextlib
 from collections.abc import Sequence
 from dataclasses import dataclass
 
@@ -93,7 +94,7 @@ def sift_features_raster(
     from rasterio.windows import Window
 
     sift = cv2.SIFT_create()
-    with rasterio.open(path) as src:
+    with rasterio.open(path) as src, pixels_of(path):
         col, row, w, h = window if window is not None else (0, 0, src.width, src.height)
         scale = max(1, int(np.ceil(max(w, h) / 1024)))
         small = src.read(1, window=Window(col, row, w, h), out_shape=(h // scale, w // scale))
@@ -104,6 +105,22 @@ def sift_features_raster(
             xy, desc = _detect(sift, to_uint8(tile, limits), core, (ca, ra), tile_px)
             parts.append((xy + (col, row), desc))
     return _concat(parts)
+
+
+@contextlib.contextmanager
+def pixels_of(path):
+    """Reading ``path``'s pixels: GDAL's read error (a truncated or corrupt file, whose header
+    opened) becomes an :class:`~jaxgeo.io.ImageError` naming the file."""
+    from rasterio.errors import RasterioIOError
+
+    from ..io import ImageError
+
+    try:
+        yield
+    except RasterioIOError as err:
+        raise ImageError(
+            f"{path}: its pixels cannot be read (truncated or corrupt? {err})"
+        ) from None
 
 
 def _epipolar_segments(m1, m2, xy, h_lo, h_hi):

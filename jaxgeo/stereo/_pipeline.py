@@ -73,7 +73,9 @@ def read_window(path: str | os.PathLike, window: tuple[int, int, int, int]) -> n
     window is read)."""
     from rasterio.windows import Window
 
-    with _open(path) as src:
+    from ._matching import pixels_of
+
+    with _open(path) as src, pixels_of(path):
         return src.read(1, window=Window(*window)).astype(np.float32)
 
 

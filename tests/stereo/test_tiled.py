@@ -160,6 +160,18 @@ def test_plan_lists_the_tiles_and_computes_nothing(scene, setup, tmp_path, capsy
     assert f"{len(setup.plan)} tiles" in capsys.readouterr().out
 
 
+def test_an_image_whose_pixels_cannot_be_read_is_named(scene, tmp_path, capsys):
+    """A truncated image whose header still opens: an error naming the file, no output."""
+    folder, _, _ = scene
+    broken = tmp_path / "broken.tif"
+    broken.write_bytes((folder / "right.tif").read_bytes()[:1000])
+    out = tmp_path / "dsm.tif"
+    code = main(["dsm", str(folder / "left.tif"), str(broken), "--res", str(RES), "--tile",
+                 str(TILE), "--workers", "0", "-o", str(out)])  # fmt: skip
+    assert code == 2 and not out.exists()
+    assert "broken.tif: its pixels cannot be read" in capsys.readouterr().err
+
+
 def test_keep_is_refused_for_a_tiled_dsm(scene, tmp_path, capsys):
     folder, _, _ = scene
     code = main(["dsm", str(folder / "left.tif"), str(folder / "right.tif"), "--tile", "256",
