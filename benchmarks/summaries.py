@@ -383,6 +383,7 @@ def cars_scene(d: dict) -> list[str]:
 
 DEVICE_CASES = (
     "device",
+    "device_transposing",
     "device_columns",
     "device_interleaved",
     "device_columns_div",

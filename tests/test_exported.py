@@ -128,7 +128,10 @@ def test_demo_warm_run_equals_an_uncached_run(tmp_path):
     cache = str(tmp_path / "c")
     first, second = demo(cache), demo(cache)
     assert list((tmp_path / "c" / "exported").glob("*.jaxexport"))
-    assert first == second
+    if jax.default_backend() == "cpu":
+        assert first == second
+    else:  # a GPU's reductions are not bitwise repeatable (an H100: s0 1e-13 relative apart)
+        assert _close(first, second, rtol=1e-11), (first, second)
     off = demo("off")
     assert _close(first, off, rtol=1e-8), (first, off)
 

@@ -115,6 +115,7 @@ def test_batch_shapes(shape):
     assert geodesy.geodetic_to_enu(g, np.array([0.0, 0.0, 0.0])).shape == (*shape, 3)
 
 
+@pytest.mark.usefixtures("finite_differences_on_cpu")
 def test_jit_and_gradients():
     g = jnp.array([[7.05, 43.7, 120.0], [10.3, -42.9, 1260.0]])
     origin = jnp.array([7.0, 43.6, 0.0])

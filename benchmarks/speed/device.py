@@ -12,7 +12,8 @@ Run it twice on one machine for a same-machine baseline: on the GPU, then with
   interleaved ``(n, 3)`` / ``(n, 2)`` layout);
 - ``device_interleaved``: the kernel reading the ``(n, 3)`` columns in place and writing
   ``(n, 2)`` directly (no transposing copies in and out, which the CPU kernel makes: what
-  ``device`` runs on a GPU);
+  ``device`` ran on a GPU before ``_project_body_direct``);
+- ``device_transposing``: the CPU's kernel (transposing copies in and out) on the device;
 - ``device_columns_div``: ``device_columns`` with the ground normalised by a float64 division
   per point (the kernel before issue 29: XLA's GPU fusion then splits it in two);
 - ``numpy``: ``rpc.project(numpy)``, numpy out (as README writes it; every copy included; on
@@ -94,8 +95,13 @@ def measure(rpc, n: int, repeats: int, hlo: dict) -> dict:
     columns_div = jax.jit(_columns_div)
     interleaved = jax.jit(_interleaved)
     copy = jax.jit(_copy)
+    on_cpu = device.platform == "cpu"
+    kernel = _rpc_eval._project_kernel if on_cpu else _rpc_eval._project_kernel_direct
+    flat = _rpc_eval._flat(rpc)
+    transposing = _rpc_eval._project_kernel
     cases = {
         "device": lambda: rpc.project(g_dev),
+        "device_transposing": lambda: transposing(*flat, g_dev),
         "device_columns": lambda: columns(rpc, *cols),
         "device_interleaved": lambda: interleaved(rpc, g_dev),
         "device_columns_div": lambda: columns_div(rpc, *cols),
@@ -136,7 +142,8 @@ def measure(rpc, n: int, repeats: int, hlo: dict) -> dict:
     )
     if not hlo:
         for name, (fn, args) in {
-            "device": (_rpc_eval._project_kernel, (*_rpc_eval._flat(rpc), g_dev)),
+            "device": (kernel, (*flat, g_dev)),
+            "device_transposing": (transposing, (*flat, g_dev)),
             "device_columns": (columns, (rpc, *cols)),
             "device_interleaved": (interleaved, (rpc, g_dev)),
             "device_columns_div": (columns_div, (rpc, *cols)),

@@ -287,7 +287,15 @@ def run(args: argparse.Namespace) -> int:
     from ..bundle import JitterSettings, NotConvergedWarning, PoorFitWarning, image_inputs
     from ..lsq import SolverConfig
     from . import CommandError
-    from ._common import EXIT_NOT_CONVERGED, EXIT_OK, EXIT_POOR_FIT, EXIT_WRITE, note, print_json
+    from ._common import (
+        EXIT_NOT_CONVERGED,
+        EXIT_OK,
+        EXIT_POOR_FIT,
+        EXIT_WRITE,
+        note,
+        ours,
+        print_json,
+    )
 
     def say(line: str) -> None:
         note(f"jaxgeo adjust: {line}", args.quiet)
@@ -353,7 +361,7 @@ def run(args: argparse.Namespace) -> int:
             tie_height_sigma_m=args.tie_height_sigma_m, progress=say,
             jitter=JitterSettings(args.jitter_knot_lines, args.jitter_smoothness_px),
         )  # fmt: skip
-    for w in caught:  # warnings are printed even with --quiet
+    for w in ours(caught):  # warnings are printed even with --quiet
         warn = issubclass(w.category, (NotConvergedWarning, PoorFitWarning))
         note(f"jaxgeo adjust: {'warning' if warn else 'note'}: {w.message}")
     if args.json:  # (the text report holds them)

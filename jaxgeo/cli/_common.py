@@ -15,6 +15,7 @@ import json
 import os
 import pathlib
 import sys
+import warnings
 from collections.abc import Iterable, Sequence
 
 EXIT_OK, EXIT_NOT_CONVERGED, EXIT_INPUT, EXIT_POOR_FIT, EXIT_WRITE = 0, 1, 2, 3, 4
@@ -353,3 +354,21 @@ def note(message: str, quiet: bool = False) -> None:
     """A progress or context line on stderr (not with ``--quiet``)."""
     if not quiet:
         print(message, file=sys.stderr, flush=True)
+
+
+def ours(caught: Iterable[warnings.WarningMessage]) -> list[warnings.WarningMessage]:
+    """jaxgeo's warnings among those a command caught (``warnings.catch_warnings(record=True)``),
+    for it to print as its own lines. The others (a library's ``DeprecationWarning``, numpy's
+    ``RuntimeWarning``) go back to Python's filters, which hide most unless the user asks
+    (``-W``, ``PYTHONWARNINGS``): they are not the user's business, and a run on a newer numpy
+    printed rasterio's deprecation notices as ``jaxgeo coregister: warning:`` lines. Call it
+    after the ``catch_warnings`` block."""
+    from ..errors import JaxgeoWarning
+
+    kept = []
+    for w in list(caught):  # (re-issued inside the recording context, they would join it)
+        if issubclass(w.category, JaxgeoWarning):
+            kept.append(w)
+        else:
+            warnings.warn_explicit(w.message, w.category, w.filename, w.lineno)
+    return kept

@@ -73,7 +73,7 @@ def run(args: argparse.Namespace) -> int:
     import warnings
 
     from ..stereo import CoregistrationWarning, NuthKaab, coregister
-    from ._common import EXIT_NOT_CONVERGED, EXIT_OK, guard_outputs, note, print_json
+    from ._common import EXIT_NOT_CONVERGED, EXIT_OK, guard_outputs, note, ours, print_json
 
     inputs = [args.dsm, args.ref] + ([args.mask] if args.mask else [])
     guard_outputs([args.out], inputs, args.overwrite)
@@ -95,7 +95,7 @@ def run(args: argparse.Namespace) -> int:
             args.dsm, args.ref, args.out, mask=args.mask, settings=settings,
             overwrite=args.overwrite, callback=progress,
         )  # fmt: skip
-    for w in caught:
+    for w in ours(caught):
         print(f"jaxgeo coregister: warning: {w.message}", file=sys.stderr)
     dx, dy, dz = result.shift_m
     if args.json:

@@ -37,6 +37,7 @@ from ._common import (
     note,
     open_dem,
     open_images,
+    ours,
     print_json,
 )
 
@@ -120,11 +121,8 @@ def _warnings(caught, prefix: str = "") -> None:
     not the user's business)."""
     import sys
 
-    from ..errors import JaxgeoWarning
-
-    for w in caught:
-        if issubclass(w.category, JaxgeoWarning):
-            print(f"jaxgeo match: warning: {prefix}{w.message}", file=sys.stderr)
+    for w in ours(caught):
+        print(f"jaxgeo match: warning: {prefix}{w.message}", file=sys.stderr)
 
 
 def run(args: argparse.Namespace) -> int:

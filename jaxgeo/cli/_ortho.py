@@ -29,6 +29,7 @@ from ._common import (
     add_out,
     add_quiet,
     add_tile_options,
+    ours,
 )
 
 
@@ -120,17 +121,17 @@ def run(args: argparse.Namespace) -> int:
 
     if args.max_pixels is not None and args.max_pixels < 0:
         raise CommandError(f"--max-pixels must be >= 0 (0: no limit), got {args.max_pixels:g}")
-    with warnings.catch_warnings(record=True) as caught:
-        warnings.simplefilter("always")
-        try:
+    caught = []
+    try:
+        with warnings.catch_warnings(record=True) as caught:
+            warnings.simplefilter("always")
             return _run(args)
-        finally:  # jaxgeo's warnings once each, one line (printed even with --quiet)
-            shown = set()
-            for w in caught:
-                ours = w.category is UserWarning or w.category.__module__.startswith("jaxgeo")
-                if issubclass(w.category, UserWarning) and ours and str(w.message) not in shown:
-                    shown.add(str(w.message))
-                    print(f"jaxgeo ortho: warning: {w.message}", file=sys.stderr)
+    finally:  # jaxgeo's warnings once each, one line (printed even with --quiet)
+        shown = set()
+        for w in ours(caught):
+            if str(w.message) not in shown:
+                shown.add(str(w.message))
+                print(f"jaxgeo ortho: warning: {w.message}", file=sys.stderr)
 
 
 def _run(args: argparse.Namespace) -> int:

@@ -310,7 +310,15 @@ def _run(args: argparse.Namespace) -> int:
         write_strip_outputs,
     )
     from . import CommandError
-    from ._common import EXIT_NOT_CONVERGED, EXIT_OK, EXIT_POOR_FIT, EXIT_WRITE, note, print_json
+    from ._common import (
+        EXIT_NOT_CONVERGED,
+        EXIT_OK,
+        EXIT_POOR_FIT,
+        EXIT_WRITE,
+        note,
+        ours,
+        print_json,
+    )
 
     def say(line: str) -> None:
         note(f"jaxgeo strip: {line}", args.quiet)
@@ -334,17 +342,18 @@ def _run(args: argparse.Namespace) -> int:
         "snooping, level-2 correction (the first run of a strip shape compiles, up to a "
         "minute)")  # fmt: skip
     poor = False
-    with warnings.catch_warnings(record=True) as caught:
-        warnings.simplefilter("always")
-        try:
+    caught = []
+    try:
+        with warnings.catch_warnings(record=True) as caught:
+            warnings.simplefilter("always")
             result = adjust_strip(strip, config)
-        finally:  # the GCP distribution warning matters most when the adjustment fails
-            for w in caught:
-                warns = (GCPDistributionWarning, UniversalCorrectionWarning, LineOffsetWarning,
-                         NotConvergedWarning, PoorFitWarning, MeasuredTieWarning)  # fmt: skip
-                kind = "warning" if issubclass(w.category, warns) else "note"
-                poor |= issubclass(w.category, PoorFitWarning)
-                print(f"jaxgeo strip: {kind}: {w.message}", file=sys.stderr)
+    finally:  # the GCP distribution warning matters most when the adjustment fails
+        for w in ours(caught):
+            warns = (GCPDistributionWarning, UniversalCorrectionWarning, LineOffsetWarning,
+                     NotConvergedWarning, PoorFitWarning, MeasuredTieWarning)  # fmt: skip
+            kind = "warning" if issubclass(w.category, warns) else "note"
+            poor |= issubclass(w.category, PoorFitWarning)
+            print(f"jaxgeo strip: {kind}: {w.message}", file=sys.stderr)
     converged = bool(result.report.strip["converged"])
     if not converged:
         print("jaxgeo strip: warning: the level-1 bundle adjustment did not converge",

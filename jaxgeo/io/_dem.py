@@ -34,6 +34,7 @@ from typing import Any
 
 import numpy as np
 
+from ..errors import JaxgeoWarning
 from ..models import AbstractDEM
 
 __all__ = ["DEM", "PLAUSIBLE_HEIGHTS_M", "implausible", "read_dem"]
@@ -311,6 +312,6 @@ def _warn_implausible(path: pathlib.Path, max_cells: int = 4_000_000) -> None:
             f"{path}: {100 * bad.mean():.2g}% of the cells hold heights no terrain has ({shown}; "
             f"plausible: {PLAUSIBLE_HEIGHTS_M[0]:g}..{PLAUSIBLE_HEIGHTS_M[1]:g} m) without being "
             "declared nodata: they are read as nodata (voids)",
-            UserWarning,
+            JaxgeoWarning,
             stacklevel=3,
         )

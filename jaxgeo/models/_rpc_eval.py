@@ -14,8 +14,8 @@ which keeps the working set in cache. A projection of a size used before runs wh
 with no copy in or out (:func:`._host.call_exact`). Where jax's default device is a GPU, numpy
 projections run on the host's CPU device all the same (0.61 against 0.07 G points/s through an
 H100 at 1e6-1e8 points: the copies cost more than the projection), and jax arrays on the GPU
-run there (:func:`_project_body_direct`); localisation, compute-bound, runs on the default
-device either way.
+run there (:func:`_project_body_direct`: 29.8 G points/s at 1e8 on the H100, 1.2x the CPU's
+body there); localisation, compute-bound, runs on the default device either way.
 
 Localisation runs one iteration everywhere (:func:`localize_lph`: Newton, then chord steps with
 the Jacobian frozen, over whole arrays): the numpy kernel, and under ``jit``/``vmap``/``grad``
@@ -112,10 +112,12 @@ _project_kernel = jax.jit(_project_body, static_argnums=0)
 
 def _project_body_direct(treedef, leaves, ground):
     # on a GPU: the columns read in place and (n, 2) written as one elementwise loop, element
-    # (i, k) evaluating image axis k's two polynomials. Measured on an H100 (1e8 points): the
-    # transposing CPU body, and x and y computed apart then stacked, both ran as three kernels
-    # (XLA's fusion splits around the stack) at 24 G points/s, where separate x, y outputs ran
-    # as one at 48 G/s; this form's speed there is not measured yet (benchmarks/speed/device.py)
+    # (i, k) evaluating image axis k's two polynomials. Measured on an H100 (1e8 points,
+    # benchmarks/results/device-1e6to1e8_direct-16core-gpu.json): 29.8 G points/s (36 % of the
+    # nominal bandwidth), the transposing CPU body 24.7 G/s, x and y computed apart then
+    # stacked 24.4 G/s; separate x, y outputs 47.5 G/s. XLA still writes the normalised
+    # lon, lat, h to memory in a kernel of their own (it does not recompute them for both
+    # output columns): the (n, 3) -> (n, 2) call stays under half the bound
     rpc = jax.tree.unflatten(treedef, leaves)
     g = ground.reshape(-1, 3)
     ln, pn, hn = (v[:, None] for v in _normalized(rpc, g[:, 0], g[:, 1], g[:, 2]))

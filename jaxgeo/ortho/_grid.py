@@ -9,6 +9,7 @@ import warnings
 import numpy as np
 
 from .. import _exported
+from ..errors import JaxgeoWarning
 from ..geodesy import utm_epsg, utm_zone
 from ..io import dem_coverage
 
@@ -196,7 +197,7 @@ def footprint(model, grid, width: int, height: int, source: str = "the DEM") -> 
         f"{source}: {100 * (1 - ok.mean()):.0f}% of the image border falls where the DEM has "
         f"no height ({100 * np.isnan(z).mean():.0f}% of its cells under the image are nodata): "
         "the orthoimage is nodata there",
-        UserWarning,
+        JaxgeoWarning,
         stacklevel=2,
     )
     out = g.copy()

@@ -13,7 +13,8 @@ REPO = pathlib.Path(__file__).resolve().parents[2]
 
 
 def _env():
-    env = dict(os.environ)
+    # the host's CPU devices, on a GPU machine too (two processes on one GPU: NCCL refuses)
+    env = dict(os.environ, JAX_PLATFORMS="cpu")
     env["PYTHONPATH"] = os.pathsep.join([str(REPO), env.get("PYTHONPATH", "")])
     return env
 

@@ -331,6 +331,7 @@ def test_implicit_root_derivatives_to_second_order():
     check_grads(jax.jit(root2), (a,), order=1, modes=("rev",))
 
 
+@pytest.mark.usefixtures("finite_differences_on_cpu")
 def test_gradients(perturbed, truth):
     """check_grads of project w.r.t. ground and the adjustable parameters (eqx.partition)
     jointly, each scaled to ~1 px per unit: order 2 in forward mode, order 1 in reverse mode

@@ -11,6 +11,7 @@ from typing import Any
 import numpy as np
 from jaxtyping import PyTree
 
+from ...errors import JaxgeoWarning
 from ...geodesy import metres_per_unit
 from ...io import GroundPoints, Observations
 from ...models import COPLANAR_RTOL, AbstractMultiImageModel, AbstractSensorModel, Affine3D
@@ -105,6 +106,7 @@ def check_points(
     if unmeasured:
         warnings.warn(
             f"ground point(s) {listing(unmeasured)} are not measured in any image: ignored",
+            JaxgeoWarning,
             stacklevel=4,
         )
     images_of_point: dict[str, list[str]] = {p: [] for p in point_ids}
