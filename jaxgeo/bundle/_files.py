@@ -15,6 +15,7 @@ models.
 
 from __future__ import annotations
 
+import concurrent.futures
 import dataclasses
 import os
 import pathlib
@@ -273,15 +274,24 @@ def adjust_files(
                 "of its product: its measurements and adjusted RPC are in the crop's pixels"
             )
     prior = bias_prior_sigma(models, bias_prior_shift_px, bias_prior_matrix)
-    result = adjust(
-        models, obs, points, prior_sigma=prior, solver=solver, sources=sources, tie_height=dem,
-        tie_height_sigma_m=tie_height_sigma_m, image_domains=domains, progress=progress,
-    )  # fmt: skip
-    direct = None
-    if points is not None and len(models) >= 2:
-        if progress is not None:
-            progress("direct georeferencing: intersecting the control points with the given models")
-        direct = direct_georeferencing(models, obs, points, roles=tuple(direct_roles))
+    # direct georeferencing (the given models, for the report) on a thread beside the adjustment:
+    # on a first run both compile, and XLA compiles without holding the GIL (`jaxgeo demo` cold:
+    # see the closing note of issue 29); an error of the adjustment comes first, and it (or an
+    # interruption) waits for the thread's few seconds
+    with concurrent.futures.ThreadPoolExecutor(1, thread_name_prefix="direct") as pool:
+        direct = None
+        if points is not None and len(models) >= 2:
+            if progress is not None:
+                progress("direct georeferencing: intersecting the control points with the given "
+                         "models (beside the adjustment)")  # fmt: skip
+            direct = pool.submit(
+                direct_georeferencing, models, obs, points, roles=tuple(direct_roles)
+            )
+        result = adjust(
+            models, obs, points, prior_sigma=prior, solver=solver, sources=sources, tie_height=dem,
+            tie_height_sigma_m=tie_height_sigma_m, image_domains=domains, progress=progress,
+        )  # fmt: skip
+        direct = direct.result() if direct is not None else None
     inputs = [p for img in opened.values() for p in image_inputs(img)]
     inputs += [observations] + ([ground] if ground is not None else [])
     inputs += [dem.path] if isinstance(dem, DEM) else []

@@ -291,13 +291,14 @@ def _early_pool(args):
     """The worker processes, started now so that their start (importing jax and jaxgeo) overlaps
     the planning (~10 s); ``None`` where the tiles run here (``--workers 0``, one core) or
     nothing runs (``--plan``)."""
-    from ..tiles import WorkerPool, cores
+    from ..stereo import dsm_workers
+    from ..tiles import WorkerPool
 
     if args.plan or args.workers == 0:
         return None
     if args.scheduler:
         return WorkerPool(0, args.scheduler, args.retries, warm=("jaxgeo.stereo",))
-    n = args.workers or (cores() if cores() > 1 else 0)
+    n = dsm_workers(args.workers)
     return WorkerPool(n, retries=args.retries, warm=("jaxgeo.stereo",)) if n else None
 
 

@@ -54,6 +54,7 @@ from ._tiled import TILED_MIN_PX as TILED_MIN_PX
 from ._tiled import DSMJob as DSMJob
 from ._tiled import DSMSetup as DSMSetup
 from ._tiled import TiledDSMReport as TiledDSMReport
+from ._tiled import dsm_workers as dsm_workers
 from ._tiled import plan_dsm as plan_dsm
 from ._tiled import reference_window as reference_window
 from ._tiled import scene_heights as scene_heights

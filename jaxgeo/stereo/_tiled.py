@@ -413,6 +413,15 @@ class TiledDSMReport:
     mosaic_s: float = 0.0
 
 
+def dsm_workers(workers: int | None, tiles: int | None = None) -> int:
+    """Worker processes of a tiled DSM: ``workers`` where given, else one per core on 2+ cores
+    (a DSM tile is tens of seconds: workers pay off) for several tiles (``tiles``; unknown
+    before the planning, when ``jaxgeo dsm`` starts them: assumed several)."""
+    if workers is not None:
+        return workers
+    return cores() if cores() > 1 and (tiles is None or tiles > 1) else 0
+
+
 def tiled_dsm(
     setup: DSMSetup,
     out: str | os.PathLike,
@@ -440,8 +449,8 @@ def tiled_dsm(
 
     t0 = time.perf_counter()
     out = refuse_existing(out, overwrite)
-    if workers is None and not scheduler:  # a DSM tile is tens of seconds: workers pay off
-        workers = cores() if len(setup.plan) > 1 and cores() > 1 else 0
+    if not scheduler:
+        workers = dsm_workers(workers, len(setup.plan))
     folder, done = None, False
     try:
         folder = work_folder(out, resume)

@@ -103,3 +103,17 @@ def test_gcp_a_kilometre_off_is_named(scene, capsys):
     assert main(_args(scene, "--bias", "shift")) == 0
     out = capsys.readouterr().out
     assert f"GCP {pid!r}: ground coordinates" in out and "removed" in out
+
+
+def test_an_adjustment_refused_beside_direct_georeferencing_is_named(scene, capsys):
+    """Direct georeferencing of the check points runs on a thread beside the adjustment
+    (``jaxgeo.bundle._files``): when the adjustment refuses its input, its error is the one
+    reported, with nothing written, and the command ends (the thread's work done or dropped)."""
+    path = scene / "ground.csv"
+    text = path.read_text().replace(",gcp,", ",check,")
+    path.write_text(text.replace(",check,", ",gcp,", 1))  # one GCP left
+    out = scene / "out"
+    assert main(_args(scene, "--bias", "affine", "--out", str(out))) == 2
+    err = capsys.readouterr().err
+    assert "error: singular normal equations: not determined: parameter(s) fore.bias" in err, err
+    assert "Traceback" not in err and not out.exists()

@@ -193,3 +193,14 @@ def test_scene_heights_cover_the_terrain(scene):
     p1, p99 = np.percentile(truth, [1, 99])
     v_lo, v_hi = los_heights(models[0])
     assert v_lo <= lo <= p1 and p99 <= hi <= v_hi, (lo, hi, p1, p99, v_lo, v_hi)
+
+
+def test_default_workers_are_one_per_core_for_several_tiles(monkeypatch):
+    """``jaxgeo dsm`` starts its workers before the planning with the rule ``tiled_dsm`` uses."""
+    from jaxgeo.stereo import _tiled, dsm_workers
+
+    monkeypatch.setattr(_tiled, "cores", lambda: 4)
+    assert dsm_workers(None) == 4 and dsm_workers(None, tiles=9) == 4
+    assert dsm_workers(None, tiles=1) == 0 and dsm_workers(0) == 0 and dsm_workers(3, tiles=1) == 3
+    monkeypatch.setattr(_tiled, "cores", lambda: 1)
+    assert dsm_workers(None) == 0 and dsm_workers(2) == 2
