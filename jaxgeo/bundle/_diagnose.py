@@ -21,7 +21,7 @@ SINGULAR_RTOL = 1e-10
 @eqx.filter_jit
 def _normal_matrices(problem: Problem, y, loss: str, loss_scale: float):
     _, blocks = blocks_at(problem, unit_scales(problem), y, loss, loss_scale)
-    big_s, _, _ = reduced_system(blocks, problem.structure, 0.0)
+    big_s, _ = reduced_system(blocks, problem.structure, 0.0)
     if isinstance(big_s, Band):  # diagnostics only: the dense matrix, dummy row last
         big_s = jnp.pad(big_s.todense(), ((0, 1), (0, 1)))
     return blocks.v, big_s, blocks.w

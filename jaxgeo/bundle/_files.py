@@ -52,6 +52,8 @@ RELATIVE_PRIOR_SHIFT_PX = 10.0
 models' pointing (a few px for current sensors) holds the block's position."""
 RELATIVE_PRIOR_MATRIX = 1e-4
 """Prior sigma (px/px) of the bias drift or affine terms in the same case."""
+LISTED = 50
+"""Flagged observations named in the summary (all of them are in residuals.csv)."""
 
 
 def image_inputs(image: SensorImage) -> tuple[pathlib.Path, ...]:
@@ -183,7 +185,11 @@ class FileAdjustment:
         if flagged:
             gone = result.removed if result.removed is not None else np.zeros(len(flagged))
             what = "gross errors removed" if np.any(gone) else "possible gross errors (|w| > k)"
-            lines.append(f"{what} ({len(flagged)} observations): {', '.join(flagged)}")
+            more = len(flagged) - LISTED
+            listed = ", ".join(flagged[:LISTED]) + (
+                f", ... ({more} more: the 'blunder' column of residuals.csv)" if more > 0 else ""
+            )
+            lines.append(f"{what} ({len(flagged)} observations): {listed}")
         for p, w in zip(result.gcp_flagged, result.gcp_w, strict=True):
             j = result.gcp_ids.index(p)
             off = np.linalg.norm(np.nan_to_num(result.ground_residuals_m[j]))

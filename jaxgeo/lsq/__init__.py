@@ -42,12 +42,12 @@ from ._problem import ModelGroup as ModelGroup
 from ._problem import Problem as Problem
 from ._problem import Structure as Structure
 from ._problem import make_structure as make_structure
+from ._residuals import residuals as residuals
 from ._results import RESULTS as RESULTS
 from ._results import describe as describe
 from ._schur import reduced_system as reduced_system
 from ._solve import Solution as Solution
 from ._solve import blocks_at as blocks_at
 from ._solve import initial_unknowns as initial_unknowns
-from ._solve import residuals as residuals
 from ._solve import solve as solve
 from ._solve import unit_scales as unit_scales

@@ -22,6 +22,7 @@ from ._schur import (
     chunked_segment_sum,
     reduced_system,
     u_diagonal,
+    wv,
 )
 
 INFLATION_MAX = 1e6
@@ -52,7 +53,7 @@ def cofactors(jac: Jacobians, blocks: NormalBlocks, s: Structure) -> Covariance:
     """Inverse of the normal matrix, by blocks: ``Q_cc = S^-1``, point blocks, and the
     diagonal of ``J Q J^T`` per observation (for redundancy numbers / standardised residuals)."""
     n = s.n_params
-    big_s, vinv, y = reduced_system(blocks, s, 0.0)
+    big_s, vinv = reduced_system(blocks, s, 0.0)
     if s.band:  # the inverse only where the pattern of S is (linear in the sub-scenes)
         qcc = band.selected_inverse(band.band_cholesky(big_s))
         ob = s.obs_block
@@ -73,8 +74,9 @@ def cofactors(jac: Jacobians, blocks: NormalBlocks, s: Structure) -> Covariance:
 
     def per_pair(a, b):  # pairs of observations of one point: their Q_cc block with W V^-1
         qab = q_blocks(a, b)
-        t = jnp.einsum("kpi,kpq,kqj->kij", y[a], qab, y[b])
-        return t, -jnp.einsum("kpq,kqj->kpj", qab, y[b])
+        ya, yb = wv(blocks, vinv, s, a), wv(blocks, vinv, s, b)
+        t = jnp.einsum("kpi,kpq,kqj->kij", ya, qab, yb)
+        return t, -jnp.einsum("kpq,kqj->kpj", qab, yb)
 
     # summed per point and per observation over chunks of the pairs: no (K, P, P) temporary
     t, qcp = chunked_segment_sum(

@@ -2,14 +2,15 @@
 solver whose steps are Schur-complement solves (:mod:`._schur`).
 
 One step evaluates the residuals and their Jacobian blocks once, at the candidate point
-(:func:`~._schur.split_jacobians`: ``width + 3`` JVPs; with a robust loss, the plain residuals
-corrected by :func:`~._loss.newton_corrected`); the trust region judges the candidate by the
-cost against the change the quadratic model at the last accepted point predicted, computed from
-that point's normal blocks (:func:`~._schur.model_change`); an accepted candidate's blocks are
-assembled and its undamped Gauss-Newton step solved; then the next candidate is the damped step
-from the accepted point. The state carries the normal blocks, not a linearisation of the
-residual function: under ``vmap`` every leaf of a while loop's state is selected per problem at
-every step, and a small state is a small step program.
+(``jacobians``, by default :func:`~._schur.split_jacobians`: ``width + 3`` JVPs; the solve
+gives :func:`~._residuals.jacobians`, the same in chunks of observations; with a robust loss,
+the plain residuals corrected by :func:`~._loss.newton_corrected`); the trust region judges
+the candidate by the cost against the change the quadratic model at the last accepted point
+predicted, computed from that point's normal blocks (:func:`~._schur.model_change`); an
+accepted candidate's blocks are assembled and its undamped Gauss-Newton step solved; then the
+next candidate is the damped step from the accepted point. The state carries the normal blocks,
+not a linearisation of the residual function: under ``vmap`` every leaf of a while loop's state
+is selected per problem at every step, and a small state is a small step program.
 """
 
 from __future__ import annotations
@@ -122,7 +123,9 @@ class StructuredGaussNewton(optx.AbstractLeastSquaresSolver):
     clamped as in :mod:`._schur`, inside a :class:`~._trust_region.TrustRegion`) or Gauss-Newton
     (``"gn"``: undamped steps of length 1) over the Schur-complement solve.
 
-    ``fn(y, args)`` gives the plain residuals ``(image blocks, ground, priors)``; ``robust``
+    ``fn(y, args)`` gives the plain residuals ``(image blocks, ground, priors)``;
+    ``jacobians(y, args)``, if given, their :class:`~._schur.Jacobians` (by default
+    :func:`~._schur.split_jacobians` of ``fn``); ``robust``
     ``(loss, c)`` minimises ``sum rho(|r|^2)`` over the image and ground residuals instead of
     their squares, with Newton's model of ``rho`` (:func:`~._loss.newton_corrected`), after the
     ``reweighting`` (:class:`Reweighting`) when one is given. The function given to
@@ -144,6 +147,7 @@ class StructuredGaussNewton(optx.AbstractLeastSquaresSolver):
     structure: Structure
     fn: Callable = eqx.field(static=True)
     args: Any
+    jacobians: Callable | None = eqx.field(static=True)
     robust: tuple[str, float] | None = eqx.field(static=True)
     reweighting: Reweighting | None
     tol: float = eqx.field(static=True)
@@ -168,6 +172,7 @@ class StructuredGaussNewton(optx.AbstractLeastSquaresSolver):
         verbose: bool = False,
         robust: tuple[str, float] | None = None,
         reweighting: Reweighting | None = None,
+        jacobians: Callable | None = None,
     ):
         if method not in ("lm", "gn"):
             raise ValueError(f"method must be 'lm' or 'gn', got {method!r}")
@@ -176,6 +181,7 @@ class StructuredGaussNewton(optx.AbstractLeastSquaresSolver):
         self.structure = structure
         self.fn = fn
         self.args = args
+        self.jacobians = jacobians
         self.robust = robust
         self.reweighting = reweighting
         self.tol = tol
@@ -319,7 +325,10 @@ class StructuredGaussNewton(optx.AbstractLeastSquaresSolver):
             reweigh, point = self._reweigh(state, y)
         # one evaluation: the plain residuals and Jacobian blocks, then the weights (a
         # function of these residuals) and the model
-        jac = split_jacobians(self.fn, self.args, point, s.width)
+        if self.jacobians is None:
+            jac = split_jacobians(self.fn, self.args, point, s.width)
+        else:
+            jac = self.jacobians(point, self.args)
         if weights is not None:
             weights, failed = self._next_weights(weights, reweigh, jac)
         blocks_eval, cost_eval = self.model(jac, weights)

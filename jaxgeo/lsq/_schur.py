@@ -168,26 +168,35 @@ def normal_blocks(jac: Jacobians, s: Structure) -> NormalBlocks:
     """Assemble :class:`NormalBlocks` from the Jacobian blocks (no dense ``J``)."""
     n1 = s.n_params + 1
     m = s.obs_block.shape[0]
-    # sum_m J_c^T J_c per block, in chunks of observations (no (M, P, P) temporary)
-    jtj = chunked_segment_sum(
-        lambda i: jnp.einsum("mkp,mkq->mpq", jac.jc[i], jac.jc[i]),
-        (jnp.arange(m),), s.obs_block, s.all_block_params.shape[0],
+    jc, jp, r = jac.jc, jac.jp, jac.r
+
+    def per_obs(i):
+        return (
+            jnp.einsum("mkp,mkq->mpq", jc[i], jc[i]),
+            jnp.einsum("mkp,mk->mp", jc[i], r[i]),
+            jnp.einsum("mki,mkj->mij", jp[i], jp[i]),
+            jnp.einsum("mki,mk->mi", jp[i], r[i]),
+        )
+
+    # summed per block and per point in chunks of observations (no (M, P, P) temporary)
+    nb = s.all_block_params.shape[0]
+    jtj, gcb, v, gp = chunked_segment_sum(
+        per_obs, (jnp.arange(m),), (s.obs_block, s.obs_block, s.obs_point, s.obs_point),
+        (nb, nb, s.n_points, s.n_points),
     )  # fmt: skip
     if s.band:  # one group: its blocks in order, the priors' blocks aligned with them
         u = jtj
     else:
         u = add_block_sums(jnp.zeros((n1, n1)), s, jtj)
-    gc = add_per_block(jnp.zeros(n1), s, jnp.einsum("mkp,mk->mp", jac.jc, jac.r))
+    gc = add_block_sums(jnp.zeros(n1), s, gcb)
     for bidx, jpr, rpr in zip(s.block_params, jac.jpr, jac.rpr, strict=True):
         prior = jnp.einsum("bqp,bqr->bpr", jpr, jpr)
         u = u + prior if s.band else u.at[bidx[:, :, None], bidx[:, None, :]].add(prior)
         gc = gc.at[bidx].add(jnp.einsum("bqp,bq->bp", jpr, rpr))
     seg = jax.ops.segment_sum
-    v = seg(jnp.einsum("mki,mkj->mij", jac.jp, jac.jp), s.obs_point, s.n_points)
-    gp = seg(jnp.einsum("mki,mk->mi", jac.jp, jac.r), s.obs_point, s.n_points)
     v = v + seg(jnp.einsum("cki,ckj->cij", jac.jg, jac.jg), s.ground_point, s.n_points)
     gp = gp + seg(jnp.einsum("cki,ck->ci", jac.jg, jac.rg), s.ground_point, s.n_points)
-    w = jnp.einsum("mkp,mkj->mpj", jac.jc, jac.jp)
+    w = jnp.einsum("mkp,mkj->mpj", jc, jp)
     return NormalBlocks(u=u, gc=gc, v=v, gp=gp, w=w)
 
 
@@ -219,26 +228,31 @@ def damped(blocks: NormalBlocks, s: Structure, lam) -> tuple[Array, Array]:
     return u, v
 
 
+def wv(blocks: NormalBlocks, vinv: Float[Array, "n 3 3"], s: Structure, rows: Array) -> Array:
+    """``W V^-1`` (k, P, 3) of the observations ``rows`` (k,): formed where it is used, a chunk
+    at a time, never for all observations at once."""
+    return jnp.einsum("kpj,kjl->kpl", blocks.w[rows], vinv[s.obs_point[rows]])
+
+
 def reduced_system(
     blocks: NormalBlocks, s: Structure, lam: Float[Array, ""] | float
-) -> tuple[Float[Array, "N1 N1"] | band.Band, Float[Array, "n 3 3"], Float[Array, "M P 3"]]:
-    """``(S, V^-1, W V^-1)`` of the damped normal equations (damping ``lam * diag``); ``S``
-    dense (N+1, N+1), or a :class:`~._band.Band` (N,) when ``Structure.band``."""
+) -> tuple[Float[Array, "N1 N1"] | band.Band, Float[Array, "n 3 3"]]:
+    """``(S, V^-1)`` of the damped normal equations (damping ``lam * diag``); ``S`` dense
+    (N+1, N+1), or a :class:`~._band.Band` (N,) when ``Structure.band``."""
     n = s.n_params
     u, v = damped(blocks, s, lam)
     vinv = inv3(v)
-    y = jnp.einsum("mpj,mjk->mpk", blocks.w, vinv[s.obs_point])
     # W V^-1 W^T summed per block pair, over chunks of the pairs (no (K, P, P) temporary)
     summed = chunked_segment_sum(
-        lambda a, b: jnp.einsum("kpj,kqj->kpq", y[a], blocks.w[b]),
+        lambda a, b: jnp.einsum("kpj,kqj->kpq", wv(blocks, vinv, s, a), blocks.w[b]),
         (s.pair_a, s.pair_b), s.pair_seg, s.pair_blocks.shape[0],
     )  # fmt: skip
     if s.band:
-        return band.assemble_band(u, s.pair_blocks, -summed, s.band, n), vinv, y
+        return band.assemble_band(u, s.pair_blocks, -summed, s.band, n), vinv
     big_s = add_pair_sums(u, s, -summed)
     # the dummy (padding) parameter stays an identity row
     big_s = big_s.at[n, :].set(0.0).at[:, n].set(0.0).at[n, n].set(1.0)
-    return big_s, vinv, y
+    return big_s, vinv
 
 
 def factorise(big_s: Array | band.Band) -> Array | band.BandFactor:
@@ -261,11 +275,12 @@ def schur_solve(
     No iterative refinement: at our conditioning the solution agrees with a dense QR solve to
     the noise floor of the cost."""
     n = s.n_params
-    big_s, vinv, y = reduced_system(blocks, s, lam)
+    big_s, vinv = reduced_system(blocks, s, lam)
     chol = factorise(big_s)
     idx, pt = s.obs_params, s.obs_point
     gc, gp = blocks.gc.at[n].set(0.0), blocks.gp
-    rhs = add_per_block(gc, s, -jnp.einsum("mpj,mj->mp", y, gp[pt])).at[n].set(0.0)
+    vg = jnp.einsum("nij,nj->ni", vinv, gp)  # W V^-1 g_p = W (V^-1 g_p): no (M, P, 3) product
+    rhs = add_per_block(gc, s, -jnp.einsum("mpj,mj->mp", blocks.w, vg[pt])).at[n].set(0.0)
     dc = solve_factored(chol, rhs)
     back = jax.ops.segment_sum(jnp.einsum("mpj,mp->mj", blocks.w, dc[idx]), pt, s.n_points)
     return dc[:n], jnp.einsum("nij,nj->ni", vinv, gp - back)

@@ -16,110 +16,26 @@ import equinox as eqx
 import jax
 import jax.numpy as jnp
 import lineax as lx
-import numpy as np
 import optimistix as optx
 from jaxtyping import Array, Bool, Float, Int
 
 from ._band import Band
 from ._config import DEFAULT_SOLVER, SolverConfig
 from ._covariance import cofactors, undetermined_unknowns
-from ._ground import beyond_offset, enu_residuals, with_frames
+from ._ground import beyond_offset, with_frames
 from ._lm import Reweighting, StructuredGaussNewton, Weights
-from ._loss import irls_weights, robust
+from ._loss import irls_weights
 from ._problem import Problem
+from ._residuals import jacobians, residuals, thetas
 from ._results import RESULTS
 from ._schur import (
     Jacobians,
     NormalBlocks,
     normal_blocks,
-    split_jacobians,
     split_params,
     u_diagonal,
 )
 from ._trust_region import sum_squares
-
-
-def _take(tree, index):
-    return jax.tree.map(lambda x: x[index] if eqx.is_array(x) else x, tree)
-
-
-def _block_priors(block) -> Float[Array, " q"]:
-    return jnp.asarray(block.prior_residuals(), dtype=float).reshape(-1)
-
-
-def _padded_layout(block_start: tuple[int, ...]) -> tuple[Int[Array, "b k"], Int[Array, " m"]]:
-    """Layout of block-sorted observations padded to ``(n_blocks, most)``: the index of each
-    padded entry into the observations (a block's last one repeated; 0 for an empty block),
-    and the padded position of each observation. Computed in the program from the (static)
-    block starts, not baked in as constants of the observations' size: the program, its
-    compilation and its serialized export stay small however many observations there are."""
-    start = np.asarray(block_start)
-    counts = np.diff(start)
-    most = max(int(counts.max()), 1)
-    first, count = jnp.asarray(start[:-1])[:, None], jnp.asarray(counts)[:, None]
-    rank = jnp.arange(most)[None, :]
-    index = jnp.where(count > 0, first + jnp.minimum(rank, jnp.maximum(count - 1, 0)), 0)
-    obs = jnp.arange(int(start[-1]))
-    block = jnp.searchsorted(jnp.asarray(start[1:]), obs, side="right")
-    position = block * most + (obs - jnp.asarray(start[:-1])[block])
-    return index, position
-
-
-def _per_block(grp, stacked, ob, ground: Float[Array, "n 3"]) -> Float[Array, "m 2"]:
-    """Weighted image residuals of ``ob`` (sorted by block, ``ob.block_start``): each block's
-    model projects its own observations, padded to the largest block's count and vmapped over
-    the blocks (one program whatever the number of blocks; no per-observation model copy)."""
-    index, position = _padded_layout(ob.block_start)
-
-    def project(block, g, slot=ob.slot):
-        return grp.image_model(block, slot).project(g)
-
-    xy = eqx.filter_vmap(project, in_axes=(eqx.if_array(0), 0))(stacked, ground[ob.point[index]])
-    return (xy.reshape(-1, 2)[position] - ob.xy) * ob.weight[:, None]
-
-
-def thetas(problem: Problem, z, scales) -> tuple[Float[Array, "b p"], ...]:
-    """Solver variables ``z`` -> raveled parameters per group."""
-    return tuple(g.theta0 + sc * zg for g, sc, zg in zip(problem.groups, scales, z, strict=True))
-
-
-def residuals(y, args):
-    """Weighted residuals ``(image per observation block, ground, prior per group)``.
-
-    ``y = (z, u)`` (see :mod:`~jaxgeo.lsq._problem`); ``args = (problem, scales, loss,
-    loss_scale)``: the loss (``"l2"``, ``"huber"``, ``"cauchy"``) on the image and ground
-    residuals (per observation: an image point's 2-vector, a GCP's 3-vector).
-    """
-    problem, scales, loss, loss_scale = args
-    z, u = y
-    ground = problem.ground_points(u)
-    theta = thetas(problem, z, scales)
-    stacked = tuple(g.blocks(t) for g, t in zip(problem.groups, theta, strict=True))
-    img = []
-    for ob in problem.images:
-        grp = problem.groups[ob.group]
-
-        def one(block, g, xy, w, grp=grp, slot=ob.slot):
-            return (grp.image_model(block, slot).project(g) - xy) * w
-
-        if ob.block_start:
-            r = _per_block(grp, stacked[ob.group], ob, ground)
-        else:
-            per_obs = _take(stacked[ob.group], ob.block)
-            r = eqx.filter_vmap(one, in_axes=(eqx.if_array(0), 0, 0, 0))(
-                per_obs, ground[ob.point], ob.xy, ob.weight
-            )
-        img.append(robust(r, loss, loss_scale))
-    gnd = robust(enu_residuals(problem, u, ground) * problem.ground.weight, loss, loss_scale)
-    prior = []
-    for grp, blocks, th, mean, wt in zip(
-        problem.groups, stacked, theta, problem.prior_mean, problem.prior_weight, strict=True
-    ):
-        own = eqx.filter_vmap(_block_priors, in_axes=eqx.if_array(0))(blocks)
-        own = own.reshape(grp.n_blocks, -1)
-        user = (th - mean) * wt if mean.shape[1] else jnp.zeros((grp.n_blocks, 0))
-        prior.append(jnp.concatenate([own, user], axis=1))
-    return tuple(img), gnd, tuple(prior)
 
 
 class Solution(eqx.Module):
@@ -192,8 +108,7 @@ def blocks_at(
     problem: Problem, scales, y, loss: str = "l2", loss_scale: float = 3.0
 ) -> tuple[Jacobians, NormalBlocks]:
     """The Jacobian and normal-equation blocks at ``y``."""
-    args = (problem, scales, loss, loss_scale)
-    jac = split_jacobians(residuals, args, y, problem.structure.width)
+    jac = jacobians(problem, scales, y, loss, loss_scale)
     return jac, normal_blocks(jac, problem.structure)
 
 
@@ -373,8 +288,14 @@ def solve_setup(
             verbose=verbose,
             robust=robust_,
             reweighting=reweighting,
+            jacobians=_jacobians,
         )
     return SolveSetup(optimiser, y_s, args, rem_i, rem_g, base_i, base_g)
+
+
+def _jacobians(y, args) -> Jacobians:
+    problem, scales, loss, c = args
+    return jacobians(problem, scales, y, loss, c)
 
 
 def solve_finish(
@@ -399,7 +320,9 @@ def solve_finish(
         st.base_ground,
     )
     if weights is None:
-        w_i, w_g = jnp.ones_like(base_i), jnp.ones_like(base_g)
+        # not weakly typed (as ``base_*`` are): a solve started from these weights (data
+        # snooping's re-solve) has the types of a cold start, and reuses its compiled program
+        w_i, w_g = jnp.ones(base_i.shape), jnp.ones(base_g.shape)
     else:
         w_i, w_g = weights.img, weights.gnd
     ok = result == RESULTS.successful

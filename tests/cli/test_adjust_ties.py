@@ -50,6 +50,11 @@ def test_ties_only_image_adjusted_with_priors(pair, tmp_path, capsys):
     # ... and nothing else: a flagged clean observation is the other ray of a bad point
     bad_points = {rows[i]["id"] for i in np.flatnonzero(p.gross)}
     assert all(rows[i]["id"] in bad_points for i in np.flatnonzero(flagged & ~p.gross))
+    # the report names the first 50 of them and says where the others are
+    line = next(ln for ln in (out / "report.txt").read_text().splitlines() if "gross err" in ln)
+    n = int(flagged.sum())
+    assert n > 50 and f"({n} observations)" in line
+    assert line.count("@") == 50 and f"({n - 50} more: the 'blunder' column of residuals" in line
     # the aft bias across the epipolar direction (x) is found through the ties alone
     aft = data["images"]["aft"]["params"]
     assert abs(aft[".bias.shift_px[0]"] - 1.2) < 0.3

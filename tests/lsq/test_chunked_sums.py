@@ -10,12 +10,8 @@ import jax.numpy as jnp
 import numpy as np
 import pytest
 
-from jaxgeo import AffineBias, Biased
-from jaxgeo.bundle import prepare
-from jaxgeo.io import read_rpc
 from jaxgeo.lsq import RESULTS, SolverConfig, _schur, solve
 from jaxgeo.lsq import _band as band
-from tests.bundle.conftest import make_block
 
 
 @pytest.mark.parametrize(("k", "chunk"), [(50, 7), (49, 7), (5, 16), (64, 64)])
@@ -38,15 +34,6 @@ def test_chunked_segment_sum_equals_segment_sum(k, chunk):
         np.testing.assert_allclose(np.asarray(a), np.asarray(b), rtol=1e-14, atol=1e-14)
     one = _schur.chunked_segment_sum(lambda i: y[i], (rows,), seg, 4, chunk=chunk)
     np.testing.assert_allclose(one, jax.ops.segment_sum(y, seg, 4), rtol=1e-14, atol=1e-14)
-
-
-@pytest.fixture(scope="module")
-def block_problem(real_data):
-    left = read_rpc(real_data / "phr_ventoux__left_image.geom")
-    right = read_rpc(real_data / "phr_ventoux__right_image.geom")
-    block = make_block(left, right, n=30, n_gcp=6)
-    models = {name: Biased(m, AffineBias()) for name, m in block.models.items()}
-    return prepare(models, block.obs, block.ground).problem
 
 
 def _solve_with_chunk(problem, chunk, monkeypatch):
