@@ -66,3 +66,13 @@ def test_both_layouts_give_the_same_residuals(block_problem):
     b = residuals(y, (_unsorted(block_problem), sc, "l2", 3.0))
     for u, v in zip(jax.tree.leaves(a), jax.tree.leaves(b), strict=True):
         np.testing.assert_allclose(np.asarray(u), np.asarray(v), rtol=1e-11, atol=1e-11)
+
+
+@pytest.mark.parametrize("loss", ["l2", "cauchy"])
+def test_solution_weights_are_not_weakly_typed(block_problem, loss):
+    # data snooping re-solves from the last solution's weights: weakly typed ones gave the
+    # re-solve another compilation key than the cold start's (a second compilation per run)
+    from jaxgeo.lsq import SolverConfig, solve
+
+    sol = eqx.filter_jit(solve)(block_problem, SolverConfig(loss=loss))
+    assert not sol.weight_image.weak_type and not sol.weight_ground.weak_type
