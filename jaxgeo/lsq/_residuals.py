@@ -195,6 +195,13 @@ def _image_blocks(problem: Problem, scales, y, ob, loss: str, loss_scale):
         jp = jnp.moveaxis(jax.vmap(lin_u)(us), 0, -1)
         return r, jc, jp
 
+    if n_chunks == 1:  # a small problem (each of a batch): no loop, no scatter
+        out = chunk(chunks[0])
+        if ob.block_start:
+            _, position = _padded_layout(ob.block_start, k)
+            return tuple(a.reshape(a.shape[0] * k, *a.shape[2:])[position] for a in out)
+        return out
+
     def body(c, acc):  # each chunk's blocks written in place (no stacked copy of them)
         d = dests[c].reshape(-1)
         return tuple(

@@ -170,20 +170,26 @@ def normal_blocks(jac: Jacobians, s: Structure) -> NormalBlocks:
     m = s.obs_block.shape[0]
     jc, jp, r = jac.jc, jac.jp, jac.r
 
-    def per_obs(i):
+    def products(jc, jp, r):
         return (
-            jnp.einsum("mkp,mkq->mpq", jc[i], jc[i]),
-            jnp.einsum("mkp,mk->mp", jc[i], r[i]),
-            jnp.einsum("mki,mkj->mij", jp[i], jp[i]),
-            jnp.einsum("mki,mk->mi", jp[i], r[i]),
+            jnp.einsum("mkp,mkq->mpq", jc, jc),
+            jnp.einsum("mkp,mk->mp", jc, r),
+            jnp.einsum("mki,mkj->mij", jp, jp),
+            jnp.einsum("mki,mk->mi", jp, r),
         )
 
-    # summed per block and per point in chunks of observations (no (M, P, P) temporary)
+    # summed per block and per point, in chunks of observations when there are many (no
+    # (M, P, P) temporary); a small problem (each of a batch) at once, without index arrays
     nb = s.all_block_params.shape[0]
-    jtj, gcb, v, gp = chunked_segment_sum(
-        per_obs, (jnp.arange(m),), (s.obs_block, s.obs_block, s.obs_point, s.obs_point),
-        (nb, nb, s.n_points, s.n_points),
-    )  # fmt: skip
+    segs = (s.obs_block, s.obs_block, s.obs_point, s.obs_point)
+    nums = (nb, nb, s.n_points, s.n_points)
+    if m <= SUM_CHUNK:
+        found = zip(products(jc, jp, r), segs, nums, strict=True)
+        jtj, gcb, v, gp = (jax.ops.segment_sum(x, g, k) for x, g, k in found)
+    else:
+        jtj, gcb, v, gp = chunked_segment_sum(
+            lambda i: products(jc[i], jp[i], r[i]), (jnp.arange(m),), segs, nums
+        )
     if s.band:  # one group: its blocks in order, the priors' blocks aligned with them
         u = jtj
     else:
