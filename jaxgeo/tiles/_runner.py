@@ -65,8 +65,8 @@ processes (Python, jax, the first compilation in each) costs seconds, more than 
 on one core."""
 MIN_CORES_FOR_WORKERS = 3
 """With ``workers=None``, worker processes only on a machine of at least this many cores: on 2
-cores a 12 000 px orthoimage (159 Mpx, tiles of ~0.2 s) took 38 s in this process, whose COG
-writer already uses both cores, and 43 s on 2 workers (benchmarks/speed/ortho_scene.py)."""
+cores a 12 000 px orthoimage (159 Mpx, tiles of ~0.1 s) took 22 s in this process, whose COG
+writer already uses both cores, and 26 s on 2 workers (benchmarks/speed/ortho_scene.py)."""
 WORKER_XLA_FLAGS = "--xla_cpu_multi_thread_eigen=false intra_op_parallelism_threads=1"
 """Each worker process is one core's worth of work: XLA's own thread pools stay single-threaded
 so that ``workers`` processes do not fight over the cores."""
