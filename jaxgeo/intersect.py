@@ -27,6 +27,7 @@ from jaxtyping import Array, ArrayLike, Bool, Float, Int
 
 from . import _exported
 from .geodesy import metres_per_unit
+from .lsq import inv3_spd
 from .models import AbstractSensorModel, newton_root
 
 INTERSECT_ATOL_M = 1e-9
@@ -77,7 +78,7 @@ def _initial(origin, mpu, p0, jac_m, xy, w):
     """Linear least squares for one point: ``jac_m @ e = xy - p0`` weighted by ``w`` (N,)."""
     a = (jac_m * w[:, None, None]).reshape(-1, 3)
     b = ((xy - p0) * w[:, None]).reshape(-1)
-    e = jnp.linalg.solve(a.T @ a, a.T @ b)
+    e = inv3_spd(a.T @ a) @ (a.T @ b)
     return origin + e / mpu
 
 
@@ -142,7 +143,7 @@ def _intersect_flat(models, xy, sigma, mask, max_steps, batch):
         u = sol.value
         ground = g0 + u / mpu
         jac = jax.jacfwd(fn)(u, args)
-        cov = jnp.linalg.inv(jac.T @ jac)
+        cov = inv3_spd(jac.T @ jac)
         r = fn(u, args)
         dof = 2 * n - 3
         s0 = jnp.where(dof > 0, jnp.sqrt(jnp.sum(r**2) / jnp.maximum(dof, 1)), jnp.nan)

@@ -32,6 +32,7 @@ from ._covariance import INFLATION_MAX as INFLATION_MAX
 from ._covariance import Covariance as Covariance
 from ._covariance import cofactors as cofactors
 from ._covariance import undetermined_unknowns as undetermined_unknowns
+from ._factor import inv3_spd as inv3_spd
 from ._lm import StructuredGaussNewton as StructuredGaussNewton
 from ._loss import irls_weights as irls_weights
 from ._loss import rho as rho

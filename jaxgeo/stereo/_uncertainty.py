@@ -45,6 +45,7 @@ import numpy as np
 
 from ..errors import JaxgeoError
 from ..geodesy import metres_per_unit
+from ..lsq import inv3_spd
 from ..models import AbstractSensorModel
 
 CHUNK = 65536
@@ -112,7 +113,8 @@ def _jacobian_flat(models, ground):
     def one(g):
         mpu = metres_per_unit(g)
         jac = jnp.concatenate([jax.jacfwd(m.project)(g) / mpu for m in models])  # (2N, 3)
-        return jnp.linalg.solve(jac.T @ jac, jac.T).reshape(3, len(models), 2)
+        # closed-form 3x3 inverse: no LAPACK call per point under vmap
+        return (inv3_spd(jac.T @ jac) @ jac.T).reshape(3, len(models), 2)
 
     ok = jnp.all(jnp.isfinite(ground), axis=-1)
     safe = jnp.where(ok[:, None], ground, jnp.stack([m.reference_ground() for m in models])[0])

@@ -171,6 +171,38 @@ def test_newton_implicit_derivatives():
     check_grads(root, (jnp.array(5.0),), order=2, modes=("fwd", "rev"))
 
 
+def _linear3(x, args):
+    m, b = args
+    return m @ x + 0.1 * jnp.sin(x) - b
+
+
+def test_newton_three_unknowns_written_out_solve():
+    """3 x 3 Newton systems are solved in closed form (no LAPACK call per point): the same roots
+    and implicit derivatives as ``jnp.linalg.solve``'s, and a singular system isolated."""
+    from jaxgeo.models._newton import _det, _solve
+
+    rng = np.random.default_rng(3)
+    ms = rng.normal(size=(50, 3, 3)) + 2 * np.eye(3)
+    bs = rng.normal(size=(50, 3))
+    np.testing.assert_allclose(
+        jax.vmap(_solve)(ms, bs), np.linalg.solve(ms, bs[..., None])[..., 0], rtol=1e-10
+    )
+    np.testing.assert_allclose(jax.vmap(_det)(ms), np.linalg.det(ms), rtol=1e-12)
+    m, b = jnp.asarray(ms[0]), jnp.asarray(bs[0])
+
+    def root(m, b):
+        return newton_root(_linear3, jnp.zeros(3), (m, b), max_steps=30, tol=1e-14).value
+
+    x = root(m, b)
+    np.testing.assert_allclose(_linear3(x, (m, b)), 0.0, atol=1e-12)
+    check_grads(root, (m, b), order=1, modes=("fwd", "rev"))
+    singular = -0.1 * jnp.eye(3)  # the Jacobian m + 0.1 cos(x) is zero at the start
+    sol = newton_root(_linear3, jnp.zeros(3), (singular, b), max_steps=5, tol=1e-14)
+    assert not bool(sol.converged)
+    grad = jax.grad(lambda b: jnp.nansum(root(singular, b)))(b)
+    assert np.all(np.isfinite(grad))
+
+
 def test_localize_gradient_through_the_shared_newton_and_nan_isolation():
     """The RPC has no direct localisation: base localize runs the shared Newton."""
     rpc = MODELS["rpc"]
