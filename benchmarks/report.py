@@ -198,6 +198,8 @@ STRIP = "strip-80scenes-2core-cpu.json"
 STRIP_CURVE = "strip-curve20to1280-2core-cpu.json"
 ADJUST_SCALE = "adjust_scale-100k-2core-cpu.json"
 CLI_TIMES = "cli_times-80scenes-2core-cpu.json"
+ORTHO_SCENE = "ortho_scene-12000px-2core-cpu.json"
+DSM_SCENE = "dsm_scene-6000px-2core-cpu.json"
 
 
 def _size(r: Result, points: int) -> dict:
@@ -257,6 +259,24 @@ def headline_rows(results: dict[str, Result] | None = None) -> list[tuple[str, .
     r = t.data["results"]["adjust"]
     out.append(("`jaxgeo adjust` on the demo data, wall time warm (cold)",
                 f"{r['warm_s']:.1f} s ({r['cold_s']:.1f} s)", "", "", t.where()))  # fmt: skip
+    o = results.get(ORTHO_SCENE)
+    if o is not None:  # the fastest jaxgeo case against GDAL's uncompressed GeoTIFF
+        d = o.data
+        case = min(d["jaxgeo"].values(), key=lambda c: c["wall_s"])
+        gdal = d["gdal"]["gdal_gtiff"]
+        out.append((f"`jaxgeo ortho` of a {d['output_mpx']:.0f} Mpx product (whole scene, DEM), "
+                    "process tree", f"{case['wall_s']:.1f} s, {case['peak_rss_gb']:.2f} GB",
+                    f"GDAL warper ({d['gdal_threads']} threads) {gdal['wall_s']:.1f} s",
+                    summaries.ratio(case["ratio_vs_gdal_gtiff"]), o.where()))  # fmt: skip
+    m = results.get(DSM_SCENE)
+    if m is not None:
+        d = m.data["jaxgeo"]
+        best = min(d, key=lambda k: d[k]["wall_s"])
+        r = d[best]
+        out.append((f"`jaxgeo dsm` of a simulated 6000 px pair, {best.replace('workers', '')} "
+                    "workers, process tree",
+                    f"{r['wall_s'] / 60:.1f} min, {r['peak_rss_gb']:.1f} GB, median abs dh "
+                    f"{r['accuracy']['median_abs_dh_m']:.2f} m", "", "", m.where()))  # fmt: skip
     return out
 
 
