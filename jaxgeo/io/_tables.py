@@ -24,8 +24,10 @@ types read and written here (:class:`GroundPoints`, :class:`Observations`) live 
 
 from __future__ import annotations
 
+import array
 import csv
 import io
+import itertools
 import math
 import os
 import pathlib
@@ -59,18 +61,28 @@ def _float(value: str, where: str, column: str, allow_empty: bool = False) -> fl
     return out
 
 
-def _rows(path: pathlib.Path, required: tuple[str, ...]):
+def _text(path: pathlib.Path) -> str:
     if not path.is_file():
         raise FileNotFoundError(f"{path}: no such file")
     try:
-        text = path.read_bytes().decode("utf-8-sig")
+        return path.read_bytes().decode("utf-8-sig")
     except UnicodeDecodeError as err:
         line = path.read_bytes()[: err.start].count(b"\n") + 1
         raise TableError(f"{path}:{line}: not UTF-8 text ({err.reason})") from None
-    lines = [(i, ln) for i, ln in enumerate(text.splitlines(), start=1)]
-    lines = [(i, ln) for i, ln in lines if ln.strip() and not ln.lstrip().startswith("#")]
-    if not lines:
-        raise TableError(f"{path}: empty table (expected header {','.join(required)})")
+
+
+def _lines(text: str):
+    """``(line number, line)`` of the lines that are neither blank nor comments, one at a time
+    (a table of 200 000 rows is never held as a list of rows: its transient objects would stay
+    in the interpreter's memory pools, ~100 MB, for the rest of an adjustment)."""
+    for i, line in enumerate(io.StringIO(text, newline=None), start=1):
+        if line.strip() and not line.lstrip().startswith("#"):
+            yield i, line.rstrip("\n")
+
+
+def _rows(path: pathlib.Path, required: tuple[str, ...]):
+    text = _text(path)
+    lines = _lines(text)
 
     def fields(lineno: int, line: str) -> list[str]:
         # one line at a time: a stray quote must not swallow the lines after it
@@ -79,24 +91,28 @@ def _rows(path: pathlib.Path, required: tuple[str, ...]):
         except csv.Error as err:
             raise TableError(f"{path}:{lineno}: {err}") from None
 
-    rows = [fields(i, ln) for i, ln in lines]
-    header = [h.strip().lower() for h in rows[0]]
+    first = next(lines, None)
+    if first is None:
+        raise TableError(f"{path}: empty table (expected header {','.join(required)})")
+    header = [h.strip().lower() for h in fields(*first)]
     missing = [c for c in required if c not in header]
     if missing:
         raise TableError(
-            f"{path}:{lines[0][0]}: header lacks column(s) {', '.join(missing)} "
+            f"{path}:{first[0]}: header lacks column(s) {', '.join(missing)} "
             f"(got {','.join(header)})"
         )
-    for (lineno, _), row in zip(lines[1:], rows[1:], strict=True):
+    for lineno, line in lines:
+        row = fields(lineno, line)
         if len(row) != len(header):
             raise TableError(f"{path}:{lineno}: expected {len(header)} fields, got {len(row)}")
         yield lineno, dict(zip(header, (c.strip() for c in row), strict=True))
 
 
-def table_lines(path: str | os.PathLike) -> list[int]:
+def table_lines(path: str | os.PathLike) -> np.ndarray:
     """The line number of every data row of a table (as read by :func:`read_ground` /
     :func:`read_observations`, in order), for messages that name the line at fault."""
-    return [lineno for lineno, _ in _rows(pathlib.Path(path), ("id",))]
+    rows = itertools.islice(_lines(_text(pathlib.Path(path))), 1, None)
+    return np.fromiter((lineno for lineno, _ in rows), dtype=np.int64)
 
 
 def read_ground(
@@ -146,34 +162,46 @@ def read_observations(
 ) -> Observations:
     """Read an OBS.csv table (see the module docstring)."""
     path = pathlib.Path(path)
-    pids, images, xy, sig = [], [], [], []
-    seen: dict[tuple[str, str], int] = {}
+    pids: list[str] = []
+    code: dict[str, int] = {}  # image name -> its number: one string per image, not per row
+    values, images, lines = array.array("d"), array.array("q"), array.array("q")
     for lineno, row in _rows(path, ("id", "image", "x", "y")):
         where = f"{path}:{lineno}"
         pid, image = row["id"], row["image"]
         if not pid or not image:
             raise TableError(f"{where}: empty point id or image name")
-        if (pid, image) in seen:
-            raise TableError(
-                f"{where}: point {pid!r} in image {image!r} already measured on line "
-                f"{seen[(pid, image)]}"
-            )
-        seen[(pid, image)] = lineno
         x, y = _float(row["x"], where, "x"), _float(row["y"], where, "y")
         s = _float(row.get("sigma_px", row.get("sigma", "")), where, "sigma_px", allow_empty=True)
         s = default_sigma_px if math.isnan(s) else s
         if s <= 0:
             raise TableError(f"{where}: point {pid!r} has a non-positive sigma_px")
         pids.append(pid)
-        images.append(image)
-        xy.append((x, y))
-        sig.append(s)
+        images.append(code.setdefault(image, len(code)))
+        values.extend((x, y, s))
+        lines.append(lineno)
+    names = list(code)
+    image_no = np.frombuffer(images, dtype=np.int64)
+    _refuse_repeats(path, pids, image_no, np.frombuffer(lines, dtype=np.int64), names)
+    xys = np.frombuffer(values, dtype=float).reshape(-1, 3)
     return Observations(
-        tuple(pids),
-        tuple(images),
-        np.asarray(xy, dtype=float).reshape(-1, 2),
-        np.asarray(sig, dtype=float),
+        tuple(pids), tuple(names[k] for k in image_no), xys[:, :2].copy(), xys[:, 2].copy()
     )
+
+
+def _refuse_repeats(path, pids: list[str], image_no: np.ndarray, lines: np.ndarray, names):
+    """The first row (in the file) that measures a point again in the same image."""
+    number: dict[str, int] = {}
+    ids = np.fromiter((number.setdefault(p, len(number)) for p in pids), np.int64, len(pids))
+    order = np.lexsort((np.arange(ids.size), image_no, ids))  # by point, image, then row
+    a, b = order[:-1], order[1:]
+    again = b[(ids[a] == ids[b]) & (image_no[a] == image_no[b])]
+    if again.size:
+        k = int(again.min())
+        first = int(a[np.flatnonzero(b == k)[0]])  # the row before it in its group: the first
+        raise TableError(
+            f"{path}:{lines[k]}: point {pids[k]!r} in image {names[image_no[k]]!r} already "
+            f"measured on line {lines[first]}"
+        )
 
 
 def _csv(header: list[str], rows) -> str:

@@ -188,9 +188,9 @@ class Sources:
     """Where the tables came from, for messages: the files and the line of each row."""
 
     observations: str | None = None
-    observation_lines: Sequence[int] = ()
+    observation_lines: Sequence[int] | np.ndarray = ()
     ground: str | None = None
-    ground_lines: Sequence[int] = ()
+    ground_lines: Sequence[int] | np.ndarray = ()
 
     def obs(self, i: int) -> str:
         if self.observations and i < len(self.observation_lines):
