@@ -155,6 +155,33 @@ def test_large_inputs_compiled_apart_once_with_the_heap_released(cache, monkeypa
     assert not cache.exists()  # not exported
 
 
+def test_large_solve_compiled_apart_with_its_own_options(cache, monkeypatch):
+    """``call_large_solve``: a large program compiled with ``LARGE_SOLVE_COMPILE`` (XLA's legacy
+    CPU emitters where jaxlib has them), apart from the same program compiled with XLA's
+    defaults; results equal to ``eqx.filter_jit`` to rounding."""
+    monkeypatch.setattr(_exported, "MAX_ELEMENTS", 2)
+    monkeypatch.setattr(_exported, "_compiled", {})
+    asked = []
+    real = _exported._compiled_call
+
+    def spy(*args):
+        asked.append(args[-1])
+        return real(*args)
+
+    monkeypatch.setattr(_exported, "_compiled_call", spy)
+    x = np.linspace(0.0, 3.0, 5)
+    want = eqx.filter_jit(fn)(x, 2.0, label="want")
+    out = _exported.call_large_solve(fn, x, 2.0, label="big")
+    np.testing.assert_allclose(out.value, want.value, rtol=1e-15, atol=0)
+    _exported.call(fn, x, 2.0, label="big")
+    assert asked == [_exported.LARGE_SOLVE_COMPILE or None, None]
+    # one program per set of options (one set only where jaxlib has no legacy emitters)
+    assert len(_exported._compiled) == (2 if _exported.LARGE_SOLVE_COMPILE else 1)
+    small = np.ones(1)  # at most MAX_ELEMENTS: the exported path, options unused
+    np.testing.assert_allclose(_exported.call_large_solve(fn, small, 2.0).value, np.sin(small) * 2)
+    assert len(asked) == 2
+
+
 def test_release_heap_runs_anywhere():
     _exported.release_heap()  # glibc's malloc_trim on Linux, nothing elsewhere; never raises
 

@@ -22,7 +22,7 @@ from typing import Any
 import equinox as eqx
 import jax
 import jax.numpy as jnp
-from jaxtyping import Array, Float, PyTree
+from jaxtyping import Array, Float, Int, PyTree
 
 from . import _band as band
 from ._factor import cho_solve, cholesky, inv3_spd
@@ -97,28 +97,20 @@ def chunked_segment_sum(
         out = add(init, rows, segs)
         return out if many else out[0]
     n_chunks = -(-k // chunk)
-    pad = n_chunks * chunk - k
 
-    def split(x, fill):
-        x = jnp.concatenate([x, jnp.full((pad, *x.shape[1:]), fill, x.dtype)])
-        return x.reshape(n_chunks, chunk, *x.shape[1:])
+    def body(acc, c):  # chunk c, sliced in place (no padded copy of the index arrays); the
+        # last one ends at row k, and its rows that an earlier chunk had are dropped
+        start = jnp.minimum(c * chunk, k - chunk)
+        idx = tuple(jax.lax.dynamic_slice_in_dim(r, start, chunk) for r in rows)
+        fresh = start + jnp.arange(chunk) >= c * chunk
+        seg = tuple(
+            jnp.where(fresh, jax.lax.dynamic_slice_in_dim(g, start, chunk), n)
+            for g, n in zip(segs, nums, strict=True)
+        )
+        return add(acc, idx, seg), None
 
-    idx = tuple(split(r, 0) for r in rows)
-    seg = tuple(split(g, n) for g, n in zip(segs, nums, strict=True))  # padding: dropped
-
-    def body(acc, xs):
-        return add(acc, *xs), None
-
-    out, _ = jax.lax.scan(body, init, (idx, seg))
+    out, _ = jax.lax.scan(body, init, jnp.arange(n_chunks))
     return out if many else out[0]
-
-
-def add_per_block(target: Array, s: Structure, values: Array) -> Array:
-    """``target`` (N+1,) or (N+1, N+1) plus per-observation ``values`` (M, P) or (M, P, P) at
-    their parameters: summed per block first (``segment_sum``), then one small scatter (a
-    scatter-add of every element is slow on CPU: ~10x at 40 000 x 6 x 6)."""
-    summed = jax.ops.segment_sum(values, s.obs_block, s.all_block_params.shape[0])
-    return add_block_sums(target, s, summed)
 
 
 def add_block_sums(target: Array, s: Structure, summed: Array) -> Array:
@@ -286,10 +278,28 @@ def schur_solve(
     idx, pt = s.obs_params, s.obs_point
     gc, gp = blocks.gc.at[n].set(0.0), blocks.gp
     vg = jnp.einsum("nij,nj->ni", vinv, gp)  # W V^-1 g_p = W (V^-1 g_p): no (M, P, 3) product
-    rhs = add_per_block(gc, s, -jnp.einsum("mpj,mj->mp", blocks.w, vg[pt])).at[n].set(0.0)
+    nb = s.all_block_params.shape[0]
+    wvg = per_observation_sum(
+        lambda i: jnp.einsum("kpj,kj->kp", blocks.w[i], vg[pt[i]]), s.obs_block, nb
+    )
+    rhs = add_block_sums(gc, s, -wvg).at[n].set(0.0)
     dc = solve_factored(chol, rhs)
-    back = jax.ops.segment_sum(jnp.einsum("mpj,mp->mj", blocks.w, dc[idx]), pt, s.n_points)
+    back = per_observation_sum(
+        lambda i: jnp.einsum("kpj,kp->kj", blocks.w[i], dc[idx[i]]), pt, s.n_points
+    )
     return dc[:n], jnp.einsum("nij,nj->ni", vinv, gp - back)
+
+
+def per_observation_sum(
+    values: Callable[[Array], Array], segments: Int[Array, " M"], num_segments: int
+) -> Array:
+    """``segment_sum(values(arange(M)), segments, num_segments)``: at once for a small problem
+    (each of a batch), in chunks of observations for a large one (no (M, ...) temporary: a
+    200 000-observation pair's (M, P) products are 9.6 MB each)."""
+    m = segments.shape[0]
+    if m <= SUM_CHUNK:
+        return jax.ops.segment_sum(values(jnp.arange(m)), segments, num_segments)
+    return chunked_segment_sum(values, (jnp.arange(m),), segments, num_segments)
 
 
 def zero_blocks(s: Structure, m: int) -> NormalBlocks:
@@ -317,7 +327,11 @@ def model_change(
     else:
         uu = jnp.dot(dc, blocks.u[:n, :n] @ dc)
     dc1 = jnp.concatenate([dc, jnp.zeros(1)])  # the dummy (padding) parameter
-    ww = jnp.einsum("mp,mpj,mj->", dc1[s.obs_params], blocks.w, dp[s.obs_point])
+    ww = per_observation_sum(
+        lambda i: jnp.einsum("kp,kpj,kj->k", dc1[s.obs_params[i]], blocks.w[i], dp[s.obs_point[i]]),
+        jnp.zeros(s.obs_point.shape[0], dtype=jnp.int32),
+        1,
+    )[0]
     vv = jnp.einsum("ni,nij,nj->", dp, blocks.v, dp)
     g = jnp.dot(blocks.gc[:n], dc) + jnp.sum(blocks.gp * dp)
     return g + 0.5 * (uu + 2.0 * ww + vv)
