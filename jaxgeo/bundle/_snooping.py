@@ -359,9 +359,23 @@ def snoop(
         f"solving: {m} image observations, {st.n_points} points, {st.n_params} parameters "
         f"({solver.loss} loss; a block of a new shape is compiled first, up to a minute)"
     )
-    sol = _solve(
-        problem, compiled, removed_image=rem_i, removed_ground=rem_g, irls_limit=irls, start=cold
-    )
+
+    def run(how: tuple) -> Solution:
+        prob, removed_i, removed_g, limit, start = how
+        return _solve(
+            prob,
+            compiled,
+            removed_image=removed_i,
+            removed_ground=removed_g,
+            irls_limit=limit,
+            start=start,
+        )
+
+    # how the current solution was solved: run again, the same program on the same inputs gives
+    # the same solution, so that it need not be held through a re-solve (21 MB at 200 000
+    # observations; its start, the last solution's unknowns and weights, is a quarter of that)
+    how = (problem, rem_i, rem_g, irls, cold)
+    sol = run(how)
     rounds = 0
     # a robust solve whose weights still move (not_converged) is snooped on: removing the gross
     # errors is what lets the reweighting settle
@@ -390,39 +404,30 @@ def snoop(
             f"{int(new_g.sum())} ground observations flagged as gross errors, re-solving"
         )
         # removed measurements sit at the last prediction: (project - xy) = r sigma
-        r_px = np.asarray(sol.residuals_image) / w_xy[:, None]
         xy_try, g_try = xy.copy(), g.copy()
-        xy_try[new_i] = xy0[new_i] + r_px[new_i]
+        xy_try[new_i] = xy0[new_i] + np.asarray(sol.residuals_image)[new_i] / w_xy[new_i, None]
         g_try[new_g] = np.asarray(sol.ground)[np.asarray(problem.ground.point)[new_g]]
         moved = eqx.tree_at(
             lambda p: p.ground.lonlath, problem.with_xy(jnp.asarray(xy_try)), jnp.asarray(g_try)
         )
-        tried = _solve(
-            moved,
-            compiled,
-            removed_image=rem_i | pick_i,
-            removed_ground=rem_g | pick_g,
-            irls_limit=full,
-            start=warm(sol),
-        )
+        tried_how = (moved, rem_i | pick_i, rem_g | pick_g, full, warm(sol))
+        del sol
+        tried = run(tried_how)
         if bool(tried.result == RESULTS.undetermined):
             # these removals would leave unknowns undetermined (the control of an image): they
-            # stay, flagged only, and the snooping stops here
+            # stay, flagged only, and the snooping stops here, at the last solution
+            del tried
+            sol = run(how)
             break
-        sol, xy, g = tried, xy_try, g_try
+        sol, how, xy, g = tried, tried_how, xy_try, g_try
         rem_i, rem_g = rem_i | pick_i, rem_g | pick_g
         problem = moved
         rounds += 1
     if brief and not rounds and bool(sol.result == RESULTS.not_converged):
         # the reweighting had the snooping's short budget: the answer gets the whole one
-        sol = _solve(
-            problem,
-            compiled,
-            removed_image=rem_i,
-            removed_ground=rem_g,
-            irls_limit=full,
-            start=warm(sol),
-        )
+        how = (problem, rem_i, rem_g, full, warm(sol))
+        del sol
+        sol = run(how)
     if rounds:  # residuals against the measurements as given
         r_img = np.asarray(sol.residuals_image) + (xy - xy0) * w_xy[:, None]
         pts = np.asarray(sol.ground)[np.asarray(problem.ground.point)]

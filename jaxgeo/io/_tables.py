@@ -163,6 +163,7 @@ def read_observations(
     """Read an OBS.csv table (see the module docstring)."""
     path = pathlib.Path(path)
     pids: list[str] = []
+    same: dict[str, str] = {}  # point id -> its first string: one string per point, not per row
     code: dict[str, int] = {}  # image name -> its number: one string per image, not per row
     values, images, lines = array.array("d"), array.array("q"), array.array("q")
     for lineno, row in _rows(path, ("id", "image", "x", "y")):
@@ -175,7 +176,7 @@ def read_observations(
         s = default_sigma_px if math.isnan(s) else s
         if s <= 0:
             raise TableError(f"{where}: point {pid!r} has a non-positive sigma_px")
-        pids.append(pid)
+        pids.append(same.setdefault(pid, pid))
         images.append(code.setdefault(image, len(code)))
         values.extend((x, y, s))
         lines.append(lineno)

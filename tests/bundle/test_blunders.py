@@ -12,10 +12,11 @@ more than snooping removes (max(1, 20 %)): they stay, flagged, and the warning n
 import dataclasses
 import warnings
 
+import jax
 import numpy as np
 import pytest
 
-from jaxgeo.bundle import PoorFitWarning, adjust
+from jaxgeo.bundle import PoorFitWarning, adjust, with_bias
 from jaxgeo.bundle._report import enu_errors
 from jaxgeo.geodesy import metres_per_unit
 from jaxgeo.lsq import SolverConfig
@@ -142,3 +143,29 @@ def test_gcp_moved_by_a_kilometre_is_named(block):
     j = r.gcp_ids.index("P01")
     assert 900.0 < np.linalg.norm(r.ground_residuals_m[j]) < 1100.0
     assert not r.blunders.any()  # the image measurements of P01 are fine
+
+
+def test_a_re_solve_left_undetermined_returns_the_last_solution_bit_for_bit(block, monkeypatch):
+    """When removing the flagged observations would leave unknowns undetermined, snooping stops
+    at the last solution: not held through the re-solve, it is solved again (the same program
+    on the same inputs), and is the solution of the first solve exactly."""
+    from jaxgeo.bundle import _snooping
+    from jaxgeo.bundle._prepare import prepare
+    from jaxgeo.lsq import RESULTS
+
+    obs, _ = _inject(block.obs, 0)
+    setup = prepare(with_bias(block.models, "affine"), obs, block.ground)
+    real, calls = _snooping._solve, []
+
+    def second_undetermined(*args, **kwargs):
+        sol = real(*args, **kwargs)
+        calls.append(sol)
+        return dataclasses.replace(sol, result=RESULTS.undetermined) if len(calls) == 2 else sol
+
+    monkeypatch.setattr(_snooping, "_solve", second_undetermined)
+    sol, rem_i, rem_g, rounds = _snooping.snoop(setup, SolverConfig())
+    assert len(calls) == 3 and rounds == 0 and not rem_i.any() and not rem_g.any()
+    first, again = calls[0], calls[2]
+    for a, b in zip(jax.tree.leaves(first), jax.tree.leaves(again), strict=True):
+        np.testing.assert_array_equal(np.asarray(a), np.asarray(b))
+    assert sol is again

@@ -29,8 +29,8 @@ def test_observations_values_and_lines(tmp_path, newline):
     assert obs.xy.flags.writeable and obs.xy.dtype == np.float64
     # the line of every row, as messages name them (comments and blank lines counted)
     np.testing.assert_array_equal(table_lines(path), [4, 5, 7])
-    # one string per image name, shared by its rows
-    assert obs.images[0] is obs.images[2]
+    # one string per image name and per point id, shared by their rows
+    assert obs.images[0] is obs.images[2] and obs.point_ids[0] is obs.point_ids[1]
 
 
 def test_a_point_measured_twice_in_one_image_names_both_lines(tmp_path):
