@@ -12,13 +12,14 @@ import json
 import os
 import pathlib
 from collections.abc import Iterable, Mapping
-from typing import Any
+from typing import Any, NamedTuple
 
 import jax
 import numpy as np
 import scipy.sparse
 
 from ..io import (
+    atomic_write_csv,
     atomic_write_text,
     format_rpc_txt,
     image_stem,
@@ -93,6 +94,20 @@ def _csv(header: list[str], rows: Iterable[Iterable[Any]]) -> str:
     w.writerow(header)
     w.writerows(rows)
     return buf.getvalue()
+
+
+class _Table(NamedTuple):
+    """A CSV output: its header and rows, formed as they are written (:func:`atomic_write_csv`:
+    100 000 points and 200 000 residuals are never held as strings)."""
+
+    header: list[str]
+    rows: Iterable[Iterable[Any]]
+
+
+def _write(path: pathlib.Path, content: str | _Table, overwrite: bool) -> pathlib.Path:
+    if isinstance(content, _Table):
+        return atomic_write_csv(path, content.header, content.rows, overwrite=overwrite)
+    return atomic_write_text(path, content, overwrite=overwrite)
 
 
 def _r(v: float) -> str:
@@ -305,7 +320,7 @@ def write_outputs(
     the tags of a copy of the GeoTIFF with ``write_into``). An RPC is folded exactly where the
     bias allows, else refitted; the refit error is in ``report.txt`` and ``report.json``."""
     out = pathlib.Path(out_dir)
-    files: dict[str, str] = {}
+    files: dict[str, str | _Table] = {}
     notes = []
     placed = []
     if rpc_files and images is not None:
@@ -333,9 +348,9 @@ def write_outputs(
                 "+ (dx, dy) at the RPC's line); the RPC holds the affine bias only"
             )
     files["adjusted_models.json"] = json.dumps(models_json(result), indent=1) + "\n"
-    files["ground_adjusted.csv"] = _csv(
+    files["ground_adjusted.csv"] = _Table(
         ["id", "lon", "lat", "h", "role", "sigma_e_m", "sigma_n_m", "sigma_h_m"],
-        (  # rows formed as they are written: 100 000 points are not held as 800 000 strings
+        (
             [p, *(_r(v) for v in g), role, *(_r(v) for v in s)]
             for p, role, g, s in zip(
                 result.point_ids,
@@ -346,7 +361,7 @@ def write_outputs(
             )
         ),
     )
-    files["residuals.csv"] = _csv(
+    files["residuals.csv"] = _Table(
         ["id", "image", "vx_px", "vy_px", "wx", "wy", "blunder"],
         (
             [p, img, _r(v[0]), _r(v[1]), _r(w[0]), _r(w[1]), int(b)]
@@ -380,9 +395,7 @@ def write_outputs(
     written = []
     for rpc, plan in placed:
         written += write_rpc_outputs(rpc, plan, overwrite=overwrite)["written"]
-    return written + [
-        atomic_write_text(targets[n], text, overwrite=overwrite) for n, text in files.items()
-    ]
+    return written + [_write(targets[n], content, overwrite) for n, content in files.items()]
 
 
 def _place_rpcs(result, images, out, rpc_format, copy_images, write_into, report):

@@ -10,6 +10,7 @@ centres, ``(0, 0)`` the centre of the first pixel); readers convert vendor conve
 
 # --- other io modules (tables, metadata, ...) re-export below this line ---
 from ._atomic import atomic_output as atomic_output
+from ._atomic import atomic_write_csv as atomic_write_csv
 from ._atomic import atomic_write_text as atomic_write_text
 from ._atomic import refuse_existing as refuse_existing
 from ._dem import DEM as DEM

@@ -9,10 +9,11 @@ intact, and an existing file is replaced only when the caller passes ``overwrite
 from __future__ import annotations
 
 import contextlib
+import csv
 import os
 import pathlib
 import secrets
-from collections.abc import Iterator, Sequence
+from collections.abc import Iterable, Iterator, Sequence
 
 from .. import _interrupt
 
@@ -81,6 +82,24 @@ def atomic_write_bytes(
     path = pathlib.Path(path)
     with atomic_output(path, overwrite) as tmp, open(tmp, "wb") as f:
         f.write(data)
+        f.flush()
+        os.fsync(f.fileno())
+    return path
+
+
+def atomic_write_csv(
+    path: str | os.PathLike,
+    header: Sequence[str],
+    rows: Iterable[Iterable[object]],
+    overwrite: bool = False,
+) -> pathlib.Path:
+    """Write a CSV table (UTF-8, ``\\n`` line ends) atomically, its rows formed and written one
+    at a time (200 000 rows are never held as one string: see :func:`atomic_output`)."""
+    path = pathlib.Path(path)
+    with atomic_output(path, overwrite) as tmp, open(tmp, "w", encoding="utf-8", newline="") as f:
+        w = csv.writer(f, lineterminator="\n")
+        w.writerow(header)
+        w.writerows(rows)
         f.flush()
         os.fsync(f.fileno())
     return path
