@@ -182,6 +182,17 @@ def test_large_solve_compiled_apart_with_its_own_options(cache, monkeypatch):
     assert len(asked) == 2
 
 
+def test_large_solve_options_jaxlib_does_not_know_are_left_out(cache, monkeypatch):
+    monkeypatch.setattr(_exported, "MAX_ELEMENTS", 2)
+    monkeypatch.setattr(_exported, "_compiled", {})
+    monkeypatch.setattr(
+        _exported, "LARGE_SOLVE_COMPILE", {**_exported.LARGE_SOLVE_COMPILE, "xla_no_such": True}
+    )
+    x = np.linspace(0.0, 3.0, 5)
+    out = _exported.call_large_solve(fn, x, 2.0)
+    np.testing.assert_allclose(out.value, np.sin(x) * 2.0, rtol=1e-15)
+
+
 def test_release_heap_runs_anywhere():
     _exported.release_heap()  # glibc's malloc_trim on Linux, nothing elsewhere; never raises
 

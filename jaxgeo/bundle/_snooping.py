@@ -118,8 +118,8 @@ def solve_settings(solver: SolverConfig) -> SolverConfig:
 
 def _solve(*args, **kwargs) -> Solution:
     """:func:`jaxgeo.lsq.solve` compiled and traced once per structure, across runs too
-    (:mod:`jaxgeo._exported`; a large block with XLA's legacy CPU emitters, which compile it
-    in a third of the memory)."""
+    (:mod:`jaxgeo._exported`; a large block with ``LARGE_SOLVE_COMPILE``'s XLA options, which
+    compile and run it in less memory)."""
     return _exported.call_large_solve(solve, *args, **kwargs)
 
 
