@@ -171,10 +171,14 @@ def make_result(
             problem, sol.q_params, sol.inflation_params, sol.inflation_points
         )
         bad_params, bad_points = (np.flatnonzero(np.asarray(m)).tolist() for m in masks)
-        if not np.all(np.isfinite(np.asarray(sol.inflation_params))):  # Cholesky failed: find
-            more_params, more = undetermined(  # the null space
-                problem, _final_y(problem, sol), loss=solver.loss, loss_scale=solver.loss_scale
-            )
+        # the null space, where the Cholesky factorisation failed or no parameter stood out
+        # (points are left open by their own rays or by undetermined parameters, which a
+        # factorisation of a singular matrix that ran to the end need not show), of the
+        # least-squares normal equations: what is determined is the geometry's, and a robust
+        # loss's Newton model has negative curvature where residuals are large (every point's
+        # block, once a solve has drifted along the null space for its 100 steps)
+        if not bad_params or not np.all(np.isfinite(np.asarray(sol.inflation_params))):
+            more_params, more = undetermined(problem, _final_y(problem, sol), loss="l2")
             bad_params, bad_points = more_params, (more if more else bad_points)
         how = ()
         if bad_params and not bad_points:
