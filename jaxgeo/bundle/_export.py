@@ -6,6 +6,7 @@ existing files before anything is written, and each file is written atomically.
 
 from __future__ import annotations
 
+import contextlib
 import csv
 import io
 import json
@@ -19,13 +20,13 @@ import numpy as np
 import scipy.sparse
 
 from ..io import (
-    atomic_write_csv,
-    atomic_write_text,
+    atomic_output,
     format_rpc_txt,
     image_stem,
     plan_rpc_outputs,
     sidecar_name,
     vendor_values,
+    write_csv,
     write_rpc_outputs,
 )
 from ..models import RPC, AffineBias, Biased, JitterBias, fit_rpc
@@ -104,10 +105,14 @@ class _Table(NamedTuple):
     rows: Iterable[Iterable[Any]]
 
 
-def _write(path: pathlib.Path, content: str | _Table, overwrite: bool) -> pathlib.Path:
+def _fill(tmp: pathlib.Path, content: str | _Table) -> None:
     if isinstance(content, _Table):
-        return atomic_write_csv(path, content.header, content.rows, overwrite=overwrite)
-    return atomic_write_text(path, content, overwrite=overwrite)
+        write_csv(tmp, content.header, content.rows)
+        return
+    with open(tmp, "wb") as f:
+        f.write(content.encode("utf-8"))
+        f.flush()
+        os.fsync(f.fileno())
 
 
 def _r(v: float) -> str:
@@ -393,9 +398,14 @@ def write_outputs(
         if path.exists() and not overwrite:
             raise FileExistsError(f"{path}: exists (choose another --out or pass --overwrite)")
     written = []
-    for rpc, plan in placed:
-        written += write_rpc_outputs(rpc, plan, overwrite=overwrite)["written"]
-    return written + [_write(targets[n], content, overwrite) for n, content in files.items()]
+    # every file to its temporary first (the CSV tables take seconds at 100 000 points), the
+    # RPCs, then all renamed at once: an interruption while they are formed leaves nothing
+    with contextlib.ExitStack() as stack:
+        for n, content in files.items():
+            _fill(stack.enter_context(atomic_output(targets[n], overwrite)), content)
+        for rpc, plan in placed:
+            written += write_rpc_outputs(rpc, plan, overwrite=overwrite)["written"]
+    return written + [targets[n] for n in files]
 
 
 def _place_rpcs(result, images, out, rpc_format, copy_images, write_into, report):

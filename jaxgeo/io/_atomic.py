@@ -87,21 +87,29 @@ def atomic_write_bytes(
     return path
 
 
+def write_csv(
+    path: str | os.PathLike, header: Sequence[str], rows: Iterable[Iterable[object]]
+) -> None:
+    """Write a CSV table to ``path`` (UTF-8, ``\\n`` line ends), its rows formed and written one
+    at a time (200 000 rows are never held as one string), flushed and fsynced."""
+    with open(path, "w", encoding="utf-8", newline="") as f:
+        w = csv.writer(f, lineterminator="\n")
+        w.writerow(header)
+        w.writerows(rows)
+        f.flush()
+        os.fsync(f.fileno())
+
+
 def atomic_write_csv(
     path: str | os.PathLike,
     header: Sequence[str],
     rows: Iterable[Iterable[object]],
     overwrite: bool = False,
 ) -> pathlib.Path:
-    """Write a CSV table (UTF-8, ``\\n`` line ends) atomically, its rows formed and written one
-    at a time (200 000 rows are never held as one string: see :func:`atomic_output`)."""
+    """:func:`write_csv` atomically (see :func:`atomic_output`)."""
     path = pathlib.Path(path)
-    with atomic_output(path, overwrite) as tmp, open(tmp, "w", encoding="utf-8", newline="") as f:
-        w = csv.writer(f, lineterminator="\n")
-        w.writerow(header)
-        w.writerows(rows)
-        f.flush()
-        os.fsync(f.fileno())
+    with atomic_output(path, overwrite) as tmp:
+        write_csv(tmp, header, rows)
     return path
 
 

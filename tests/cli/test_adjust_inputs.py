@@ -92,6 +92,25 @@ def test_failed_write_keeps_the_report(scene, tmp_path, capsys, monkeypatch):
     assert "RMS_E" in cap.out and "writing -o/--out failed: disk says no" in cap.err
 
 
+def test_a_failure_while_the_tables_are_written_leaves_no_file(scene, tmp_path, monkeypatch):
+    """Every output goes to its temporary file first (the CSV tables are streamed: seconds at
+    100 000 points) and all are renamed at the end: a failure or an interruption while the
+    residual table is formed leaves no output file, not the ones written before it."""
+    import jaxgeo.bundle._export as export
+
+    real = export.write_csv
+
+    def fail_on_residuals(path, header, rows):
+        if "vx_px" in header:
+            raise OSError("disk full")
+        real(path, header, rows)
+
+    monkeypatch.setattr(export, "write_csv", fail_on_residuals)
+    out = tmp_path / "o"
+    assert main(_args(scene, "--bias", "shift", "--out", str(out))) == 4
+    assert not out.exists() or list(out.iterdir()) == []
+
+
 def test_gcp_a_kilometre_off_is_named(scene, capsys):
     path = scene / "ground.csv"
     rows = list(csv.reader(path.read_text().splitlines()))
