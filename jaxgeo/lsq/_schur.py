@@ -291,14 +291,15 @@ def schur_solve(
 
 
 def per_observation_sum(
-    values: Callable[[Array], Array], segments: Int[Array, " M"], num_segments: int
+    values: Callable[[Array | slice], Array], segments: Int[Array, " M"], num_segments: int
 ) -> Array:
-    """``segment_sum(values(arange(M)), segments, num_segments)``: at once for a small problem
-    (each of a batch), in chunks of observations for a large one (no (M, ...) temporary: a
-    200 000-observation pair's (M, P) products are 9.6 MB each)."""
+    """``segment_sum(values(all rows), segments, num_segments)``: at once for a small problem
+    (each of a batch; ``values`` gets ``slice(None)``, no gather), in chunks of observations
+    for a large one (``values`` gets index arrays; no (M, ...) temporary: a 200 000-observation
+    pair's (M, P) products are 9.6 MB each)."""
     m = segments.shape[0]
     if m <= SUM_CHUNK:
-        return jax.ops.segment_sum(values(jnp.arange(m)), segments, num_segments)
+        return jax.ops.segment_sum(values(slice(None)), segments, num_segments)
     return chunked_segment_sum(values, (jnp.arange(m),), segments, num_segments)
 
 
