@@ -26,6 +26,7 @@ from ..io import (
     plan_rpc_outputs,
     sidecar_name,
     vendor_values,
+    write_bytes,
     write_csv,
     write_rpc_outputs,
 )
@@ -98,7 +99,7 @@ def _csv(header: list[str], rows: Iterable[Iterable[Any]]) -> str:
 
 
 class _Table(NamedTuple):
-    """A CSV output: its header and rows, formed as they are written (:func:`atomic_write_csv`:
+    """A CSV output: its header and rows, formed as they are written (:func:`jaxgeo.io.write_csv`:
     100 000 points and 200 000 residuals are never held as strings)."""
 
     header: list[str]
@@ -108,11 +109,8 @@ class _Table(NamedTuple):
 def _fill(tmp: pathlib.Path, content: str | _Table) -> None:
     if isinstance(content, _Table):
         write_csv(tmp, content.header, content.rows)
-        return
-    with open(tmp, "wb") as f:
-        f.write(content.encode("utf-8"))
-        f.flush()
-        os.fsync(f.fileno())
+    else:
+        write_bytes(tmp, content.encode("utf-8"))
 
 
 def _r(v: float) -> str:

@@ -13,6 +13,7 @@ from ._atomic import atomic_output as atomic_output
 from ._atomic import atomic_write_csv as atomic_write_csv
 from ._atomic import atomic_write_text as atomic_write_text
 from ._atomic import refuse_existing as refuse_existing
+from ._atomic import write_bytes as write_bytes
 from ._atomic import write_csv as write_csv
 from ._dem import DEM as DEM
 from ._dem import read_dem as read_dem

@@ -80,11 +80,18 @@ def atomic_write_bytes(
     onto ``path`` (see :func:`atomic_output`).
     """
     path = pathlib.Path(path)
-    with atomic_output(path, overwrite) as tmp, open(tmp, "wb") as f:
+    with atomic_output(path, overwrite) as tmp:
+        write_bytes(tmp, data)
+    return path
+
+
+def write_bytes(path: str | os.PathLike, data: bytes) -> None:
+    """Write ``data`` to ``path``, flushed and fsynced (the body of :func:`atomic_write_bytes`,
+    for a writer that commits several temporary files together)."""
+    with open(path, "wb") as f:
         f.write(data)
         f.flush()
         os.fsync(f.fileno())
-    return path
 
 
 def write_csv(
