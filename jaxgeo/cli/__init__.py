@@ -168,6 +168,9 @@ def _main(argv: list[str] | None, restore_handlers: bool) -> int:
     command = next((a for a in argv if not a.startswith("-")), None)
     parser = build_parser(command if command in COMMANDS else None)
     args = parser.parse_args(argv)
+    from .. import _exported  # jax: every command computes (help and usage errors are above)
+
+    owned = _exported.own_process()  # restored below (tests run commands in their process)
     name = f"jaxgeo {args.command}"
     interrupted = f"{name}: interrupted; no output was written"
     previous = _install_interrupt_handlers()
@@ -186,6 +189,7 @@ def _main(argv: list[str] | None, restore_handlers: bool) -> int:
             return EXIT_INTERRUPTED
         return _report_error(name, err)
     finally:
+        _exported.own_process(owned)
         if restore_handlers:
             _restore_handlers(previous)
         elif _interrupt.requested():  # the process is ending: a late signal changes nothing
