@@ -46,7 +46,8 @@ import os
 import pickle
 import sys
 import tempfile
-from collections.abc import Callable
+import threading
+from collections.abc import Callable, Iterator
 from pathlib import Path
 from typing import Any
 
@@ -108,6 +109,7 @@ MAX_ENTRIES = 200
 
 _log = logging.getLogger(__name__)
 _owns_process = False
+_solve_hooks = threading.local()
 _loaded: dict[str, tuple[Any, Any, Any]] = {}
 _compiled: dict[str, Any] = {}
 _runners: dict[str, Callable] = {}
@@ -125,6 +127,31 @@ def own_process(owns: bool = True) -> bool:
     global _owns_process
     previous, _owns_process = _owns_process, bool(owns)
     return previous
+
+
+@contextlib.contextmanager
+def when_solve_traced(callback: Callable[[], None]) -> Iterator[None]:
+    """Within this block, in this thread: ``callback()`` is called each time a solve
+    (:func:`call_large_solve`) has been traced, before XLA compiles (or, warm, runs) it. Work
+    on another thread started then does not compete with the trace for the GIL; XLA's
+    compilation and runs release it (``jaxgeo demo`` cold: the direct georeferencing, traced
+    beside the solve's trace, delayed it by ~1 s on 2 cores)."""
+    previous = getattr(_solve_hooks, "callback", None)
+    _solve_hooks.callback = callback
+    try:
+        yield
+    finally:
+        _solve_hooks.callback = previous
+
+
+def _solve_traced() -> None:
+    callback = getattr(_solve_hooks, "callback", None)
+    if callback is not None:
+        callback()
+
+
+def _nothing() -> None:
+    pass
 
 
 def release_heap() -> None:
@@ -292,20 +319,22 @@ def call(fn: Callable, *args, **kwargs):
 def call_large_solve(fn: Callable, *args, **kwargs):
     """:func:`call` of a solve, compiled with :data:`LARGE_SOLVE_COMPILE` when its inputs
     exceed :data:`MAX_ELEMENTS`."""
-    return _call(LARGE_SOLVE_COMPILE or None, fn, args, kwargs)
+    return _call(LARGE_SOLVE_COMPILE or None, fn, args, kwargs, traced=_solve_traced)
 
 
-def _call(large: dict | None, fn: Callable, args, kwargs):
+def _call(large: dict | None, fn: Callable, args, kwargs, traced: Callable[[], None] = _nothing):
+    """``traced()`` is called once the program is traced (or found), before it is compiled or
+    run; on the plain-jit fall-backs (which trace, compile and run in one call) before that."""
     dynamic, static = eqx.partition((args, kwargs), eqx.is_array)
     leaves, treedef = jax.tree.flatten(dynamic)
     where = folder()
     if any(isinstance(x, jax.core.Tracer) for x in leaves):
+        traced()
         return _filter_jit(fn)(*args, **kwargs)
     if _elements(leaves) > MAX_ELEMENTS:
-        return _compiled_call(fn, treedef, static, leaves, args, kwargs, large)
-    if where is None:
-        return _filter_jit(fn)(*args, **kwargs)
-    program = _program(where, fn, treedef, static, leaves)
+        return _compiled_call(fn, treedef, static, leaves, args, kwargs, large, traced)
+    program = None if where is None else _program(where, fn, treedef, static, leaves)
+    traced()
     if program is None:
         return _filter_jit(fn)(*args, **kwargs)
     key, exported, out_def, out_static = program
@@ -317,17 +346,21 @@ def _call(large: dict | None, fn: Callable, args, kwargs):
     return eqx.combine(jax.tree.unflatten(out_def, out_leaves), out_static)
 
 
-def _compiled_call(fn: Callable, treedef, static, leaves, args, kwargs, options=None):
+def _compiled_call(
+    fn: Callable, treedef, static, leaves, args, kwargs, options=None, traced=_nothing
+):
     """``eqx.filter_jit(fn)(*args, **kwargs)``, compiled apart (once per structure and XLA
     ``options`` in this process) with the heap released before each run (see the module
-    docstring)."""
+    docstring); ``traced`` as in :func:`_call`."""
     try:
         key = _key(fn, treedef, static, leaves) + repr(sorted((options or {}).items()))
     except Exception:  # an unpicklable static value: no stable key
+        traced()
         return _filter_jit(fn)(*args, **kwargs)
     compiled = _compiled.get(key)
     if compiled is None:
         lowered = _filter_jit(fn).lower(*args, **kwargs)
+        traced()
         options = dict(options or {})
         while True:
             try:
@@ -343,5 +376,7 @@ def _compiled_call(fn: Callable, treedef, static, leaves, args, kwargs, options=
         _compiled[key] = compiled
         if _owns_process:  # the large program's trace and lowering, kept by jax (own_process)
             jax.clear_caches()
+    else:
+        traced()
     release_heap()  # before every run: the caller's freed memory too (26 MB before a re-solve)
     return compiled(*args, **kwargs)

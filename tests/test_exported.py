@@ -165,7 +165,7 @@ def test_large_solve_compiled_apart_with_its_own_options(cache, monkeypatch):
     real = _exported._compiled_call
 
     def spy(*args):
-        asked.append(args[-1])
+        asked.append(args[6])  # (fn, treedef, static, leaves, args, kwargs, options, ...)
         return real(*args)
 
     monkeypatch.setattr(_exported, "_compiled_call", spy)
@@ -225,6 +225,33 @@ def test_command_line_owns_the_process_only_while_it_runs(monkeypatch):
     assert _exported._owns_process is False
     assert main(["demo"]) == 0
     assert seen == [True] and _exported._owns_process is False
+
+
+def test_a_solve_announces_its_trace_before_it_is_compiled(cache, monkeypatch):
+    """``when_solve_traced``: called for ``call_large_solve`` (exported or compiled apart,
+    first and later calls), once the program is traced and before XLA compiles it; not for
+    ``call``."""
+    monkeypatch.setattr(_exported, "_compiled", {})
+    seen = []
+
+    def announce():
+        seen.append(list(TRACES))  # the traces done by then
+
+    x = np.linspace(0.0, 3.0, 5)
+    with _exported.when_solve_traced(announce):
+        _exported.call(fn, x, 2.0, label="plain")
+        assert seen == []
+        _exported.call_large_solve(fn, x, 3.0, label="solve")
+        _exported.call_large_solve(fn, x, 3.0, label="solve")
+        monkeypatch.setattr(_exported, "MAX_ELEMENTS", 2)
+        _exported.call_large_solve(fn, x, 3.0, label="large")
+        _exported.call_large_solve(fn, x, 3.0, label="large")
+    assert seen == [
+        ["plain", "solve"],
+        ["plain", "solve"],
+        ["plain", "solve", "large"],
+        ["plain", "solve", "large"],
+    ]
 
 
 def test_release_heap_runs_anywhere():

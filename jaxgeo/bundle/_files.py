@@ -19,11 +19,13 @@ import concurrent.futures
 import dataclasses
 import os
 import pathlib
+import threading
 from collections.abc import Callable, Mapping, Sequence
 from typing import Any
 
 import numpy as np
 
+from .. import _exported
 from ..io import (
     DEM,
     SensorImage,
@@ -281,23 +283,35 @@ def adjust_files(
                 "of its product: its measurements and adjusted RPC are in the crop's pixels"
             )
     prior = bias_prior_sigma(models, bias_prior_shift_px, bias_prior_matrix)
-    # direct georeferencing (the given models, for the report) on a thread beside the adjustment:
-    # on a first run both compile, and XLA compiles without holding the GIL (`jaxgeo demo` cold:
-    # see the closing note of issue 29); an error of the adjustment comes first, and it (or an
-    # interruption) waits for the thread's few seconds
+    # direct georeferencing (the given models, for the report) on a thread beside the adjustment,
+    # started once the solve is traced: XLA compiles and runs without holding the GIL, tracing
+    # holds it (`jaxgeo demo` cold: see the closing notes of issue 29); an error of the
+    # adjustment comes first and the thread then does nothing
+    go, abandon = threading.Event(), threading.Event()
+
+    def after_trace(*args, **kwargs):
+        go.wait()
+        return None if abandon.is_set() else direct_georeferencing(*args, **kwargs)
+
     with concurrent.futures.ThreadPoolExecutor(1, thread_name_prefix="direct") as pool:
         direct = None
         if points is not None and len(models) >= 2:
             if progress is not None:
                 progress("direct georeferencing: intersecting the control points with the given "
                          "models (beside the adjustment)")  # fmt: skip
-            direct = pool.submit(
-                direct_georeferencing, models, obs, points, roles=tuple(direct_roles)
-            )
-        result = adjust(
-            models, obs, points, prior_sigma=prior, solver=solver, sources=sources, tie_height=dem,
-            tie_height_sigma_m=tie_height_sigma_m, image_domains=domains, progress=progress,
-        )  # fmt: skip
+            direct = pool.submit(after_trace, models, obs, points, roles=tuple(direct_roles))
+        try:
+            with _exported.when_solve_traced(go.set):
+                result = adjust(
+                    models, obs, points, prior_sigma=prior, solver=solver, sources=sources,
+                    tie_height=dem, tie_height_sigma_m=tie_height_sigma_m,
+                    image_domains=domains, progress=progress,
+                )  # fmt: skip
+        except BaseException:
+            abandon.set()
+            raise
+        finally:
+            go.set()
         direct = direct.result() if direct is not None else None
     inputs = [p for img in opened.values() for p in image_inputs(img)]
     inputs += [observations] + ([ground] if ground is not None else [])

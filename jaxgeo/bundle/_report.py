@@ -17,11 +17,10 @@ import json
 from collections.abc import Mapping, Sequence
 from typing import Any
 
-import equinox as eqx
 import jax
 import numpy as np
 
-from .. import geodesy
+from .. import _exported, geodesy
 from ..intersect import intersect
 from ..io import GroundPoints, Observations
 
@@ -84,13 +83,16 @@ def _stats(errors: np.ndarray):
     return np.sqrt(np.mean(errors**2, axis=0)), errors.min(axis=0), errors.max(axis=0)
 
 
-@eqx.filter_jit
-def project(model, ground):
-    """``model.project`` compiled once per model structure (reports run at Python level)."""
+def project(model, ground) -> np.ndarray:
+    """``model.project`` compiled once per model structure and number of points, traced once
+    across runs (:mod:`jaxgeo._exported`; reports run at Python level)."""
+    return np.asarray(_exported.call(_project, model, np.asarray(ground, float)))
+
+
+def _project(model, ground):
     return model.project(ground)
 
 
-@jax.jit
 def _enu(estimated, truth):
     return jax.vmap(geodesy.geodetic_to_enu)(estimated, truth)
 
@@ -99,7 +101,7 @@ def enu_errors(estimated: np.ndarray, truth: np.ndarray) -> np.ndarray:
     """``(n, 3)`` estimated - true in east/north/up metres about each true point."""
     if len(truth) == 0:
         return np.zeros((0, 3))
-    return np.asarray(_enu(np.asarray(estimated, float), np.asarray(truth, float)))
+    return np.asarray(_exported.call(_enu, np.asarray(estimated, float), np.asarray(truth, float)))
 
 
 def image_rms(

@@ -35,6 +35,7 @@ import jax.numpy as jnp
 import numpy as np
 
 from .. import _exported
+from .._arrays import device_array
 from ..lsq import (
     BLUNDER_K,
     DEFAULT_SOLVER,
@@ -342,11 +343,11 @@ def snoop(
     point, gpts = np.asarray(problem.structure.obs_point), np.asarray(problem.ground.point)
     gcp_rows = _layout(setup).gcp_row
     limit = solver.snooping_rounds if solver.remove_blunders else 0
-    full = jnp.asarray(solver.irls_iterations)
+    full = device_array(solver.irls_iterations)
     at_scale = _at_scale(problem)
     brief = bool(limit) and solver.loss != "l2" and at_scale  # a short first reweighting
-    irls = jnp.asarray(DETECT_IRLS) if brief else full
-    cold = (initial_unknowns(problem), jnp.ones(m), jnp.ones(c))
+    irls = device_array(DETECT_IRLS) if brief else full
+    cold = (initial_unknowns(problem), device_array(np.ones(m)), device_array(np.ones(c)))
 
     def warm(last: Solution):
         # at scale a removal barely moves the solution: the re-solve goes on from the last one

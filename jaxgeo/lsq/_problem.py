@@ -22,10 +22,10 @@ from typing import Any
 
 import equinox as eqx
 import jax
-import jax.numpy as jnp
 import numpy as np
 from jaxtyping import Array, Float, Int, PyTree
 
+from .._arrays import device_array
 from ._band import block_bandwidth, super_blocks
 from ._observations import GroundObs, ImageObs
 
@@ -84,11 +84,11 @@ class ModelGroup(eqx.Module):
         leaves, start = [], 0
         for shape in self.dyn_shapes:
             size = int(np.prod(shape))
-            leaves.append(jnp.asarray(theta[k, start : start + size].reshape(shape)))
+            leaves.append(device_array(theta[k, start : start + size].reshape(shape)))
             start += size
         dyn = jax.tree.unflatten(self.dyn_treedef, leaves)
         static = jax.tree.map(
-            lambda x: jnp.asarray(np.asarray(x)[k]) if eqx.is_array(x) else x, self.static
+            lambda x: device_array(np.asarray(x)[k]) if eqx.is_array(x) else x, self.static
         )
         return eqx.combine(dyn, static)
 
@@ -179,7 +179,7 @@ def _index(a) -> Int[Array, "..."]:
     a = np.asarray(a)
     if a.size and a.max() >= np.iinfo(np.int32).max:
         raise ValueError(f"too many unknowns or observations for 32-bit indices ({a.max()})")
-    return jnp.asarray(a, dtype=jnp.int32)
+    return device_array(a, np.int32)
 
 
 def make_structure(

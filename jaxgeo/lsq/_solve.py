@@ -19,6 +19,7 @@ import lineax as lx
 import optimistix as optx
 from jaxtyping import Array, Bool, Float, Int
 
+from .._arrays import zeros_like
 from ._band import Band
 from ._config import DEFAULT_SOLVER, SolverConfig
 from ._covariance import cofactors, undetermined_unknowns
@@ -95,8 +96,8 @@ class Solution(eqx.Module):
 
 def initial_unknowns(problem: Problem):
     """The solver's starting point ``y0 = (z, u) = 0``: the initial parameters and points."""
-    z0 = tuple(jnp.zeros_like(g.theta0) for g in problem.groups)
-    return z0, jnp.zeros_like(problem.origin)
+    z0 = tuple(zeros_like(g.theta0) for g in problem.groups)
+    return z0, zeros_like(problem.origin)
 
 
 def unit_scales(problem: Problem) -> tuple[Float[Array, "b p"], ...]:

@@ -25,6 +25,7 @@ import jax.numpy as jnp
 import numpy as np
 from jaxtyping import Array, ArrayLike, Float, PyTree
 
+from .._arrays import device_array
 from ._base import AbstractSensorModel, all_inexact, nothing
 from ._rpc import RPC
 
@@ -132,8 +133,8 @@ class AffineBias(AbstractLinearBias):
         shift_px: Float[ArrayLike, "2"] = (0.0, 0.0),
         matrix: Float[ArrayLike, "2 2"] = ((0.0, 0.0), (0.0, 0.0)),
     ):
-        self.shift_px = jnp.asarray(shift_px, dtype=float)
-        self.matrix = jnp.asarray(matrix, dtype=float)
+        self.shift_px = device_array(shift_px, float)
+        self.matrix = device_array(matrix, float)
 
     @classmethod
     def from_image_affine(cls, a: Float[ArrayLike, "3"], b: Float[ArrayLike, "3"]) -> AffineBias:

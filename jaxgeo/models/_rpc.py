@@ -16,6 +16,7 @@ import jax.numpy as jnp
 import numpy as np
 from jaxtyping import Array, ArrayLike, Bool, Float, PyTree
 
+from .._arrays import device_array
 from ._base import AbstractSensorModel, nothing
 from ._rpc_eval import (
     is_concrete,
@@ -112,12 +113,12 @@ class RPC(AbstractSensorModel):
         image_scale: Float[ArrayLike, "2"],
         order: TermOrder = "RPC00B",
     ):
-        self.num = jnp.asarray(to_rpc00b(num, order), dtype=float)
-        self.den = jnp.asarray(to_rpc00b(den, order), dtype=float)
-        self.ground_offset = jnp.asarray(ground_offset, dtype=float)
-        self.ground_scale = jnp.asarray(ground_scale, dtype=float)
-        self.image_offset = jnp.asarray(image_offset, dtype=float)
-        self.image_scale = jnp.asarray(image_scale, dtype=float)
+        self.num = device_array(to_rpc00b(num, order), float)
+        self.den = device_array(to_rpc00b(den, order), float)
+        self.ground_offset = device_array(ground_offset, float)
+        self.ground_scale = device_array(ground_scale, float)
+        self.image_offset = device_array(image_offset, float)
+        self.image_scale = device_array(image_scale, float)
 
     def __check_init__(self):
         for name, shape in (

@@ -12,9 +12,9 @@ import dataclasses
 from collections.abc import Callable, Mapping
 from typing import Any
 
-import jax.numpy as jnp
 import numpy as np
 
+from ..._arrays import device_array
 from ...geodesy import metres_per_unit
 from ...io import GroundPoints, Observations
 from ...lsq import GroundObs, ImageObs, ModelGroup, Problem, make_structure
@@ -183,10 +183,10 @@ def prepare(
             order.append(sel)
             images.append(
                 ImageObs(
-                    block=jnp.asarray(obs_img[sel, 1]),
-                    point=jnp.asarray(obs_pt[sel]),
-                    xy=jnp.asarray(xy[sel]),
-                    weight=jnp.asarray(1.0 / sig_px[sel]),
+                    block=device_array(obs_img[sel, 1]),
+                    point=device_array(obs_pt[sel]),
+                    xy=device_array(xy[sel]),
+                    weight=device_array(1.0 / sig_px[sel]),
                     group=g,
                     slot=slot,
                     block_start=start,
@@ -210,9 +210,9 @@ def prepare(
         up = np.tile([0.0, 0.0, 1.0 / _positive_sigma(tie_height_sigma_m)], (len(ties), 1))
         gweight = np.concatenate([gweight, up])
     gobs = GroundObs(
-        point=jnp.asarray(g_point),
-        lonlath=jnp.asarray(g_lonlath.reshape(-1, 3)),
-        weight=jnp.asarray(gweight.reshape(-1, 3)),
+        point=device_array(g_point),
+        lonlath=device_array(g_lonlath.reshape(-1, 3)),
+        weight=device_array(gweight.reshape(-1, 3)),
     )
     prior_mean, prior_weight, n_prior_rows = prior_arrays(
         groups, labels, models, filters, prior_sigma
@@ -223,12 +223,12 @@ def prepare(
         groups=groups_t,
         images=images_t,
         ground=gobs,
-        origin=jnp.asarray(origin),
-        metres_per_unit=jnp.asarray(metres_per_unit(origin, xp=np)),
+        origin=device_array(origin),
+        metres_per_unit=device_array(metres_per_unit(origin, xp=np)),
         prior_mean=prior_mean,
         prior_weight=prior_weight,
         structure=make_structure(groups_t, images_t, gobs, len(point_ids)),
-        n_rows=jnp.asarray(n_rows),
+        n_rows=device_array(n_rows),
     )
     param_names = tuple(
         f"{label(key)}{name}"

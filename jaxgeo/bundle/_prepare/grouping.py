@@ -22,6 +22,7 @@ import jax.numpy as jnp
 import numpy as np
 from jaxtyping import PyTree
 
+from ..._arrays import device_array
 from ...lsq import ModelGroup
 from .._errors import AdjustmentError
 
@@ -96,14 +97,14 @@ def make_group(
     stacked_s = []
     for column in zip(*s_leaves, strict=True):
         if eqx.is_array(column[0]):
-            stacked_s.append(jnp.asarray(np.stack([np.asarray(c) for c in column])))
+            stacked_s.append(device_array(np.stack([np.asarray(c) for c in column])))
         else:
             stacked_s.append(column[0])
     stacked_d = [
         np.stack([np.asarray(c, dtype=float) for c in column])
         for column in zip(*d_leaves, strict=True)
     ]
-    theta0 = jnp.asarray(ravel_stacked(stacked_d, n))
+    theta0 = device_array(ravel_stacked(stacked_d, n))
     return ModelGroup(
         static=jax.tree.unflatten(s_tree, stacked_s),
         theta0=theta0,

@@ -12,10 +12,10 @@ from collections.abc import Callable, Mapping, Sequence
 from typing import Any
 
 import jax
-import jax.numpy as jnp
 import numpy as np
 from jaxtyping import Array, Float
 
+from ..._arrays import device_array
 from ...lsq import ModelGroup
 from .._errors import AdjustmentError
 from .checks import label
@@ -72,8 +72,8 @@ def prior_arrays(
             n_rows += int(np.count_nonzero(weight))
         else:
             mean = weight = np.zeros((grp.n_blocks, 0))
-        prior_mean.append(jnp.asarray(mean))
-        prior_weight.append(jnp.asarray(weight))
+        prior_mean.append(device_array(mean))
+        prior_weight.append(device_array(weight))
         for key in labels[g]:
             n_rows += int(np.prod(jax.eval_shape(models[key].prior_residuals).shape))
     return tuple(prior_mean), tuple(prior_weight), n_rows
