@@ -26,12 +26,14 @@ def device_array(x: ArrayLike, dtype: Any = None) -> Array:
         return x if dtype is None or x.dtype == np.dtype(dtype) else jnp.asarray(x, dtype)
     if dtype is None and isinstance(x, bool | int | float | complex):
         return jax.device_put(x)
-    return jax.device_put(np.asarray(x, dtype=dtype), may_alias=False)
+    # a private copy: the transfer is asynchronous, and the caller may change its array
+    # before it is done (seen on a CPU: a value written after the call reached the device)
+    return jax.device_put(np.array(x, dtype=dtype, copy=True))
 
 
 def zeros_like(x: ArrayLike) -> Array:
     """``jnp.zeros_like(x)`` (float ``x``), without an XLA program outside a trace."""
     if isinstance(x, jax.core.Tracer):
         return jnp.zeros_like(x)
-    dtype = x.dtype if hasattr(x, "dtype") else np.asarray(x).dtype
+    dtype = x.dtype if isinstance(x, jax.Array | np.ndarray | np.generic) else np.result_type(x)
     return device_array(np.zeros(np.shape(x), dtype=dtype))
