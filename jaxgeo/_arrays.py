@@ -22,8 +22,8 @@ def device_array(x: ArrayLike, dtype: Any = None) -> Array:
     """``jnp.asarray(x, dtype)``: a jax array (or tracer) as it is (converted if ``dtype``
     differs), host data (numpy, Python values) copied to the default device, no XLA program.
     A Python scalar without ``dtype`` stays weakly typed, as ``jnp.asarray`` makes it."""
-    if isinstance(x, jax.Array):  # tracers too
-        return x if dtype is None or x.dtype == np.dtype(dtype) else jnp.asarray(x, dtype)
+    if isinstance(x, jax.Array):  # tracers too; of the same type, ``jnp.asarray`` returns x
+        return x if dtype is None else jnp.asarray(x, dtype)
     if dtype is None and isinstance(x, bool | int | float | complex):
         return jax.device_put(x)
     # a private copy: the transfer is asynchronous, and the caller may change its array
