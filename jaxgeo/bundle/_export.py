@@ -17,7 +17,6 @@ from typing import Any, NamedTuple
 
 import jax
 import numpy as np
-import scipy.sparse
 
 from ..io import (
     atomic_output,
@@ -161,6 +160,8 @@ def bias_covariance(result) -> dict[str, Any] | None:
     names = [n for n in result.param_names if any(leaf in n for leaf in JOINT_LEAVES)]
     if not names:
         return None
+    import scipy.sparse  # here: 90 ms of every start otherwise
+
     idx = [result.param_names.index(n) for n in names]
     cov = result.param_cov
     if scipy.sparse.issparse(cov):  # a banded problem: within the band only
