@@ -18,6 +18,9 @@ Run it twice on one machine for a same-machine baseline: on the GPU, then with
   per point (the kernel before issue 29: XLA's GPU fusion then splits it in two);
 - ``numpy``: ``rpc.project(numpy)``, numpy out (as README writes it; every copy included; on
   a GPU machine computed on the host's CPU);
+- ``numpy_host_model``: ``numpy`` with the model's arrays put on the host's CPU device first
+  (on a GPU machine ``numpy`` computes there with a model whose arrays are on the GPU: the
+  difference is what moving them costs a call; on a CPU the same as ``numpy``);
 - ``numpy_whole``: the same data moved in one ``device_put``, one call, one copy back;
 - ``numpy_pinned``: through pinned host memory (``memory_kind="pinned_host"``) where the
   backend has it;
@@ -44,6 +47,7 @@ import numpy as np
 from benchmarks.harness import best_of, emit
 from benchmarks.speed.localize_traced import pleiades_rpc
 from jaxgeo.models import _rpc_eval
+from jaxgeo.models._host import host_device
 
 BYTES_PER_POINT = 40
 """A projection reads lon, lat, h and writes x, y: five float64."""
@@ -98,6 +102,7 @@ def measure(rpc, n: int, repeats: int, hlo: dict) -> dict:
     on_cpu = device.platform == "cpu"
     kernel = _rpc_eval._project_kernel if on_cpu else _rpc_eval._project_kernel_direct
     flat = _rpc_eval._flat(rpc)
+    rpc_host = jax.device_put(rpc, host_device())
     transposing = _rpc_eval._project_kernel
     cases = {
         "device": lambda: rpc.project(g_dev),
@@ -107,6 +112,7 @@ def measure(rpc, n: int, repeats: int, hlo: dict) -> dict:
         "device_columns_div": lambda: columns_div(rpc, *cols),
         "copy": lambda: copy(g_dev),
         "numpy": lambda: rpc.project(ground),
+        "numpy_host_model": lambda: rpc_host.project(ground),
         "numpy_whole": lambda: np.asarray(interleaved(rpc, jax.device_put(ground, device))),
     }
     pinned = _pinned(device)

@@ -373,7 +373,8 @@ def snoop(
         )
 
     # how the current solution was solved: run again, the same program on the same inputs gives
-    # the same solution, so that it need not be held through a re-solve (21 MB at 200 000
+    # the same solution (bitwise on a CPU; a GPU's reductions are not bitwise repeatable: 1e-10
+    # apart on an H200), so that it need not be held through a re-solve (21 MB at 200 000
     # observations; its start, the last solution's unknowns and weights, is a quarter of that)
     how = (problem, rem_i, rem_g, irls, cold)
     sol = run(how)

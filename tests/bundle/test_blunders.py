@@ -148,7 +148,7 @@ def test_gcp_moved_by_a_kilometre_is_named(block):
 def test_a_re_solve_left_undetermined_returns_the_last_solution_bit_for_bit(block, monkeypatch):
     """When removing the flagged observations would leave unknowns undetermined, snooping stops
     at the last solution: not held through the re-solve, it is solved again (the same program
-    on the same inputs), and is the solution of the first solve exactly."""
+    on the same inputs), and is the solution of the first solve exactly (on a CPU)."""
     from jaxgeo.bundle import _snooping
     from jaxgeo.bundle._prepare import prepare
     from jaxgeo.lsq import RESULTS
@@ -167,5 +167,8 @@ def test_a_re_solve_left_undetermined_returns_the_last_solution_bit_for_bit(bloc
     assert len(calls) == 3 and rounds == 0 and not rem_i.any() and not rem_g.any()
     first, again = calls[0], calls[2]
     for a, b in zip(jax.tree.leaves(first), jax.tree.leaves(again), strict=True):
-        np.testing.assert_array_equal(np.asarray(a), np.asarray(b))
+        if jax.default_backend() == "cpu":
+            np.testing.assert_array_equal(np.asarray(a), np.asarray(b))
+        else:  # a GPU's reductions are not bitwise repeatable: an H200's re-solve 1.2e-10 apart
+            np.testing.assert_allclose(np.asarray(a), np.asarray(b), rtol=1e-8, atol=1e-12)
     assert sol is again

@@ -22,7 +22,10 @@ def _run(mode: str) -> dict:
         PYTHONPATH=os.pathsep.join([str(REPO), env.get("PYTHONPATH", "")]),
     )
     run = subprocess.run(
-        [sys.executable, str(WORKER), mode], capture_output=True, text=True, env=env,
+        # faulthandler: a crash prints the Python stacks (jaxlib 0.11.2 segfaulted in "strip"
+        # with no output on an H100 and an H200 machine's CPU devices; 0.10.2 never has)
+        [sys.executable, "-X", "faulthandler", str(WORKER), mode], capture_output=True, text=True,
+        env=env,
         timeout=1200,
     )  # fmt: skip
     assert run.returncode == 0, run.stderr[-3000:]

@@ -353,7 +353,11 @@ def test_gradients(perturbed, truth):
 
     zeros = (jnp.zeros((2, 3)), jax.tree.map(jnp.zeros_like, params))
     check_grads(f, zeros, order=2, modes=("fwd",))
-    check_grads(f, zeros, order=1, modes=("rev",))
+    # f's rounding (~1e-9 px: ECEF metres near 7e6) over check_grads' default step (1e-4) put
+    # 1e-5 to 2.5e-5 of relative noise in the reverse check's finite differences (steps of
+    # 1e-4 * (1 +- 3e-3), measured; an H200 machine's run failed at 2.0e-5); at 1e-3 they stay
+    # under 2.4e-6 over the same steps, the truncation included
+    check_grads(f, zeros, order=1, modes=("rev",), eps=1e-3)
     loc = jax.jit(lambda i, h: perturbed.localize(i, h))
     check_grads(loc, (jnp.asarray(image), jnp.asarray(ground[:, 2])), order=1)
 
