@@ -127,6 +127,25 @@ class Recent:
 
 _SEEN = Recent(SEEN_MAX)
 _PROGRAMS = Recent(PROGRAMS_MAX)
+_ON_HOST = Recent(PROGRAMS_MAX)
+
+
+def on_host(leaves: list) -> list:
+    """A model's arrays ``leaves`` on :func:`host_device`: those already there as they are, the
+    others put there once per model (its last :data:`PROGRAMS_MAX` kept, by the arrays'
+    identity). On a GPU machine a numpy projection computes on the host with a model made on
+    the GPU: without this every call would copy its arrays back from the GPU first."""
+    host = host_device()
+    placed = [not isinstance(x, jax.Array) or x.devices() == {host} for x in leaves]
+    if all(placed):
+        return leaves
+    key = tuple(map(id, leaves))
+    hit = _ON_HOST.get(key)
+    if hit is not None and all(a is b for a, b in zip(hit[0], leaves, strict=True)):
+        return hit[1]
+    moved = [x if ok else jax.device_put(x, host) for x, ok in zip(leaves, placed, strict=True)]
+    _ON_HOST.put(key, (list(leaves), moved))  # holds the originals: their ids stay theirs
+    return moved
 
 
 @functools.partial(jax.jit, static_argnums=(0, 1, 4))

@@ -98,3 +98,56 @@ def test_recent_keeps_the_last_used_keys():
     recent.put("c", 3)
     assert recent.get("b") is None and recent.get("a") == 1 and recent.get("c") == 3
     assert len(recent) == 2
+
+
+def test_on_host_leaves_host_arrays_as_they_are():
+    leaves = [jnp.arange(3.0), 2.0, np.ones(2)]
+    assert host.on_host(leaves) is leaves
+
+
+# a model made on another device (a GPU's part played by a second CPU device): its arrays are put
+# on the host device once, and its numpy projection has the numbers of the model made there
+ELSEWHERE = """
+import json, jax, numpy as np
+import jaxgeo
+from jaxgeo.io import read_rpc
+from jaxgeo.models import _host
+from jaxgeo.simulate import demo_dir
+
+cpu0, cpu1 = jax.devices()
+with jax.default_device(cpu1):
+    far = read_rpc(demo_dir() / "fore.txt")
+near = read_rpc(demo_dir() / "fore.txt")
+leaves = jax.tree.leaves(far)
+moved = _host.on_host(leaves)
+ground = np.asarray(near.ground_offset) + np.linspace(-0.5, 0.5, 30).reshape(10, 3) * np.asarray(
+    near.ground_scale)
+print(json.dumps({
+    "far": sorted({str(d) for x in leaves for d in x.devices()}),
+    "moved": sorted({str(d) for x in moved for d in x.devices()}),
+    "again": _host.on_host(leaves) is moved,
+    "new_list_hits": _host.on_host(list(leaves)) is moved,
+    "equal": all(np.array_equal(a, b) for a, b in zip(leaves, moved)),
+    "projection": float(np.abs(jax.tree.unflatten(jax.tree.structure(far), moved).project(ground)
+                              - near.project(ground)).max()),
+}))
+"""
+
+
+def test_on_host_puts_a_model_from_another_device_there_once():
+    import json
+    import os
+    import pathlib
+    import subprocess
+    import sys
+
+    env = {k: v for k, v in os.environ.items() if k != "JAX_NUM_CPU_DEVICES"}
+    repo = str(pathlib.Path(__file__).resolve().parents[2])
+    env.update(JAXGEO_CPU_DEVICES="2", JAX_PLATFORMS="cpu", PYTHONPATH=repo)
+    run = subprocess.run([sys.executable, "-c", ELSEWHERE], capture_output=True, text=True,
+                         env=env, timeout=300)  # fmt: skip
+    assert run.returncode == 0, run.stderr[-3000:]
+    out = json.loads(run.stdout.strip().splitlines()[-1])
+    assert out["far"] == ["cpu:1"] and out["moved"] == ["cpu:0"]
+    assert out["again"] and out["new_list_hits"]  # cached by the arrays, not by their list
+    assert out["equal"] and out["projection"] == 0.0
