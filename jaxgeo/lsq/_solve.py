@@ -105,11 +105,28 @@ def unit_scales(problem: Problem) -> tuple[Float[Array, "b p"], ...]:
     return tuple(jnp.ones_like(g.theta0) for g in problem.groups)
 
 
+_traced_once = eqx.filter_jit(jacobians)
+""":func:`~._residuals.jacobians` as one nested program: a solve linearises in its iterations,
+at its solution and for its scales, and a nested ``jit`` is traced and lowered once for the
+same argument types (jax caches its jaxpr): the demo's robust solve traced and lowered in
+1.6-1.7 s instead of 1.9-2.8 s (three paired runs, a loaded 2-core CPU; XLA compiles the
+inlined program in the same time as before)."""
+
+
+def linearised(problem: Problem, scales, y, loss: str = "l2", loss_scale: float = 3.0) -> Jacobians:
+    """:func:`~._residuals.jacobians`, traced once per argument types (:data:`_traced_once`);
+    the ground frames computed first where ``problem`` has none (as :func:`solve_setup` does):
+    the iterations' problem and the solution's then have the same type."""
+    if problem.ground.frame is None:
+        problem = with_frames(problem)
+    return _traced_once(problem, scales, y, loss, loss_scale)
+
+
 def blocks_at(
     problem: Problem, scales, y, loss: str = "l2", loss_scale: float = 3.0
 ) -> tuple[Jacobians, NormalBlocks]:
     """The Jacobian and normal-equation blocks at ``y``."""
-    jac = jacobians(problem, scales, y, loss, loss_scale)
+    jac = linearised(problem, scales, y, loss, loss_scale)
     return jac, normal_blocks(jac, problem.structure)
 
 
@@ -296,7 +313,7 @@ def solve_setup(
 
 def _jacobians(y, args) -> Jacobians:
     problem, scales, loss, c = args
-    return jacobians(problem, scales, y, loss, c)
+    return linearised(problem, scales, y, loss, c)
 
 
 def solve_finish(
