@@ -42,7 +42,7 @@ from ._level2 import Level2Data, level2_input
 from ._report import GrossErrors, line_offset_message, strip_report
 from ._result import StripResult
 from ._snooping import seam_offsets, snoop_level2, suspect_offsets
-from ._solve import en_error_m, evaluate_jit, localize_in, tie_gap
+from ._solve import en_error_m, evaluate_jit, localize_together
 from ._universal import N_TERMS, UniversallyCorrected, check_design
 
 N_BIAS_GCPS = {name: kind().n_params // 2 for name, kind in BIAS_KINDS.items()}
@@ -231,9 +231,12 @@ def evaluate_models(result: StripResult, models: Mapping[str, Any]) -> dict[str,
 
 @eqx.filter_jit
 def _evaluate_blocks(blocks, d: Level2Data):
-    h = d.check_lonlath[:, 2]
-    check = en_error_m(localize_in(blocks, d.check_scene, d.check_xy, h), d.check_lonlath)
-    return check, tie_gap(blocks, d)
+    chk, t0, t1 = localize_together(
+        (blocks,),
+        [(0, d.check_scene, d.check_xy, d.check_lonlath[:, 2])]
+        + [(0, d.tie_scene[:, i], d.tie_xy[:, i], d.tie_h) for i in (0, 1)],
+    )
+    return en_error_m(chk, d.check_lonlath), en_error_m(t1, t0)
 
 
 def adjust_individually(
