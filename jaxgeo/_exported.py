@@ -84,12 +84,17 @@ QUICK_COMPILE = {
     "xla_backend_optimization_level": 0,
     "xla_llvm_disable_expensive_passes": True,
     "xla_cpu_use_fusion_emitters": False,
+    "xla_cpu_parallel_codegen_split_count": 1,
 }
 """XLA options (``jax.jit(compiler_options=...)``) of small programs: LLVM without its expensive
-optimisations and XLA's legacy CPU emitters. ``jaxgeo demo`` cold: 32.5 -> 19.3 s of CPU time
-(2-core AVX-512 CPU, same output); an elementwise 1e6-point kernel runs 10 % slower with them,
-which is why large programs keep XLA's defaults. The test suite sets the same flags for every
-program (tests/conftest.py). jaxlib 0.11 has no fusion-emitter option (XLA refuses an option it
+optimisations, XLA's legacy CPU emitters, and LLVM's code generation in one piece (not split
+over threads). ``jaxgeo demo`` cold: 32.5 -> 19.3 s of CPU time (2-core AVX-512 CPU, same
+output); in one piece, the demo's solve and intersection compile with 5-10 % less CPU time
+(2.61 -> 2.37 s and 0.97 -> 0.89 s, best of 5; the split's threads compete with the
+demo's other thread on 2 cores). An elementwise 1e6-point kernel runs 10 % slower with these
+options, which is why large programs keep XLA's defaults. The test suite sets the first three
+for every program (tests/conftest.py; the fourth changed its run time by -8 and +3 % in two
+pairs of runs). jaxlib 0.11 has no fusion-emitter option (XLA refuses an option it
 does not know): there it is left out."""
 with contextlib.suppress(importlib.metadata.PackageNotFoundError, ValueError):
     if tuple(int(v) for v in importlib.metadata.version("jaxlib").split(".")[:2]) >= (0, 11):

@@ -84,12 +84,29 @@ def _initial(origin, mpu, p0, jac_m, xy, w):
 
 def _residual_fn(models):
     def fn(u, args):
-        origin, mpu, xy, w = args
-        ground = origin + u / mpu
-        pred = jnp.stack([m.project(ground) for m in models])
-        return ((pred - xy) * w[:, None]).reshape(-1)
+        return _residuals_and_predictions(models, u, args)[0]
 
     return fn
+
+
+def _residuals_and_predictions(models, u, args):
+    """Weighted residuals ``(2N,)`` at ``u`` (ENU metres from ``origin``) and the projections
+    ``(N, 2)`` px they come from."""
+    origin, mpu, xy, w = args
+    ground = origin + u / mpu
+    pred = jnp.stack([m.project(ground) for m in models])
+    return ((pred - xy) * w[:, None]).reshape(-1), pred
+
+
+def _linearised(models, u, args):
+    """``(J, (r, pred))``: the Jacobian ``(2N, 3)`` of the weighted residuals at ``u`` with the
+    residuals and projections of the same evaluation (forward mode)."""
+
+    def fn(v):
+        r, pred = _residuals_and_predictions(models, v, args)
+        return r, (r, pred)
+
+    return jax.jacfwd(fn, has_aux=True)(u)
 
 
 def _gradient(u, args):
@@ -105,7 +122,7 @@ def _gauss_newton(u, args):
     derivatives only (the exact Hessian of :func:`_gradient`, second derivatives of every
     model, is left to the implicit derivative; the compiled intersection is ~2x smaller)."""
     models, rest = args
-    jac, r = jax.jacfwd(lambda v: (_residual_fn(models)(v, rest),) * 2, has_aux=True)(u)
+    jac, (r, _) = _linearised(models, u, rest)
     return jac.T @ r, jac.T @ jac
 
 
@@ -117,7 +134,6 @@ def _weights(xy, sigma, mask):
 
 
 def _intersect_flat(models, xy, sigma, mask, max_steps, batch):
-    fn = _residual_fn(models)
     lin = _linear_terms(models)
     xy, weight, valid = _weights(xy, sigma, mask)
 
@@ -142,12 +158,12 @@ def _intersect_flat(models, xy, sigma, mask, max_steps, batch):
         )
         u = sol.value
         ground = g0 + u / mpu
-        jac = jax.jacfwd(fn)(u, args)
+        # one linearisation at the solution: the Jacobian, the residuals and the projections
+        # (each model traced and compiled once here, not three times)
+        jac, (r, pred) = _linearised(models, u, args)
         cov = inv3_spd(jac.T @ jac)
-        r = fn(u, args)
         dof = 2 * n - 3
         s0 = jnp.where(dof > 0, jnp.sqrt(jnp.sum(r**2) / jnp.maximum(dof, 1)), jnp.nan)
-        pred = jnp.stack([m.project(ground) for m in models])
         res = jnp.where(ok_i[:, None], pred - xy_i, jnp.nan)
         ok = sol.converged & enough & jnp.all(jnp.isfinite(ground))
         nan = jnp.full(3, jnp.nan)
