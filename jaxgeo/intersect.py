@@ -41,7 +41,8 @@ class IntersectResult(eqx.Module):
         ground: ``(*batch, 3)`` ``(lon_deg, lat_deg, h_m)``; NaN where fewer than 2 rays.
         cov_enu: ``(*batch, 3, 3)`` covariance in local east/north/up metres from the a priori
             image sigmas (multiply by ``s0**2`` for the a posteriori one).
-        residuals_px: ``(*batch, N, 2)`` ``project(ground) - image`` per image; NaN if missing.
+        residuals_px: ``(*batch, N, 2)`` ``project(ground) - image`` per image; NaN for a ray
+            missing or left out, and for every ray of a point with fewer than 2 rays.
         s0: ``(*batch,)`` a posteriori sigma of unit weight, ``sqrt(sum r^2 / (2 n - 3))``
             (with two rays a one-degree-of-freedom estimate).
         n_rays: ``(*batch,)`` number of rays used.
@@ -164,7 +165,9 @@ def _intersect_flat(models, xy, sigma, mask, max_steps, batch):
         cov = inv3_spd(jac.T @ jac)
         dof = 2 * n - 3
         s0 = jnp.where(dof > 0, jnp.sqrt(jnp.sum(r**2) / jnp.maximum(dof, 1)), jnp.nan)
-        res = jnp.where(ok_i[:, None], pred - xy_i, jnp.nan)
+        # residuals of the rays used, and only where there is a ground point (fewer than two
+        # rays: NaN, not the one ray's offset from wherever the iteration was left)
+        res = jnp.where((ok_i & enough)[:, None], pred - xy_i, jnp.nan)
         ok = sol.converged & enough & jnp.all(jnp.isfinite(ground))
         nan = jnp.full(3, jnp.nan)
         return (

@@ -78,6 +78,10 @@ def test_missing_rays_and_three_images(pair):
     assert np.all(np.isnan(np.asarray(res.ground)[3]))
     assert np.asarray(res.n_rays).tolist() == [3, 2, 2, 1, 3]
     assert np.isnan(np.asarray(res.residuals_px)[1, 2]).all()
+    # a point without a ground point has no residuals either (its one ray's was computed at
+    # the scene's centre: thousands of pixels, reported as if measured)
+    assert np.isnan(np.asarray(res.residuals_px)[3]).all()
+    assert np.isfinite(np.asarray(res.residuals_px)[[0, 4]]).all()
 
 
 def test_intersection_is_differentiable(pair):
