@@ -42,7 +42,9 @@ def test_banded_level1_equals_dense(dense, extra):
     sigma_p = np.sqrt(np.diagonal(np.asarray(want.q_points), axis1=1, axis2=2))  # ENU m
     moved = (np.asarray(got.ground) - np.asarray(want.ground)) * problem.metres_per_unit
     assert np.max(np.abs(moved) / sigma_p) < 1e-6
-    np.testing.assert_allclose(got.s0, want.s0, rtol=1e-9)
+    # s0 to 1e-8: the robust weights move with the unknowns (equal to 1e-6 sigma above), and s0
+    # with them (an H200: 1.3e-9 apart)
+    np.testing.assert_allclose(got.s0, want.s0, rtol=1e-8)
     np.testing.assert_allclose(got.redundancy_image, want.redundancy_image, atol=1e-9)
     # cofactors compared as correlations (entries over sqrt(q_ii q_jj) of the dense solve)
     d = np.sqrt(np.diagonal(np.asarray(want.q_points), axis1=1, axis2=2))
