@@ -33,6 +33,7 @@ import jax.numpy as jnp
 import numpy as np
 import optimistix as optx
 
+from .._shard import shard_map
 from ._config import DEFAULT_SOLVER, SolverConfig
 from ._factor import UNROLL_MAX
 from ._ground import with_frames
@@ -150,8 +151,7 @@ def _solve_stacked(stacked: Problem, solver: SolverConfig, chunk: int, mesh) -> 
     if mesh is None:
         return run(dyn)
     spec = jax.sharding.PartitionSpec("problems")
-    # check_vma off: optimistix linearises inside, which the varying-axis types reject
-    return jax.shard_map(run, mesh=mesh, in_specs=spec, out_specs=spec, check_vma=False)(dyn)
+    return shard_map(run, mesh, in_specs=spec, out_specs=spec)(dyn)
 
 
 def _mesh(devices: int):

@@ -19,6 +19,7 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
+from .._shard import shard_map
 from ._result import StripResult
 from ._solve import Evaluation, TwoLevelSolution, degree_index, two_level_batch, two_level_jit
 
@@ -104,7 +105,4 @@ def _sharded(problem, data, batch, degree, solver, mesh):
         p, d, g = eqx.combine(fixed, static)
         return two_level_batch(p, d, xy, gcp_xy, check_xy, g, solver)
 
-    # check_vma off: the solver linearises inside, which the varying-axis types reject
-    return jax.shard_map(
-        run, mesh=mesh, in_specs=(whole, spec, spec, spec), out_specs=spec, check_vma=False
-    )(fixed, *batch)
+    return shard_map(run, mesh, in_specs=(whole, spec, spec, spec), out_specs=spec)(fixed, *batch)
