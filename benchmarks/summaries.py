@@ -389,6 +389,7 @@ DEVICE_CASES = (
     "device_columns_div",
     "copy",
     "numpy",
+    "numpy_host_model",
     "numpy_whole",
     "numpy_pinned",
     "localize_device",
