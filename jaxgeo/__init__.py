@@ -16,7 +16,10 @@ from ._jaxconfig import configure as _configure_jax
 # (environment variables jax reads when it starts; jax.config if it already has)
 _configure_jax()
 
-__version__ = importlib.metadata.version("jaxgeo")
+try:
+    __version__ = importlib.metadata.version("jaxgeo")
+except importlib.metadata.PackageNotFoundError:  # a source tree on sys.path, not installed
+    __version__ = "unknown (not installed)"
 
 _EXPORTS = {
     "jaxgeo.bundle": ("AccuracyReport", "AdjustResult", "adjust"),

@@ -33,14 +33,10 @@ class CommandError(JaxgeoError):
 
 
 def version() -> str:
-    """jaxgeo's version, from the installed package's metadata."""
-    from importlib.metadata import PackageNotFoundError
-    from importlib.metadata import version as _version
+    """jaxgeo's version, from the installed package's metadata (``jaxgeo.__version__``)."""
+    from .. import __version__
 
-    try:
-        return _version("jaxgeo")
-    except PackageNotFoundError:  # pragma: no cover - running from a source tree
-        return "unknown (not installed)"
+    return __version__
 
 
 def build_parser(command: str | None = None) -> argparse.ArgumentParser:

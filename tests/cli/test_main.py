@@ -48,3 +48,24 @@ def test_subcommand_help_names_its_options(capsys):
         main(["strip", "--help"])
     out = capsys.readouterr().out
     assert "--ties-per-pair" in out and "shift-drift" in out and "--degree" in out
+
+
+UNINSTALLED = """
+import importlib.metadata as md
+real = md.version
+def version(name):  # a source tree on sys.path: no jaxgeo metadata
+    if name == "jaxgeo":
+        raise md.PackageNotFoundError(name)
+    return real(name)
+md.version = version
+import jaxgeo
+from jaxgeo.cli import main
+print(jaxgeo.__version__)
+main(["--version"])
+"""
+
+
+def test_a_source_tree_without_metadata_imports_and_says_so():
+    run = subprocess.run([sys.executable, "-c", UNINSTALLED], capture_output=True, text=True)
+    assert run.returncode == 0, run.stderr[-2000:]
+    assert run.stdout.splitlines() == ["unknown (not installed)", "jaxgeo unknown (not installed)"]
