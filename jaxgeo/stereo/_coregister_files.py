@@ -134,7 +134,10 @@ def _stable_mask(mask_path, dsm, shape, transform) -> np.ndarray:
 
             values = m.read(1, out_shape=shape, masked=True, resampling=Resampling.nearest)
             return np.ma.filled(values != 0, False)
-        values = _warp_onto(m, shape, transform, dsm.crs, "nearest", 0.0, np.float32)
+        # no data and outside: NaN, not 0. A GDAL that warps onto a destination no-data value
+        # moves valid source values equal to it off it (rasterio 1.5.2's GDAL: every 0 of the
+        # mask became 1e-45, non-zero, and the whole DSM counted as stable)
+        values = _warp_onto(m, shape, transform, dsm.crs, "nearest", np.nan, np.float32)
         return np.isfinite(values) & (values != 0)
 
 
