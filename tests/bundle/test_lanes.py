@@ -45,10 +45,11 @@ def test_queue_gives_each_problem_its_own_solution(batch, loss):
         if not bool(want.result == RESULTS.successful):
             continue
         np.testing.assert_allclose(got.theta[0][k], want.theta[0], rtol=1e-9, atol=1e-10)
-        # lon, lat (deg) to 1e-12 relative (~5e-6 m); heights to 1 nm: the batched and the single
-        # program round differently (one CI run: 0.66 nm apart on a 459 m height)
+        # lon, lat (deg) to 1e-12 relative (~5e-6 m); heights to 10 nm: the batched and the single
+        # program round differently (one CI run: 0.66 nm apart on a 459 m height; jaxlib 0.11.2
+        # on a CPU: 1.46 nm on 1097 m, 1.3e-12 of it)
         np.testing.assert_allclose(got.ground[k][:, :2], want.ground[:, :2], rtol=1e-12)
-        np.testing.assert_allclose(got.ground[k][:, 2], want.ground[:, 2], rtol=0, atol=1e-9)
+        np.testing.assert_allclose(got.ground[k][:, 2], want.ground[:, 2], rtol=0, atol=1e-8)
         np.testing.assert_allclose(got.weight_image[k], want.weight_image, atol=1e-9)
         np.testing.assert_allclose(got.s0[k], want.s0, rtol=1e-9)
     codes = np.asarray(got.result._value)

@@ -45,5 +45,7 @@ def test_solve_batch_over_two_cpu_devices_equals_one():
 def test_monte_carlo_strips_over_two_cpu_devices_equal_one():
     out = _run("strip")
     assert out["devices"] == 2 and out["runs"] == 3 and out["successful"] == 3
-    assert out["theta"] <= 1e-9 and out["evaluation"] <= 1e-6
+    # theta (px, px/px) to 1e-8: the sharded and the single-device programs round differently
+    # (jaxlib 0.11.2 with the suite's XLA flags: 1.1e-9 apart; 0.10.2: below 1e-9)
+    assert out["theta"] <= 1e-8 and out["evaluation"] <= 1e-6
     assert out["runs_differ"] > 1e-6  # the draws differ: not one run copied three times
