@@ -39,7 +39,8 @@ def shard_map(run: Callable, mesh, in_specs: Any, out_specs: Any) -> Callable:
     ``in_specs``: a prefix of the arguments' tuple, as ``jax.shard_map`` takes it."""
 
     def mapped(*args):
-        specs = in_specs if isinstance(in_specs, tuple) else (in_specs,) * len(args)
+        bare = isinstance(in_specs, PartitionSpec) or in_specs is None
+        specs = (in_specs,) * len(args) if bare else tuple(in_specs)
         # one spec per array: a spec applies to every array under its argument
         per_leaf = jax.tree.map(
             lambda spec, arg: jax.tree.map(lambda _: spec, arg),
