@@ -3,8 +3,9 @@
 jaxlib 0.11.2 (the jaxlib of Python >= 3.12) kills the process (a segmentation fault in Shardy's
 ``ManualComputationUnusedInputsPattern``, while XLA compiles) when a ``shard_map`` takes a
 zero-size array that its body uses: ``jnp.ones((4, 0))`` summed inside is enough, replicated or
-sharded; jaxlib 0.10.2 compiles it. A strip's problem has such arrays (a group's zero-column
-parameters), so the Monte-Carlo batch over several CPU devices crashed there. A zero-size array
+sharded; jaxlib 0.10.2 compiles it. A problem whose model group has no prior rows has such
+arrays (its prior means and weights, ``(images, 0)``): the strip's Monte-Carlo batch over several
+CPU devices crashed there. A zero-size array
 holds no values: :func:`shard_map` passes the others and makes the empty ones again inside, of
 the same per-device shape and dtype.
 """
