@@ -14,13 +14,21 @@ from __future__ import annotations
 import math
 import os
 import pathlib
+import warnings
 from collections.abc import Callable
 from dataclasses import replace
 
 import numpy as np
 
 from ..io import atomic_output, refuse_existing
-from ._coregister import Coregistration, CoregistrationError, NuthKaab, nuth_kaab, shift_heights
+from ._coregister import (
+    Coregistration,
+    CoregistrationError,
+    CoregistrationWarning,
+    NuthKaab,
+    nuth_kaab,
+    shift_heights,
+)
 
 MAX_CELLS = 8_000_000
 """Cells of the grid the shift is estimated on (more: the DSM grid decimated by a step)."""
@@ -132,13 +140,24 @@ def _stable_mask(mask_path, dsm, shape, transform) -> np.ndarray:
                 )
             from rasterio.enums import Resampling
 
-            values = m.read(1, out_shape=shape, masked=True, resampling=Resampling.nearest)
-            return np.ma.filled(values != 0, False)
-        # no data and outside: NaN, not 0. A GDAL that warps onto a destination no-data value
-        # moves valid source values equal to it off it (rasterio 1.5.2's GDAL: every 0 of the
-        # mask became 1e-45, non-zero, and the whole DSM counted as stable)
-        values = _warp_onto(m, shape, transform, dsm.crs, "nearest", np.nan, np.float32)
-        return np.isfinite(values) & (values != 0)
+            read = m.read(1, out_shape=shape, masked=True, resampling=Resampling.nearest)
+            values = np.ma.filled(read.astype(np.float64), np.nan)
+        else:
+            # no data and outside: NaN, not 0. A GDAL that warps onto a destination no-data
+            # value moves valid source values equal to it off it (rasterio 1.5.2's GDAL: every
+            # 0 of the mask became 1e-45, non-zero, and the whole DSM counted as stable)
+            values = _warp_onto(m, shape, transform, dsm.crs, "nearest", np.nan, np.float32)
+    stable = np.isfinite(values) & (values != 0)
+    distinct = np.unique(values[np.isfinite(values)])
+    if distinct.size > 2:  # a DEM or an image given as the mask: every cell would count
+        warnings.warn(
+            f"{mask_path}: the stable-terrain mask has {distinct.size} distinct values "
+            f"({distinct[0]:g} to {distinct[-1]:g}), not a mask's 0 / non-zero: every non-zero "
+            f"cell counts as stable ({stable.mean():.0%} of the DSM's cells)",
+            CoregistrationWarning,
+            stacklevel=2,
+        )
+    return stable
 
 
 def _read_rows(ds, start: int, stop: int, nodata) -> np.ndarray:

@@ -12,6 +12,7 @@ from affine import Affine
 
 from jaxgeo.stereo import (
     CoregistrationError,
+    CoregistrationWarning,
     NuthKaab,
     coregister,
     dh_stats,
@@ -255,3 +256,16 @@ def test_real_s2p_dsm_georeferencing_shift_recovered(shared_data, tmp_path):
     error = np.subtract(result.shift_m, (-1.3, 0.7, -0.6))
     print("s2p", result.shift_m, "error", error, result.before, result.after)
     assert np.all(np.abs(error) < 0.3), error
+
+
+def test_a_dem_given_as_the_mask_is_named(tmp_path):
+    """A mask is 0 / non-zero: a raster of heights given for it (every cell non-zero, the whole
+    DSM "stable") gets a warning naming the file, not a silent unmasked fit."""
+    rng = np.random.default_rng(4)
+    e, n = grid_centres()
+    ref = terrain(e, n) + rng.normal(0, 0.15, e.shape)
+    dsm = terrain(e - SHIFT[0], n - SHIFT[1]) + SHIFT[2] + rng.normal(0, 0.15, e.shape)
+    write_raster(tmp_path / "dsm.tif", dsm)
+    write_raster(tmp_path / "ref.tif", ref)
+    with pytest.warns(CoregistrationWarning, match=r"ref\.tif: the stable-terrain mask has \d+"):
+        coregister(tmp_path / "dsm.tif", tmp_path / "ref.tif", mask=tmp_path / "ref.tif")
