@@ -55,7 +55,7 @@ def _tiles(rows, cols, tile_px):
 
 def _detect(sift, tile8, core, offset, tile_px):
     kps, desc = sift.detectAndCompute(np.ascontiguousarray(tile8), None)
-    if desc is None:
+    if desc is None or len(kps) == 0:  # OpenCV 4: None; OpenCV >= 5: a (0, 128) array
         return np.zeros((0, 2)), np.zeros((0, 128), np.float32)
     # OpenCV keypoints are in pixel-centre-at-0 coordinates like jaxgeo's
     xy = np.array([k.pt for k in kps], dtype=float) + offset
