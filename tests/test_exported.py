@@ -202,28 +202,43 @@ def test_large_solve_options_jaxlib_does_not_know_are_left_out(cache, monkeypatc
     np.testing.assert_allclose(out.value, np.sin(x) * 2.0, rtol=1e-15)
 
 
-def test_owned_process_drops_jax_caches_after_a_large_compile(cache, monkeypatch):
-    """Where jaxgeo owns the process (the command line), compiling a large program clears jax's
-    tracing and lowering caches (which kept its jaxpr and lowering: 46-53 MB for the 200 000-
-    observation pair); a library caller's caches are kept; the program runs alike."""
+def test_owned_process_drops_jax_caches_before_and_after_a_large_compile(cache, monkeypatch):
+    """Where jaxgeo owns the process (the command line), a large program's lowering clears jax's
+    tracing and lowering caches before XLA compiles it, and its compilation clears them again
+    (they kept its jaxpr and lowering: 46-53 MB for the 200 000-observation pair); a library
+    caller's caches are kept; the program runs alike."""
     monkeypatch.setattr(_exported, "MAX_ELEMENTS", 2)
     monkeypatch.setattr(_exported, "_compiled", {})
     x = np.linspace(0.0, 3.0, 5)
     other = jax.jit(jnp.cos)
+    drops = []
+    real_drop = _exported._drop_traces
+
+    def spy():
+        drops.append(len(_exported._compiled))  # programs compiled when the caches go
+        real_drop()
+        drops.append(other._cache_size())
+
+    monkeypatch.setattr(_exported, "_drop_traces", spy)
     other(x)  # a caller's own jitted function, compiled before the large program
     assert other._cache_size() == 1
     out = _exported.call(fn, x, 2.0, label="library")
-    assert other._cache_size() == 1  # not owned: left alone
+    assert other._cache_size() == 1 and drops == []  # not owned: left alone
     previous = _exported.own_process()
     try:
         owned = _exported.call(fn, x[:4], 2.0, label="owned")
-        assert other._cache_size() == 0  # cleared after compiling
+        assert drops == [1, 0]  # dropped before it was compiled (the library one was)
+        other(x)
+        assert other._cache_size() == 1
         again = _exported.call(fn, x[:4], 2.0, label="owned")  # the held executable runs
+        assert other._cache_size() == 1 and drops == [1, 0]  # compiled once, dropped once
+        owned = _exported.call(fn, x[:3], 2.0, label="owned")  # another shape
+        assert other._cache_size() == 0 and drops == [1, 0, 2, 0]
     finally:
         assert _exported.own_process(previous) is True
-    np.testing.assert_array_equal(owned.value, out.value[:4])
-    np.testing.assert_array_equal(again.value, owned.value)
-    assert TRACES == ["library", "owned"]
+    np.testing.assert_array_equal(again.value, out.value[:4])
+    np.testing.assert_array_equal(owned.value, out.value[:3])
+    assert TRACES == ["library", "owned", "owned"]
 
 
 def test_command_line_owns_the_process_only_while_it_runs(monkeypatch):

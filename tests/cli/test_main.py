@@ -69,3 +69,25 @@ def test_a_source_tree_without_metadata_imports_and_says_so():
     run = subprocess.run([sys.executable, "-c", UNINSTALLED], capture_output=True, text=True)
     assert run.returncode == 0, run.stderr[-2000:]
     assert run.stdout.splitlines() == ["unknown (not installed)", "jaxgeo unknown (not installed)"]
+
+
+def test_entry_exits_with_the_status_the_collector_tuned_and_objects_frozen(monkeypatch):
+    """``jaxgeo`` (:func:`jaxgeo.cli.entry`): exits with the command's status; the command ran
+    under ``GC_THRESHOLD`` and its objects are frozen before the interpreter's teardown."""
+    import gc
+
+    import jaxgeo.cli as cli
+
+    seen = []
+    monkeypatch.setattr(
+        cli, "_main", lambda argv, restore_handlers: seen.append(gc.get_threshold()) or 3
+    )
+    before = gc.get_threshold()
+    try:
+        with pytest.raises(SystemExit) as exc:
+            cli.entry()
+        assert exc.value.code == 3 and seen == [cli.GC_THRESHOLD]
+        assert gc.get_freeze_count() > 0
+    finally:
+        gc.unfreeze()
+        gc.set_threshold(*before)
