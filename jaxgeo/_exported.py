@@ -16,9 +16,9 @@ environment variables that change a trace, the backend, the input structure with
 exported this way (an unpicklable static value, a host callback in the program) falls back to
 ``eqx.filter_jit`` -- slower, never different.
 Results are those of the jitted function (the same StableHLO; tested bit for bit), compiled
-with the same XLA options; small programs get quicker ones (:data:`QUICK_COMPILE`), whose
-roundings may differ from XLA's defaults in the last bits (a solve then stops within its
-tolerance of the same point).
+with the same XLA options; small programs get quicker ones (:data:`QUICK_COMPILE`), other
+solves leaner ones (:data:`SOLVE_COMPILE`), whose roundings may differ from XLA's defaults in
+the last bits (a solve then stops within its tolerance of the same point).
 
 Off with the compilation cache (``JAXGEO_CACHE_DIR=off``), inside transformations (tracers in
 the inputs) and for inputs over ``MAX_ELEMENTS``: then :func:`call` is ``eqx.filter_jit(fn)``.
@@ -29,8 +29,8 @@ the allocator's arenas (the 200 000-observation pair: 810 -> 530 MB), and the ca
 between two runs tens (26 MB before a re-solve of that pair), on top of which the run would
 allocate its working memory.
 Where jaxgeo owns the process (the command line, :func:`own_process`), jax's own caches are
-cleared once a large program is compiled: they held its jaxpr and MLIR lowering (46-53 MB for
-that pair) through every run.
+cleared before and after a large program is compiled: they held its jaxpr and MLIR lowering
+(46-53 MB for that pair) through its compilation and every run.
 Files are written atomically; at most ``MAX_ENTRIES`` are kept (least recently used first out).
 """
 
@@ -93,23 +93,30 @@ over threads). ``jaxgeo demo`` cold: 32.5 -> 19.3 s of CPU time (2-core AVX-512 
 output); in one piece, the demo's solve and intersection compile with 5-10 % less CPU time
 (2.61 -> 2.37 s and 0.97 -> 0.89 s, best of 5; the split's threads compete with the
 demo's other thread on 2 cores). An elementwise 1e6-point kernel runs 10 % slower with these
-options, which is why large programs keep XLA's defaults. The test suite sets the first three
-for every program (tests/conftest.py; the fourth changed its run time by -8 and +3 % in two
-pairs of runs). jaxlib 0.11 has no fusion-emitter option (XLA refuses an option it
-does not know): there it is left out."""
+options, which is why large programs keep XLA's defaults (solves: :data:`SOLVE_COMPILE`). The
+test suite sets the first three for every program (tests/conftest.py; the fourth changed its
+run time by -8 and +3 % in two pairs of runs). jaxlib 0.11 has no fusion-emitter option
+(XLA refuses an option it does not know): there it is left out."""
 with contextlib.suppress(importlib.metadata.PackageNotFoundError, ValueError):
     if tuple(int(v) for v in importlib.metadata.version("jaxlib").split(".")[:2]) >= (0, 11):
         del QUICK_COMPILE["xla_cpu_use_fusion_emitters"]
-LARGE_SOLVE_COMPILE = {
+SOLVE_COMPILE = {
     "xla_cpu_use_fusion_emitters": False,
     "xla_cpu_scheduler_type": "CPU_SCHEDULER_TYPE_MEMORY_OPTIMIZED",
 }
-"""XLA options of a large solve (inputs over :data:`MAX_ELEMENTS`, compiled apart;
-:func:`call_large_solve`): XLA's legacy CPU emitters and its memory-optimising scheduler. The
-200 000-observation pair's solve: compiling it with the legacy emitters took the process from
-473 to 550 MB instead of 814 (7.1 s instead of 8.2); the scheduler brings the run's working
-memory from 161 to 138 MB; the run takes as long (2.1 s, 2-core Intel Xeon). Options the jaxlib
-does not know (jaxlib 0.11 has no fusion-emitter option) are left out."""
+"""XLA options of a solve (:func:`call_solve`) too large for :data:`QUICK_COMPILE`, exported
+or compiled apart: XLA's legacy CPU emitters and its memory-optimising scheduler; the run takes
+as long as with XLA's defaults. The 200 000-observation pair's solve (compiled apart):
+compiling it with the legacy emitters took the process from 473 to 550 MB instead of 814 (7.1 s
+instead of 8.2); the scheduler brings the run's working memory from 161 to 138 MB; the run
+takes as long (2.1 s, 2-core Intel Xeon). A 10 000-tie pair (exported; ``jaxgeo adjust``, 2-core
+AMD EPYC, jaxlib 0.10.2): cold 18.1 -> 15.5 s, peak 754 -> 546 MB, warm 4.44 -> 4.41 s; the
+80-scene strip (``jaxgeo strip``): cold 19.7 -> 16.8 s, peak 842 -> 538 MB, warm 4.9 -> 4.3
+s. Options the jaxlib does not know are left out (jaxlib 0.11 has no fusion-emitter
+option)."""
+with contextlib.suppress(importlib.metadata.PackageNotFoundError, ValueError):
+    if tuple(int(v) for v in importlib.metadata.version("jaxlib").split(".")[:2]) >= (0, 11):
+        del SOLVE_COMPILE["xla_cpu_use_fusion_emitters"]
 MAX_ENTRIES = 200
 """Exported programs kept on disk (~0.3 MB each); older ones are removed when more are written."""
 
@@ -140,7 +147,7 @@ def own_process(owns: bool = True) -> bool:
 @contextlib.contextmanager
 def when_solve_traced(callback: Callable[[], None]) -> Iterator[None]:
     """Within this block, in this thread: ``callback()`` is called each time a solve
-    (:func:`call_large_solve`) has been traced, before XLA compiles (or, warm, runs) it. Work
+    (:func:`call_solve`) has been traced, before XLA compiles (or, warm, runs) it. Work
     on another thread started then does not compete with the trace for the GIL; XLA's
     compilation and runs release it (``jaxgeo demo`` cold: the direct georeferencing, traced
     beside the solve's trace, delayed it by ~1 s on 2 cores)."""
@@ -332,15 +339,17 @@ def call(fn: Callable, *args, **kwargs):
     return _call(None, fn, args, kwargs)
 
 
-def call_large_solve(fn: Callable, *args, **kwargs):
-    """:func:`call` of a solve, compiled with :data:`LARGE_SOLVE_COMPILE` when its inputs
-    exceed :data:`MAX_ELEMENTS`."""
-    return _call(LARGE_SOLVE_COMPILE or None, fn, args, kwargs, traced=_solve_traced)
+def call_solve(fn: Callable, *args, **kwargs):
+    """:func:`call` of a solve: compiled with :data:`SOLVE_COMPILE` unless small enough for
+    :data:`QUICK_COMPILE`; ``when_solve_traced``'s callback is called once it is traced."""
+    return _call(SOLVE_COMPILE or None, fn, args, kwargs, traced=_solve_traced)
 
 
-def _call(large: dict | None, fn: Callable, args, kwargs, traced: Callable[[], None] = _nothing):
-    """``traced()`` is called once the program is traced (or found), before it is compiled or
-    run; on the plain-jit fall-backs (which trace, compile and run in one call) before that."""
+def _call(solve: dict | None, fn: Callable, args, kwargs, traced: Callable[[], None] = _nothing):
+    """``solve``: the XLA options of a program too large for :data:`QUICK_COMPILE` (``None``:
+    XLA's defaults). ``traced()`` is called once the program is traced (or found), before it is
+    compiled or run; on the plain-jit fall-backs (which trace, compile and run in one call)
+    before that."""
     dynamic, static = eqx.partition((args, kwargs), eqx.is_array)
     leaves, treedef = jax.tree.flatten(dynamic)
     where = folder()
@@ -348,7 +357,7 @@ def _call(large: dict | None, fn: Callable, args, kwargs, traced: Callable[[], N
         traced()
         return _filter_jit(fn)(*args, **kwargs)
     if _elements(leaves) > MAX_ELEMENTS:
-        return _compiled_call(fn, treedef, static, leaves, args, kwargs, large, traced)
+        return _compiled_call(fn, treedef, static, leaves, args, kwargs, solve, traced)
     program = None if where is None else _program(where, fn, treedef, static, leaves)
     traced()
     if program is None:
@@ -356,10 +365,30 @@ def _call(large: dict | None, fn: Callable, args, kwargs, traced: Callable[[], N
     key, exported, out_def, out_static = program
     runner = _runners.get(key)
     if runner is None:
-        runner = jax.jit(exported.call, compiler_options=compiler_options(leaves, exported))
+        options = dict(compiler_options(leaves, exported) or solve or {})
+        while True:  # compiled at the first call
+            runner = jax.jit(exported.call, compiler_options=options or None)
+            try:
+                out_leaves = runner(*leaves)
+                break
+            except Exception as err:
+                if not _left_out(options, err, fn):
+                    raise
         _runners[key] = runner
-    out_leaves = runner(*leaves)
+    else:
+        out_leaves = runner(*leaves)
     return eqx.combine(jax.tree.unflatten(out_def, out_leaves), out_static)
+
+
+def _left_out(options: dict, err: Exception, fn: Callable) -> bool:
+    """Remove from ``options`` those that ``err`` (a compilation's) names: options this jaxlib
+    does not know. Whether there were any (else ``err`` is another error)."""
+    unknown = [k for k in options if f"'{k}'" in str(err)]
+    if unknown:
+        _log.debug("compiling %s without %s: %s", fn.__qualname__, unknown, err)
+    for k in unknown:
+        del options[k]
+    return bool(unknown)
 
 
 def _compiled_call(
@@ -385,12 +414,8 @@ def _compiled_call(
                 compiled = lowered.compile(compiler_options=options or None)
                 break
             except Exception as err:  # an option this jaxlib does not know: left out
-                unknown = [k for k in options if f"'{k}'" in str(err)]
-                if not unknown:
+                if not _left_out(options, err, fn):
                     raise
-                _log.debug("compiling %s without %s: %s", fn.__qualname__, unknown, err)
-                for k in unknown:
-                    del options[k]
         _compiled[key] = compiled
         if _owns_process:  # the large program's lowering, kept by jax (own_process)
             jax.clear_caches()

@@ -2,6 +2,7 @@
 once per structure across processes, safe fall-backs."""
 
 import json
+import logging
 import os
 import pathlib
 import subprocess
@@ -165,7 +166,7 @@ def test_large_inputs_compiled_apart_once_with_the_heap_released(cache, monkeypa
 
 
 def test_large_solve_compiled_apart_with_its_own_options(cache, monkeypatch):
-    """``call_large_solve``: a large program compiled with ``LARGE_SOLVE_COMPILE`` (XLA's legacy
+    """``call_solve``: a large program compiled with ``SOLVE_COMPILE`` (XLA's legacy
     CPU emitters where jaxlib has them), apart from the same program compiled with XLA's
     defaults; results equal to ``eqx.filter_jit`` to rounding."""
     monkeypatch.setattr(_exported, "MAX_ELEMENTS", 2)
@@ -180,26 +181,43 @@ def test_large_solve_compiled_apart_with_its_own_options(cache, monkeypatch):
     monkeypatch.setattr(_exported, "_compiled_call", spy)
     x = np.linspace(0.0, 3.0, 5)
     want = eqx.filter_jit(fn)(x, 2.0, label="want")
-    out = _exported.call_large_solve(fn, x, 2.0, label="big")
+    out = _exported.call_solve(fn, x, 2.0, label="big")
     np.testing.assert_allclose(out.value, want.value, rtol=1e-15, atol=0)
     _exported.call(fn, x, 2.0, label="big")
-    assert asked == [_exported.LARGE_SOLVE_COMPILE or None, None]
+    assert asked == [_exported.SOLVE_COMPILE or None, None]
     # one program per set of options (one set only where jaxlib has no legacy emitters)
-    assert len(_exported._compiled) == (2 if _exported.LARGE_SOLVE_COMPILE else 1)
+    assert len(_exported._compiled) == (2 if _exported.SOLVE_COMPILE else 1)
     small = np.ones(1)  # at most MAX_ELEMENTS: the exported path, options unused
-    np.testing.assert_allclose(_exported.call_large_solve(fn, small, 2.0).value, np.sin(small) * 2)
+    np.testing.assert_allclose(_exported.call_solve(fn, small, 2.0).value, np.sin(small) * 2)
     assert len(asked) == 2
 
 
-def test_large_solve_options_jaxlib_does_not_know_are_left_out(cache, monkeypatch):
-    monkeypatch.setattr(_exported, "MAX_ELEMENTS", 2)
+@pytest.mark.parametrize("path", ["compiled apart", "exported"])
+def test_solve_options_reach_xla_and_those_jaxlib_does_not_know_are_left_out(
+    cache, monkeypatch, caplog, path
+):
+    """A solve too large for ``QUICK_COMPILE`` is compiled with ``SOLVE_COMPILE`` on both paths
+    (inputs over ``MAX_ELEMENTS``: compiled apart; else exported): an option XLA refuses is
+    left out, once, and logged; the result is right. Another program keeps XLA's defaults."""
+    if path == "compiled apart":
+        monkeypatch.setattr(_exported, "MAX_ELEMENTS", 2)
+    monkeypatch.setattr(_exported, "QUICK_MAX_ELEMENTS", 0)
     monkeypatch.setattr(_exported, "_compiled", {})
+    monkeypatch.setattr(_exported, "_runners", {})
     monkeypatch.setattr(
-        _exported, "LARGE_SOLVE_COMPILE", {**_exported.LARGE_SOLVE_COMPILE, "xla_no_such": True}
+        _exported, "SOLVE_COMPILE", {**_exported.SOLVE_COMPILE, "xla_no_such": True}
     )
     x = np.linspace(0.0, 3.0, 5)
-    out = _exported.call_large_solve(fn, x, 2.0)
+    with caplog.at_level(logging.DEBUG, logger="jaxgeo._exported"):
+        out = _exported.call_solve(fn, x, 2.0)
+        again = _exported.call_solve(fn, x, 2.0)
+        other = _exported.call(fn, x[:4], 2.0)  # not a solve: XLA's defaults
+    left_out = [r for r in caplog.records if "without ['xla_no_such']" in r.getMessage()]
+    assert len(left_out) == 1
     np.testing.assert_allclose(out.value, np.sin(x) * 2.0, rtol=1e-15)
+    np.testing.assert_array_equal(again.value, out.value)
+    np.testing.assert_allclose(other.value, np.sin(x[:4]) * 2.0, rtol=1e-15)
+    assert cache.exists() == (path == "exported")
 
 
 def test_owned_process_drops_jax_caches_before_and_after_a_large_compile(cache, monkeypatch):
@@ -252,7 +270,7 @@ def test_command_line_owns_the_process_only_while_it_runs(monkeypatch):
 
 
 def test_a_solve_announces_its_trace_before_it_is_compiled(cache, monkeypatch):
-    """``when_solve_traced``: called for ``call_large_solve`` (exported or compiled apart,
+    """``when_solve_traced``: called for ``call_solve`` (exported or compiled apart,
     first and later calls), once the program is traced and before XLA compiles it; not for
     ``call``."""
     monkeypatch.setattr(_exported, "_compiled", {})
@@ -265,11 +283,11 @@ def test_a_solve_announces_its_trace_before_it_is_compiled(cache, monkeypatch):
     with _exported.when_solve_traced(announce):
         _exported.call(fn, x, 2.0, label="plain")
         assert seen == []
-        _exported.call_large_solve(fn, x, 3.0, label="solve")
-        _exported.call_large_solve(fn, x, 3.0, label="solve")
+        _exported.call_solve(fn, x, 3.0, label="solve")
+        _exported.call_solve(fn, x, 3.0, label="solve")
         monkeypatch.setattr(_exported, "MAX_ELEMENTS", 2)
-        _exported.call_large_solve(fn, x, 3.0, label="large")
-        _exported.call_large_solve(fn, x, 3.0, label="large")
+        _exported.call_solve(fn, x, 3.0, label="large")
+        _exported.call_solve(fn, x, 3.0, label="large")
     assert seen == [
         ["plain", "solve"],
         ["plain", "solve"],

@@ -119,9 +119,9 @@ def solve_settings(solver: SolverConfig) -> SolverConfig:
 
 def _solve(*args, **kwargs) -> Solution:
     """:func:`jaxgeo.lsq.solve` compiled and traced once per structure, across runs too
-    (:mod:`jaxgeo._exported`; a large block with ``LARGE_SOLVE_COMPILE``'s XLA options, which
+    (:mod:`jaxgeo._exported`; unless small, with ``SOLVE_COMPILE``'s XLA options, which
     compile and run it in less memory)."""
-    return _exported.call_large_solve(solve, *args, **kwargs)
+    return _exported.call_solve(solve, *args, **kwargs)
 
 
 def removal_cap(n: int) -> int:
