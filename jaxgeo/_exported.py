@@ -9,7 +9,9 @@ writes the serialized program (StableHLO, with its output structure) to
 loads it and runs it without tracing (its XLA executable then comes from the compilation cache).
 
 The key is a SHA-256 of everything the program depends on: the function's module and name,
-the source of every jaxgeo module (any edit gives new keys), the Python version and those of
+the source of every jaxgeo module (any edit gives new keys) and that of any other module that
+defines the function or a class of the inputs (a user's own sensor model; one without a source
+file, as in a notebook, runs through plain jit), the Python version and those of
 jax, jaxlib, equinox, optimistix, lineax, jaxtyping and numpy, the ``jax.config`` options and
 environment variables that change a trace, the backend, the input structure with its static
 (non-array) values pickled, and each array's shape and dtype. Anything that cannot be keyed or
@@ -42,6 +44,7 @@ import functools
 import gc
 import hashlib
 import importlib.metadata
+import inspect
 import logging
 import os
 import pickle
@@ -61,6 +64,10 @@ from ._jaxconfig import cache_dir
 SUFFIX = ".jaxexport"
 TRACED_BY = ("jax", "jaxlib", "equinox", "optimistix", "lineax", "jaxtyping", "numpy")
 """Distributions whose versions are part of the key (their code is traced into the programs)."""
+OWN_CODE = frozenset({"jaxgeo", *TRACED_BY, "builtins", "collections", "abc", "typing"})
+"""Top-level modules whose code the key holds already (jaxgeo's source, the versions of
+:data:`TRACED_BY`) or Python's own: a class or function from anywhere else has its module's
+source in the key (:func:`_foreign_digest`)."""
 JAX_OPTIONS = (
     "jax_enable_x64",
     "jax_default_matmul_precision",
@@ -227,6 +234,42 @@ def _versions() -> tuple[str, ...]:
     return tuple(out)
 
 
+def _node_types(treedef) -> Iterator[type]:
+    data = treedef.node_data()
+    if data is not None:
+        yield data[0]
+    for child in treedef.children():
+        yield from _node_types(child)
+
+
+def _foreign_digest(fn: Callable, treedef) -> str:
+    """SHA-256 of the source of every module outside :data:`OWN_CODE` that defines ``fn`` or a
+    class of the input structure, or one of its bases (a user's own sensor model): that code is
+    traced into the program, so an edit must give another key. Raises (``OSError``,
+    ``TypeError``) where such a module has no source file (a class defined in a notebook or at
+    the prompt): no stable key, plain jit then."""
+    names = {fn.__module__}
+    names.update(base.__module__ for t in _node_types(treedef) for base in t.__mro__)
+    h = hashlib.sha256()
+    for name in sorted(n for n in names if n.split(".")[0] not in OWN_CODE):
+        h.update(name.encode())
+        h.update(_module_digest(inspect.getsourcefile(sys.modules[name])).encode())
+    return h.hexdigest()
+
+
+def _module_digest(path: str | None) -> str:
+    """SHA-256 of a source file, kept per path, size and modification time."""
+    if path is None:
+        raise OSError("no source file")
+    stat = os.stat(path)
+    return _file_digest(path, stat.st_size, stat.st_mtime_ns)
+
+
+@functools.lru_cache(maxsize=256)
+def _file_digest(path: str, size: int, mtime_ns: int) -> str:
+    return hashlib.sha256(Path(path).read_bytes()).hexdigest()
+
+
 def _key(fn: Callable, treedef, static, leaves) -> str:
     h = hashlib.sha256()
     config = {name: getattr(jax.config, name, None) for name in JAX_OPTIONS}
@@ -234,6 +277,7 @@ def _key(fn: Callable, treedef, static, leaves) -> str:
         fn.__module__,
         fn.__qualname__,
         _source_digest(),
+        _foreign_digest(fn, treedef),
         _versions(),
         tuple(sorted(config.items())),
         tuple((name, os.environ.get(name)) for name in ENVIRONMENT),

@@ -1,12 +1,14 @@
 """Trace-free warm calls (``jaxgeo._exported``): results bit-equal to ``eqx.filter_jit``, traced
 once per structure across processes, safe fall-backs."""
 
+import importlib
 import json
 import logging
 import os
 import pathlib
 import subprocess
 import sys
+import types
 
 import equinox as eqx
 import jax
@@ -334,3 +336,46 @@ def test_a_program_is_compiled_once_whether_its_inputs_are_committed_or_not(cach
     assert runner._cache_size() == 1
     np.testing.assert_array_equal(again.value, first.value)
     np.testing.assert_array_equal(mixed.value, first.value)
+
+
+def apply(model, x):
+    return model(x)
+
+
+USER_MODEL = """import equinox as eqx
+import jax
+
+
+class Scale(eqx.Module):
+    k: jax.Array
+
+    def __call__(self, x):
+        return x * self.k{}
+"""
+
+
+def test_code_from_outside_jaxgeo_is_traced_again_once_edited(cache, monkeypatch, tmp_path):
+    """A class from outside jaxgeo in the inputs (a user's own sensor model) has its module's
+    source in the key: once edited, the program is traced again (the stale one would run the old
+    code without a word); a class with no source file (a notebook's) runs through plain jit,
+    nothing exported."""
+    monkeypatch.setattr(_exported, "_loaded", {})
+    path = tmp_path / "user_model_for_exported.py"
+    path.write_text(USER_MODEL.format(""))
+    monkeypatch.syspath_prepend(str(tmp_path))
+    import user_model_for_exported as user
+
+    monkeypatch.setitem(sys.modules, user.__name__, user)
+    x, k = np.linspace(0.0, 1.0, 4), np.asarray(2.0)
+    np.testing.assert_allclose(_exported.call(apply, user.Scale(k), x), 2.0 * x)
+    path.write_text(USER_MODEL.format(" + 1.0"))
+    importlib.reload(user)
+    np.testing.assert_allclose(_exported.call(apply, user.Scale(k), x), 2.0 * x + 1.0)
+    written = sorted(cache.rglob(f"*{_exported.SUFFIX}"))
+    assert len(written) == 2
+
+    cell = types.ModuleType("notebook_cell_for_exported")  # no file behind it
+    monkeypatch.setitem(sys.modules, cell.__name__, cell)
+    exec(USER_MODEL.format(" - 1.0"), cell.__dict__)
+    np.testing.assert_allclose(_exported.call(apply, cell.Scale(k), x), 2.0 * x - 1.0)
+    assert sorted(cache.rglob(f"*{_exported.SUFFIX}")) == written
