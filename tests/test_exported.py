@@ -324,18 +324,38 @@ def test_quick_compilation_only_for_small_inputs_and_outputs():
 def test_a_program_is_compiled_once_whether_its_inputs_are_committed_or_not(cache, monkeypatch):
     """Inputs from numpy (uncommitted) and from an earlier program (committed to its device),
     or a mix, run the same executable: jax lowers them differently (with and without a
-    sharding annotation), and the 10 000-tie pair's re-solve was compiled a second time."""
+    sharding annotation) unless the call lays them out, and the 10 000-tie pair's re-solve was
+    compiled a second time."""
     monkeypatch.setattr(_exported, "_runners", {})
+    compiled = []
+
+    def listen(event, duration, **kwargs):
+        if event == "/jax/core/compile/backend_compile_duration":
+            compiled.append(duration)
+
     x, scale = np.linspace(0.0, 3.0, 5), np.asarray(2.0)
     on_device = jax.device_put((x, scale), jax.devices()[0])
     assert all(a.committed for a in on_device)
-    first = _exported.call(fn, x, scale)
-    again = _exported.call(fn, *on_device)
-    mixed = _exported.call(fn, x, on_device[1])
-    (runner,) = _exported._runners.values()
-    assert runner._cache_size() == 1
+    jax.monitoring.register_event_duration_secs_listener(listen)
+    try:
+        first = _exported.call(fn, x, scale)
+        again = _exported.call(fn, *on_device)
+        mixed = _exported.call(fn, x, on_device[1])
+    finally:
+        jax.monitoring.unregister_event_duration_listener(listen)
+    assert len(_exported._runners) == 1
+    assert len(compiled) == 1
     np.testing.assert_array_equal(again.value, first.value)
     np.testing.assert_array_equal(mixed.value, first.value)
+    # the listener sees compilations: plain jit compiles the committed call again
+    plain = jax.jit(lambda a, b: jnp.sin(a) * b)
+    jax.monitoring.register_event_duration_secs_listener(listen)
+    try:
+        plain(x, scale)
+        plain(*on_device)
+    finally:
+        jax.monitoring.unregister_event_duration_listener(listen)
+    assert len(compiled) == 3
 
 
 def apply(model, x):

@@ -134,3 +134,67 @@ def test_bad_input(cameras):
         fit_rpc(cameras["fore"], order="RPC00C")
     with pytest.raises(ValueError, match="could not localise"):
         fit_rpc(_Nowhere(), 100, 100, (0.0, 10.0), grid=(4, 4, 4))
+
+
+def test_refit_through_exported_programs_equals_the_jitted_one(cameras, monkeypatch, tmp_path):
+    """The CLI's path (the refit's localisation, fit and check projections as serialized
+    ``jax.export`` programs, ``jaxgeo._exported``): the suite's plain-jit RPC to rounding, and a
+    new process (the programs loaded from disk) exports, so traces, nothing again."""
+    from jaxgeo import _exported
+
+    want = fit_rpc(cameras["aft"], h_range=H_RANGE, grid=(6, 6, 4))
+    exported = []
+    real_export = _exported._export
+    monkeypatch.setattr(
+        _exported, "_export", lambda fn, *a: exported.append(fn.__name__) or real_export(fn, *a)
+    )
+    monkeypatch.setenv("JAXGEO_CACHE_DIR", str(tmp_path))
+    monkeypatch.setattr(_exported, "_loaded", {})
+    got = fit_rpc(cameras["aft"], h_range=H_RANGE, grid=(6, 6, 4))
+    names = ("_localize_chunk", "_fit_normalized", "_project_rpc")
+    # one localisation program (fixed chunks), one fit, a projection per grid (fit, check)
+    assert sorted(exported) == sorted([*names, "_project_rpc"])
+    _exported._loaded.clear()  # as a new process
+    again = fit_rpc(cameras["aft"], h_range=H_RANGE, grid=(6, 6, 4))
+    assert len(exported) == 4  # nothing traced again
+    ground, image = random_points(cameras["aft"], 200, seed=4)
+    for rpc, report in (got, again):
+        # the suite compiles with other XLA options (tests/conftest.py): equal to rounding
+        err = np.abs(project_points(rpc, ground) - project_points(want[0], ground)).max()
+        assert err < 1e-6, err
+        # the grid's errors are ~1e-6 px, at the roundings' floor
+        assert report.check_max_px == pytest.approx(want[1].check_max_px, abs=1e-5)
+        assert report.n_fit == want[1].n_fit == 6 * 6 * 4
+
+
+def test_many_points_in_large_chunks_compiled_for_speed(fitted, monkeypatch, tmp_path):
+    """``localize_points`` / ``project_points``: below ``CHUNKS[1]`` points in small chunks,
+    from there on in large ones compiled with XLA's defaults (``_exported.call_kernel``, not the
+    slow-running quick options); any number of points from the same two programs, the model's
+    own results either way."""
+    from jaxgeo import _exported
+    from jaxgeo.models import _rpc_fit
+
+    monkeypatch.setenv("JAXGEO_CACHE_DIR", str(tmp_path))
+    monkeypatch.setattr(_exported, "_loaded", {})
+    monkeypatch.setattr(_exported, "_runners", {})
+    kernels = []
+    real_kernel = _exported.call_kernel
+    monkeypatch.setattr(
+        _exported, "call_kernel", lambda fn, *a: kernels.append(len(a[1])) or real_kernel(fn, *a)
+    )
+    rpc = fitted["fore"][0]
+    small, large = _rpc_fit.CHUNKS
+    rng = np.random.default_rng(5)
+    for n in (3, small + 1, large - 1, large, 2 * large + 7):
+        image = rng.uniform(0, N - 1, (n, 2))
+        h = rng.uniform(*H_RANGE, n)
+        ground = localize_points(rpc, image, h)
+        assert ground.shape == (n, 3)
+        np.testing.assert_allclose(project_points(rpc, ground), image, atol=1e-6)
+        want = np.asarray(rpc.project(jnp.asarray(ground)))
+        np.testing.assert_allclose(project_points(rpc, ground[None]), want[None], atol=1e-9)
+    # localised once and projected twice: large points in 1 chunk, 2 * large + 7 in 3
+    assert kernels == [large] * (3 * 1 + 3 * 3)
+    # two programs per function: the small chunk and the large one
+    assert len(_exported._runners) == 4
