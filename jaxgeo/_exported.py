@@ -408,6 +408,13 @@ def call_solve(fn: Callable, *args, **kwargs):
     return _call(SOLVE_COMPILE or None, fn, args, kwargs, traced=_solve_traced)
 
 
+def compiled_apart(*args, **kwargs) -> bool:
+    """Whether :func:`call` compiles a program of these inputs apart (over
+    :data:`MAX_ELEMENTS` array elements)."""
+    dynamic, _ = eqx.partition((args, kwargs), eqx.is_array)
+    return _elements(jax.tree.leaves(dynamic)) > MAX_ELEMENTS
+
+
 def call_kernel(fn: Callable, *args, **kwargs):
     """:func:`call` of a kernel run many times (a chunk of many points): compiled with XLA's
     defaults whatever its size, its run mattering more than its compilation. 8 192 points of

@@ -44,6 +44,8 @@ from ..lsq import (
     SolverConfig,
     initial_unknowns,
     solve,
+    solve_finished,
+    solve_iterations,
 )
 from ._prepare import Prepared
 from ._prepare.checks import listing
@@ -117,11 +119,16 @@ def solve_settings(solver: SolverConfig) -> SolverConfig:
     )
 
 
-def _solve(*args, **kwargs) -> Solution:
+def _solve(problem, solver: SolverConfig, **kwargs) -> Solution:
     """:func:`jaxgeo.lsq.solve` compiled and traced once per structure, across runs too
     (:mod:`jaxgeo._exported`; unless small, with ``SOLVE_COMPILE``'s XLA options, which
-    compile and run it in less memory)."""
-    return _exported.call_solve(solve, *args, **kwargs)
+    compile and run it in less memory). A problem compiled apart (large) as two programs, the
+    iterations and what follows them, whose compilations each need less memory than the whole
+    solve's."""
+    if not _exported.compiled_apart(problem, solver, **kwargs):
+        return _exported.call_solve(solve, problem, solver, **kwargs)
+    done = _exported.call_solve(solve_iterations, problem, solver, **kwargs)
+    return _exported.call_solve(solve_finished, problem, solver, done, **kwargs)
 
 
 def removal_cap(n: int) -> int:

@@ -226,19 +226,51 @@ def solve(
         start=start,
         verbose=verbose,
     )
-    if st.optimiser is None:
-        y, result, steps = _dense(st.args, st.y, solver, verbose)
-        weights = None
-    else:
-        sol = optx.least_squares(
-            residuals, st.optimiser, st.y, args=st.args, max_steps=solver.max_steps, throw=False
-        )
-        y, result, steps = sol.value, RESULTS.promote(sol.result), sol.stats["num_steps"]
-        weights = sol.state.weights
-    out = solve_finish(problem, solver, st, y, result, steps, weights)
+    out = solve_finish(problem, solver, st, *_iterate(st, solver, verbose))
     if throw:
         out = out.result.error_if(out, out.result != RESULTS.successful)
     return out
+
+
+class Iterations(eqx.Module):
+    """Where :func:`solve_iterations` ended: the unknowns ``y``, the result, the number of steps
+    and the reweighting's last weights (``None`` without one)."""
+
+    y: Any
+    result: RESULTS
+    steps: Int[Array, ""]
+    weights: Weights | None
+
+
+def solve_iterations(
+    problem: Problem, solver: SolverConfig = DEFAULT_SOLVER, **kwargs
+) -> Iterations:
+    """The iterations of :func:`solve` (same arguments but ``throw``) without what follows them
+    (:func:`solve_finished`): two programs whose compilations each need less memory than the
+    whole solve's (a large problem, compiled apart)."""
+    st = solve_setup(problem, solver, **kwargs)
+    return Iterations(*_iterate(st, solver, kwargs.get("verbose", False)))
+
+
+def solve_finished(
+    problem: Problem, solver: SolverConfig, iterations: Iterations, **kwargs
+) -> Solution:
+    """:func:`solve`'s solution from its :func:`solve_iterations` (the same ``problem``,
+    ``solver`` and keyword arguments): weights, covariance, redundancy numbers, s0, result."""
+    st = solve_setup(problem, solver, **kwargs)
+    it = iterations
+    return solve_finish(problem, solver, st, it.y, it.result, it.steps, it.weights)
+
+
+def _iterate(st: SolveSetup, solver: SolverConfig, verbose: bool):
+    """``(y, result, steps, weights)`` where the iterations of ``st`` end."""
+    if st.optimiser is None:
+        y, result, steps = _dense(st.args, st.y, solver, verbose)
+        return y, result, steps, None
+    sol = optx.least_squares(
+        residuals, st.optimiser, st.y, args=st.args, max_steps=solver.max_steps, throw=False
+    )
+    return sol.value, RESULTS.promote(sol.result), sol.stats["num_steps"], sol.state.weights
 
 
 class SolveSetup(eqx.Module):

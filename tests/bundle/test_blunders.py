@@ -176,3 +176,49 @@ def test_a_re_solve_left_undetermined_returns_the_last_solution_bit_for_bit(bloc
             atol = 1e-8 * float(np.max(np.abs(b), initial=0.0))
             np.testing.assert_allclose(np.asarray(a), b, rtol=1e-8, atol=atol)
     assert sol is again
+
+
+def test_a_large_solve_runs_as_two_programs_with_the_same_solution(block, monkeypatch, tmp_path):
+    """A problem compiled apart (over ``MAX_ELEMENTS``, here lowered to this block's size) is
+    solved as two programs, the iterations and what follows them (whose compilations each need
+    less memory than the whole solve's: 200 000 observations, Cauchy, jaxlib 0.12.1: peak 665
+    -> 645 MiB), with the solution of the one-program solve to rounding: robust loss, a limited
+    reweighting and a warm start."""
+    from jaxgeo import _exported
+    from jaxgeo.bundle import _snooping
+    from jaxgeo.bundle._prepare import prepare
+    from jaxgeo.lsq import RESULTS
+
+    setup = prepare(with_bias(block.models, "affine"), block.obs, block.ground)
+    solver = _snooping.solve_settings(SolverConfig(loss="cauchy"))
+    m = setup.problem.structure.obs_point.shape[0]
+    kwargs = dict(removed_image=np.zeros(m, bool), irls_limit=np.asarray(3))
+    want = _snooping._solve(setup.problem, solver, **kwargs)  # the suite: one program (jit)
+    monkeypatch.setenv("JAXGEO_CACHE_DIR", str(tmp_path))
+    monkeypatch.setattr(_exported, "MAX_ELEMENTS", 10)
+    monkeypatch.setattr(_exported, "_compiled", {})
+    programs = []
+    real = _exported.call_solve
+    monkeypatch.setattr(
+        _exported,
+        "call_solve",
+        lambda fn, *a, **k: programs.append(fn.__name__) or real(fn, *a, **k),
+    )
+    got = _snooping._solve(setup.problem, solver, **kwargs)
+    assert programs == ["solve_iterations", "solve_finished"]
+    assert len(_exported._compiled) == 2
+    start = (got.unknowns, got.weight_image, got.weight_ground)
+    again = _snooping._solve(setup.problem, solver, start=start, **kwargs)  # a warm re-solve
+    assert len(_exported._compiled) == 4  # ``start`` given: other input structures
+    monkeypatch.setattr(_exported, "MAX_ELEMENTS", 10**9)
+    whole = _snooping._solve(setup.problem, solver, start=start, **kwargs)
+    for a, b in ((got, want), (again, whole)):
+        assert bool(a.result == RESULTS.successful) and bool(b.result == RESULTS.successful)
+        assert int(a.num_steps) == int(b.num_steps)
+        for x, y in zip(jax.tree.leaves(a), jax.tree.leaves(b), strict=True):
+            x, y = np.asarray(x), np.asarray(y)
+            if np.issubdtype(y.dtype, np.floating):
+                scale = float(np.max(np.abs(y), initial=0.0, where=np.isfinite(y)))
+                np.testing.assert_allclose(x, y, rtol=1e-9, atol=1e-9 * scale)
+            else:
+                np.testing.assert_array_equal(x, y)
