@@ -84,7 +84,8 @@ def _chunked(fn, model, *points) -> np.ndarray:
     small = n < CHUNKS[1]
     chunk, call = (CHUNKS[0], _exported.call) if small else (CHUNKS[1], _exported.call_kernel)
     n_pad = -(-max(n, 1) // chunk) * chunk
-    padded = [np.pad(p, [(0, n_pad - n)] + [(0, 0)] * (p.ndim - 1), mode="edge") for p in points]
+    mode = "edge" if n else "constant"  # no points: one chunk of zeros, its results cut off
+    padded = [np.pad(p, [(0, n_pad - n)] + [(0, 0)] * (p.ndim - 1), mode=mode) for p in points]
     out = [
         np.asarray(call(fn, model, *(p[i : i + chunk] for p in padded)))
         for i in range(0, n_pad, chunk)

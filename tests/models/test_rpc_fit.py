@@ -186,6 +186,8 @@ def test_many_points_in_large_chunks_compiled_for_speed(fitted, monkeypatch, tmp
     rpc = fitted["fore"][0]
     small, large = _rpc_fit.CHUNKS
     rng = np.random.default_rng(5)
+    assert localize_points(rpc, np.zeros((0, 2)), 0.0).shape == (0, 3)
+    assert project_points(rpc, np.zeros((4, 0, 3))).shape == (4, 0, 2)
     for n in (3, small + 1, large - 1, large, 2 * large + 7):
         image = rng.uniform(0, N - 1, (n, 2))
         h = rng.uniform(*H_RANGE, n)
