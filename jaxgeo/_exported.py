@@ -8,11 +8,11 @@ writes the serialized program (StableHLO, with its output structure) to
 ``<cache dir>/exported/<key>.jaxexport``; a later call -- in any process -- with the same key
 loads it and runs it without tracing (its XLA executable then comes from the compilation cache).
 
-The key is a SHA-256 of everything the program depends on: the function's module and name,
-the source of every jaxgeo module (any edit gives new keys) and that of any other module that
-defines the function or a class of the inputs (a user's own sensor model; one without a source
-file, as in a notebook, runs through plain jit), the Python version and those of
-jax, jaxlib, equinox, optimistix, lineax, jaxtyping and numpy, the ``jax.config`` options and
+The key (:mod:`._program_key`) is a SHA-256 of everything the program depends on: the function's
+module and name, the source of every jaxgeo module (any edit gives new keys) and that of any
+other module that defines the function or a class of the inputs (a user's own sensor model; one
+without a source file, as in a notebook, runs through plain jit), the Python version and those
+of jax, jaxlib, equinox, optimistix, lineax, jaxtyping and numpy, the ``jax.config`` options and
 environment variables that change a trace, the backend, the input structure with its static
 (non-array) values pickled, and each array's shape and dtype. Anything that cannot be keyed or
 exported this way (an unpicklable static value, a host callback in the program) falls back to
@@ -42,9 +42,7 @@ import contextlib
 import ctypes
 import functools
 import gc
-import hashlib
 import importlib.metadata
-import inspect
 import logging
 import math
 import os
@@ -60,24 +58,9 @@ import equinox as eqx
 import jax
 
 from ._jaxconfig import cache_dir
+from ._program_key import key as _key
 
 SUFFIX = ".jaxexport"
-TRACED_BY = ("jax", "jaxlib", "equinox", "optimistix", "lineax", "jaxtyping", "numpy")
-"""Distributions whose versions are part of the key (their code is traced into the programs)."""
-OWN_CODE = frozenset({"jaxgeo", *TRACED_BY, "builtins", "collections", "abc", "typing"})
-"""Top-level modules whose code the key holds already (jaxgeo's source, the versions of
-:data:`TRACED_BY`) or Python's own: a class or function from anywhere else has its module's
-source in the key (:func:`_foreign_digest`)."""
-JAX_OPTIONS = (
-    "jax_enable_x64",
-    "jax_default_matmul_precision",
-    "jax_numpy_dtype_promotion",
-    "jax_numpy_rank_promotion",
-    "jax_default_prng_impl",
-)
-"""``jax.config`` options that change what a trace produces (part of the key)."""
-ENVIRONMENT = ("EQX_ON_ERROR", "JAXGEO_TYPECHECK")
-"""Environment variables read while tracing (part of the key)."""
 MAX_ELEMENTS = 1_000_000
 """Inputs larger than this (array elements in all) run through plain jit: an exported program
 is lowered twice and compiled more slowly on its first run (a 200 000-observation pair: 25 s
@@ -196,17 +179,6 @@ def release_heap() -> None:
 
 
 @functools.cache
-def _source_digest() -> str:
-    """SHA-256 of every jaxgeo module's source (computed once per process, a few ms)."""
-    root = Path(__file__).resolve().parent
-    h = hashlib.sha256()
-    for path in sorted(root.rglob("*.py")):
-        h.update(str(path.relative_to(root)).encode())
-        h.update(path.read_bytes())
-    return h.hexdigest()
-
-
-@functools.cache
 def _filter_jit(fn: Callable) -> Callable:
     return eqx.filter_jit(fn)
 
@@ -218,94 +190,6 @@ def folder() -> Path | None:
         return None
     env = os.environ.get("JAX_COMPILATION_CACHE_DIR")
     return (Path(env) if env else base) / "exported"
-
-
-@functools.cache
-def _versions() -> tuple[str, ...]:
-    """Versions of everything that shapes a traced program besides jaxgeo's own source."""
-    from importlib.metadata import PackageNotFoundError, version
-
-    out = [sys.version]
-    for dist in TRACED_BY:
-        try:
-            out.append(f"{dist}=={version(dist)}")
-        except PackageNotFoundError:
-            out.append(f"{dist}: none")
-    return tuple(out)
-
-
-def _node_types(treedef) -> Iterator[type]:
-    data = treedef.node_data()
-    if data is not None:
-        yield data[0]
-    for child in treedef.children():
-        yield from _node_types(child)
-
-
-def _foreign_digest(fn: Callable, treedef) -> str:
-    """SHA-256 of the source of every module outside :data:`OWN_CODE` that defines ``fn`` or a
-    class of the input structure, or one of its bases (a user's own sensor model): that code is
-    traced into the program, so an edit must give another key. Raises (``OSError``,
-    ``TypeError``) where such a module has no source file (a class defined in a notebook or at
-    the prompt): no stable key, plain jit then."""
-    try:
-        names = _foreign_modules(fn, treedef)
-    except TypeError:  # an unhashable structure: walked every time
-        names = _foreign_modules.__wrapped__(fn, treedef)
-    h = hashlib.sha256()
-    for name in names:
-        h.update(name.encode())
-        h.update(_module_digest(inspect.getsourcefile(sys.modules[name])).encode())
-    return h.hexdigest()
-
-
-@functools.lru_cache(maxsize=1024)
-def _foreign_modules(fn: Callable, treedef) -> tuple[str, ...]:
-    """The modules outside :data:`OWN_CODE` of :func:`_foreign_digest`, sorted (kept per
-    function and structure: walking the structure's classes took 20 us a call)."""
-    names = {fn.__module__}
-    names.update(base.__module__ for t in _node_types(treedef) for base in t.__mro__)
-    return tuple(sorted(n for n in names if n.split(".")[0] not in OWN_CODE))
-
-
-def _module_digest(path: str | None) -> str:
-    """SHA-256 of a source file, kept per path, size and modification time."""
-    if path is None:
-        raise OSError("no source file")
-    stat = os.stat(path)
-    return _file_digest(path, stat.st_size, stat.st_mtime_ns)
-
-
-@functools.lru_cache(maxsize=256)
-def _file_digest(path: str, size: int, mtime_ns: int) -> str:
-    return hashlib.sha256(Path(path).read_bytes()).hexdigest()
-
-
-@functools.lru_cache(maxsize=64)
-def _dtype_name(dtype) -> str:
-    return str(dtype)  # numpy's takes 9 us
-
-
-def _key(fn: Callable, treedef, static, leaves) -> str:
-    h = hashlib.sha256()
-    config = {name: getattr(jax.config, name, None) for name in JAX_OPTIONS}
-    parts = (
-        fn.__module__,
-        fn.__qualname__,
-        _source_digest(),
-        _foreign_digest(fn, treedef),
-        _versions(),
-        tuple(sorted(config.items())),
-        tuple((name, os.environ.get(name)) for name in ENVIRONMENT),
-        jax.default_backend(),
-        tuple(
-            (tuple(x.shape), _dtype_name(x.dtype), bool(getattr(x, "weak_type", False)))
-            for x in leaves
-        ),
-    )
-    h.update(repr(parts).encode())
-    h.update(pickle.dumps((treedef, static), protocol=4))
-    return h.hexdigest()
 
 
 def _export(fn: Callable, treedef, static, leaves):
