@@ -401,6 +401,12 @@ def _compiled_call(
     if compiled is None:
         lowered = _filter_jit(fn).lower(*args, **kwargs)
         traced()
+        # the inputs computed first: the program that makes them (dispatched, still running
+        # on XLA's threads) frees its working memory before this one's compilation takes its
+        # own (a large solve's iterations, then its finish: 200 000 observations, jaxlib
+        # 0.12.1, cauchy: the iterations' ~110 MB had been held through the finish's
+        # compilation); the trace and lowering above still ran beside it
+        jax.block_until_ready(leaves)
         if _owns_process:  # the trace, before XLA's compilation adds its own memory
             _drop_traces()
         options = dict(options or {})

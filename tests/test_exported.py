@@ -167,6 +167,36 @@ def test_large_inputs_compiled_apart_once_with_the_heap_released(cache, monkeypa
     assert not cache.exists()  # not exported
 
 
+@jax.jit
+def _slow(x):
+    """~0.35 s of work on a 2-core CPU, dispatched asynchronously (a while loop over matrix
+    products; jax runs a while loop over small arrays inline, in the call)."""
+    return jax.lax.fori_loop(0, 40, lambda i, v: jnp.sin(v @ v * 1e-3), x)
+
+
+def test_large_inputs_computed_before_their_program_is_compiled(cache, monkeypatch):
+    """A program compiled apart is compiled once its inputs exist: the computation that makes
+    them (dispatched, still running) has freed its working memory by then (a large solve's
+    iterations, then its finish), while its trace and lowering ran beside that computation."""
+    monkeypatch.setattr(_exported, "MAX_ELEMENTS", 2)
+    monkeypatch.setattr(_exported, "_compiled", {})
+    seen = []
+    compile_ = jax.stages.Lowered.compile
+
+    def spy(self, *args, **kwargs):
+        seen.append(pending.is_ready())
+        return compile_(self, *args, **kwargs)
+
+    monkeypatch.setattr(jax.stages.Lowered, "compile", spy)
+    start = np.linspace(0.0, 1.0, 600 * 600).reshape(600, 600)
+    _slow(start).block_until_ready()  # compiled, so that the next call only runs
+    pending = _slow(start)  # dispatched: running on XLA's threads
+    assert not pending.is_ready()  # (else the test would show nothing)
+    out = _exported.call(fn, pending, 2.0, label="big")
+    assert seen == [True]
+    np.testing.assert_array_equal(out.value, np.sin(np.asarray(pending)) * 2.0)
+
+
 def test_large_solve_compiled_apart_with_its_own_options(cache, monkeypatch):
     """``call_solve``: a large program compiled with ``SOLVE_COMPILE`` (XLA's legacy
     CPU emitters where jaxlib has them), apart from the same program compiled with XLA's
