@@ -194,7 +194,7 @@ def test_large_inputs_computed_before_their_program_is_compiled(cache, monkeypat
     assert not pending.is_ready()  # (else the test would show nothing)
     out = _exported.call(fn, pending, 2.0, label="big")
     assert seen == [True]
-    np.testing.assert_array_equal(out.value, np.sin(np.asarray(pending)) * 2.0)
+    np.testing.assert_allclose(out.value, np.sin(np.asarray(pending)) * 2.0, rtol=1e-14)
 
 
 def test_large_solve_compiled_apart_with_its_own_options(cache, monkeypatch):
