@@ -10,7 +10,7 @@ The public names below are imported on first use (PEP 562), so that ``jaxgeo --h
 import importlib
 import importlib.metadata
 
-from ._jaxconfig import configure as _configure_jax
+from ._runtime.jaxconfig import configure as _configure_jax
 
 # float64 everywhere and the persistent compilation cache, before any submodule imports jax
 # (environment variables jax reads when it starts; jax.config if it already has)
@@ -36,7 +36,7 @@ _WHERE = {name: module for module, names in _EXPORTS.items() for name in names}
 # no function shadows a module of the package
 _SUBMODULES = (
     "geodesy", "rotations", "errors", "models", "lsq", "intersect", "io", "bundle", "strip",
-    "ortho", "stereo", "simulate", "cli",
+    "tiles", "ortho", "stereo", "coreg", "simulate", "cli",
 )  # fmt: skip
 
 

@@ -25,7 +25,7 @@ import jax.numpy as jnp
 import numpy as np
 from jaxtyping import Array, ArrayLike, Bool, Float, Int
 
-from . import _exported
+from ._runtime import exported as _exported
 from .geodesy import metres_per_unit
 from .lsq import inv3_spd
 from .models import AbstractSensorModel, newton_root

@@ -18,7 +18,7 @@ import pathlib
 # tests/models/test_bias.py + tests/bundle/test_cartosat.py from 199 s to 148 s (-25 %) with the
 # same results to every tolerance asserted. XLA's legacy CPU emitters (no fusion emitters)
 # compile the adjustment's program 25 % faster again (the demo's robust solve: 3.7 s -> 2.7 s).
-# The library itself only adds the vector width (jaxgeo._jaxconfig.VECTOR_FLAG); a flag the
+# The library itself only adds the vector width (jaxgeo._runtime.jaxconfig.VECTOR_FLAG); a flag the
 # caller already set in XLA_FLAGS wins.
 _SUITE_XLA_FLAGS = {
     "xla_cpu_multi_thread_eigen": "false",
@@ -44,7 +44,7 @@ os.environ["XLA_FLAGS"] = _xla_flags.strip()
 # The persistent compilation cache is off in the suite: a CI machine starts with an empty one, so
 # writing every test's programs costs time and pays nothing back, and one full-suite run here
 # aborted inside jaxlib's executable serialisation (put_executable_and_time). The cache itself
-# is tested in subprocesses (tests/test_jaxconfig.py).
+# is tested in subprocesses (tests/runtime/test_jaxconfig.py).
 os.environ.setdefault("JAXGEO_CACHE_DIR", "off")
 
 # Runtime shape/type checks of every jaxgeo function (jaxtyping + beartype), as equinox and
@@ -96,7 +96,7 @@ LONGEST_FIRST = (
     "notebooks/test_notebook_01.py",
     "bundle/test_transforms.py",
     "models/test_affine3d.py",
-    "test_exported.py",
+    "runtime/test_exported.py",
     "cli/test_adjust.py",
     "notebooks/test_notebook_03.py",
     "bundle/test_physical.py",

@@ -6,7 +6,7 @@
 
 One worker process per core set (``taskset -c <set> python -m benchmarks.speed.cores
 --worker``), each started as a user starts jaxgeo: with its default settings, which give it
-one CPU device per core it may use (:mod:`jaxgeo._jaxconfig`). A core set may carry settings
+one CPU device per core it may use (:mod:`jaxgeo._runtime.jaxconfig`). A core set may carry settings
 of its own after a colon (``0,1:JAXGEO_CPU_DEVICES=1``: two cores, one device -- what jax
 alone does; several joined by ``+``; ``JAXGEO_BENCH_CODE=DIR``: another checkout's jaxgeo, e.g.
 the code before a change); ``--env NAME=VALUE`` applies to every worker. Each worker

@@ -25,7 +25,7 @@ from typing import Any
 
 import numpy as np
 
-from .. import _exported
+from .._runtime import exported as _exported
 from ..io import (
     DEM,
     SensorImage,

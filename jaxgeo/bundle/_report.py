@@ -20,7 +20,8 @@ from typing import Any
 import jax
 import numpy as np
 
-from .. import _exported, geodesy
+from .. import geodesy
+from .._runtime import exported as _exported
 from ..intersect import intersect
 from ..io import GroundPoints, Observations
 
@@ -85,7 +86,7 @@ def _stats(errors: np.ndarray):
 
 def project(model, ground) -> np.ndarray:
     """``model.project`` compiled once per model structure and number of points, traced once
-    across runs (:mod:`jaxgeo._exported`; reports run at Python level)."""
+    across runs (:mod:`jaxgeo._runtime.exported`; reports run at Python level)."""
     return np.asarray(_exported.call(_project, model, np.asarray(ground, float)))
 
 

@@ -34,8 +34,8 @@ import equinox as eqx
 import jax.numpy as jnp
 import numpy as np
 
-from .. import _exported
-from .._arrays import device_array
+from .._runtime import exported as _exported
+from .._runtime.arrays import device_array
 from ..lsq import (
     BLUNDER_K,
     DEFAULT_SOLVER,
@@ -121,7 +121,7 @@ def solve_settings(solver: SolverConfig) -> SolverConfig:
 
 def _solve(problem, solver: SolverConfig, **kwargs) -> Solution:
     """:func:`jaxgeo.lsq.solve` compiled and traced once per structure, across runs too
-    (:mod:`jaxgeo._exported`; unless small, with ``SOLVE_COMPILE``'s XLA options, which
+    (:mod:`jaxgeo._runtime.exported`; unless small, with ``SOLVE_COMPILE``'s XLA options, which
     compile and run it in less memory). A problem compiled apart (large) as two programs, the
     iterations and what follows them, whose compilations each need less memory than the whole
     solve's."""

@@ -12,7 +12,7 @@ import argparse
 import importlib
 import sys
 
-from .. import _interrupt
+from .._runtime import interrupt as _interrupt
 from ..errors import JaxgeoError
 
 COMMANDS = {
@@ -152,7 +152,7 @@ def _ignore_signals() -> None:
 def main(argv: list[str] | None = None) -> int:
     """Run one sub-command; every error ends as one line on stderr and an exit status (the
     codes of ``jaxgeo.cli._common``), never as a traceback (``JAXGEO_TRACEBACK=1`` re-raises).
-    Ctrl-C and SIGTERM end it with status 130 and no output (:mod:`jaxgeo._interrupt`)."""
+    Ctrl-C and SIGTERM end it with status 130 and no output (:mod:`jaxgeo._runtime.interrupt`)."""
     return _main(argv, restore_handlers=True)
 
 
@@ -164,7 +164,8 @@ def _main(argv: list[str] | None, restore_handlers: bool) -> int:
     command = next((a for a in argv if not a.startswith("-")), None)
     parser = build_parser(command if command in COMMANDS else None)
     args = parser.parse_args(argv)
-    from .. import _exported  # jax: every command computes (help and usage errors are above)
+    # jax: every command computes (help and usage errors are above)
+    from .._runtime import exported as _exported
 
     owned = _exported.own_process()  # restored below (tests run commands in their process)
     name = f"jaxgeo {args.command}"

@@ -4,7 +4,7 @@
                       [--nmad-k K] [--max-iterations N] [--tolerance M] [--json] [--quiet]
                       [--overwrite]
 
-Parse -> :func:`jaxgeo.stereo.coregister` -> print (the human summary, or ``--json``); what
+Parse -> :func:`jaxgeo.coreg.coregister` -> print (the human summary, or ``--json``); what
 it does is ``DESCRIPTION`` (the ``--help`` text) and docs/coregister.md.
 """
 
@@ -72,7 +72,7 @@ def _table(result) -> str:
 def run(args: argparse.Namespace) -> int:
     import warnings
 
-    from ..stereo import CoregistrationWarning, NuthKaab, coregister
+    from ..coreg import CoregistrationWarning, NuthKaab, coregister
     from ._common import EXIT_NOT_CONVERGED, EXIT_OK, guard_outputs, note, ours, print_json
 
     inputs = [args.dsm, args.ref] + ([args.mask] if args.mask else [])

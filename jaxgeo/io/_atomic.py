@@ -15,7 +15,7 @@ import pathlib
 import secrets
 from collections.abc import Iterable, Iterator, Sequence
 
-from .. import _interrupt
+from .._runtime import interrupt as _interrupt
 
 
 def refuse_existing(path: str | os.PathLike, overwrite: bool = False) -> pathlib.Path:
@@ -55,8 +55,8 @@ def atomic_output(
     temporary file exists (empty) when the block starts; on an exception it is removed and
     ``path`` is untouched. ``leftovers`` are suffixes of files a writer may leave beside the
     temporary one (GDAL's ``.aux.xml``), removed either way. ``os.replace`` is atomic on POSIX.
-    Once the process was asked to stop (Ctrl-C, SIGTERM: :mod:`jaxgeo._interrupt`) nothing is
-    committed: the block's end raises ``KeyboardInterrupt`` instead.
+    Once the process was asked to stop (Ctrl-C, SIGTERM: :mod:`jaxgeo._runtime.interrupt`)
+    nothing is committed: the block's end raises ``KeyboardInterrupt`` instead.
     """
     path = refuse_existing(path, overwrite)
     path.parent.mkdir(parents=True, exist_ok=True)

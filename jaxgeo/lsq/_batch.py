@@ -12,9 +12,9 @@ to differentiate). The small factorisations are LAPACK-free
 (:mod:`~jaxgeo.lsq._factor`), which removes the hang of >= 1000 vmapped problems in jaxlib's
 batched LAPACK; problems whose reduced system is larger (LAPACK) run one at a time. With
 several local devices (``jax.local_device_count() > 1``; on a CPU jaxgeo makes one device per
-usable core, :mod:`jaxgeo._jaxconfig`) the problems are sharded over them (``shard_map``, one
-mesh axis), each device running its own queue of lanes on its own core: the results are
-those of one device.
+usable core, :mod:`jaxgeo._runtime.jaxconfig`) the problems are sharded over them
+(``shard_map``, one mesh axis), each device running its own queue of lanes on its own core:
+the results are those of one device.
 
 Example::
 
@@ -33,7 +33,7 @@ import jax.numpy as jnp
 import numpy as np
 import optimistix as optx
 
-from .._shard import shard_map
+from .._runtime.shard import shard_map
 from ._config import DEFAULT_SOLVER, SolverConfig
 from ._factor import UNROLL_MAX
 from ._ground import with_frames
@@ -164,7 +164,7 @@ def _mesh(devices: int):
 
 def shard_count(n: int, shard: bool = True) -> int:
     """Devices a batch of ``n`` problems is spread over: all local devices (jaxgeo asks jax
-    for one CPU device per usable core: :mod:`jaxgeo._jaxconfig`), at most ``n``; 1 without
+    for one CPU device per usable core: :mod:`jaxgeo._runtime.jaxconfig`), at most ``n``; 1 without
     ``shard``."""
     return max(1, min(jax.local_device_count(), n)) if shard else 1
 

@@ -25,7 +25,7 @@ import jax
 import numpy as np
 from jaxtyping import Array, Float, Int, PyTree
 
-from .._arrays import device_array
+from .._runtime.arrays import device_array
 from ._band import block_bandwidth, super_blocks
 from ._observations import GroundObs, ImageObs
 

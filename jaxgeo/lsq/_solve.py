@@ -19,7 +19,7 @@ import lineax as lx
 import optimistix as optx
 from jaxtyping import Array, Bool, Float, Int
 
-from .._arrays import zeros_like
+from .._runtime.arrays import zeros_like
 from ._band import Band
 from ._config import DEFAULT_SOLVER, SolverConfig
 from ._covariance import cofactors, undetermined_unknowns

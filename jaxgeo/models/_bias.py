@@ -25,7 +25,7 @@ import jax.numpy as jnp
 import numpy as np
 from jaxtyping import Array, ArrayLike, Float, PyTree
 
-from .._arrays import device_array
+from .._runtime.arrays import device_array
 from ._base import AbstractSensorModel, all_inexact, nothing
 from ._rpc import RPC
 

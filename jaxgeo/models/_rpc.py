@@ -16,7 +16,7 @@ import jax.numpy as jnp
 import numpy as np
 from jaxtyping import Array, ArrayLike, Bool, Float, PyTree
 
-from .._arrays import device_array
+from .._runtime.arrays import device_array
 from ._base import AbstractSensorModel, nothing
 from ._rpc_eval import (
     is_concrete,

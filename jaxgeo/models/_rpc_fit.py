@@ -14,8 +14,8 @@ Accuracy is reported on the fit grid and on an independent check grid placed at 
 midpoints (half a cell away in column, row and height).
 
 The localisation, the fit and the check projections run as kept programs
-(:func:`jaxgeo._exported.call`): a second run of ``jaxgeo adjust`` or ``jaxgeo strip`` traces
-none of them (a 10 000-tie ``jaxgeo adjust``, paired: 0.5 s less warm, ~1 s less cold).
+(:func:`jaxgeo._runtime.exported.call`): a second run of ``jaxgeo adjust`` or ``jaxgeo strip``
+traces none of them (a 10 000-tie ``jaxgeo adjust``, paired: 0.5 s less warm, ~1 s less cold).
 """
 
 from __future__ import annotations
@@ -27,7 +27,7 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
-from .. import _exported
+from .._runtime import exported as _exported
 from ._base import AbstractSensorModel
 from ._rpc import B_TO_A, RPC, TermOrder, monomials
 
@@ -72,9 +72,9 @@ def _grid(n_cols, n_rows, h_range, grid, check: bool):
 
 CHUNKS = (512, 8192)
 """Points per compiled call: the small size below ``CHUNKS[1]`` points (a refit grid, GCPs),
-compiled quickly (:data:`jaxgeo._exported.QUICK_COMPILE`); the large one from there on, compiled
-for speed (:func:`jaxgeo._exported.call_kernel`; a call's own cost, ~0.3 ms, spread over 16x the
-points). At most two programs per model type whatever the number of points."""
+compiled quickly (:data:`jaxgeo._runtime.exported.QUICK_COMPILE`); the large one from there on,
+compiled for speed (:func:`jaxgeo._runtime.exported.call_kernel`; a call's own cost, ~0.3 ms,
+spread over 16x the points). At most two programs per model type whatever the number of points."""
 
 
 def _chunked(fn, model, *points) -> np.ndarray:

@@ -8,7 +8,7 @@ import warnings
 
 import numpy as np
 
-from .. import _exported
+from .._runtime import exported as _exported
 from ..errors import JaxgeoWarning
 from ..geodesy import utm_epsg, utm_zone
 from ..io import dem_coverage
@@ -77,7 +77,7 @@ def on_dem(model, xy: np.ndarray, grid) -> tuple[np.ndarray, np.ndarray]:
     border of a footprint): a bracketed root between the grid's lowest and highest heights, a
     few dozen localisations of one compiled program (tracing the march took 3-8 s of every run,
     compiling it a minute in the test suite). Traced once per shape across runs
-    (:mod:`jaxgeo._exported`); padded to ``BATCH`` points.
+    (:mod:`jaxgeo._runtime.exported`); padded to ``BATCH`` points.
     """
     xy = np.asarray(xy, dtype=float).reshape(-1, 2)
     n = len(xy)

@@ -19,7 +19,7 @@ import warnings
 
 import numpy as np
 
-from .. import _exported
+from .._runtime import exported as _exported
 from ..models import AbstractSensorModel, DEMGrid
 from ..tiles import NoData, RasterSpec, Tile, write_tile
 from ._kernel import map_pixels, sample_window

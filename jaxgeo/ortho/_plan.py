@@ -19,7 +19,7 @@ from collections.abc import Sequence
 
 import numpy as np
 
-from .. import _exported
+from .._runtime import exported as _exported
 from ..io import DEM, SensorImage, open_image, read_dem, refuse_existing
 from ..tiles import RasterSpec, TilePlan, overview_factors, plan_tiles
 from ._grid import default_crs, dem_for_image, footprint, ground_sample_distance

@@ -8,16 +8,6 @@ module: matching (``_matching``), rectification (``_rectification``), dense matc
 (``_uncertainty``).
 """
 
-from ._coregister import Coregistration as Coregistration
-from ._coregister import CoregistrationError as CoregistrationError
-from ._coregister import CoregistrationWarning as CoregistrationWarning
-from ._coregister import NuthKaab as NuthKaab
-from ._coregister import nuth_kaab as nuth_kaab
-from ._coregister import shift_heights as shift_heights
-from ._coregister_files import coregister as coregister
-from ._coregister_stats import DHStats as DHStats
-from ._coregister_stats import dh_stats as dh_stats
-from ._coregister_stats import nmad as nmad
 from ._dense import SGMSettings as SGMSettings
 from ._dense import correlation_sigma_px as correlation_sigma_px
 from ._dense import refine_disparity as refine_disparity

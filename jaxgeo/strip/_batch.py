@@ -5,9 +5,9 @@ adjusts every draw in one jitted call (:func:`~._solve.two_level_batch`). A batc
 the compiled call alone: the solver's robust loss acts, but nothing is removed (data snooping
 is a host-side loop around one strip, :func:`~._adjustment.adjust_strip`); the level-2 GCP
 weights are the result's (GCP measurements removed there stay out). With several local devices
-(on a CPU jaxgeo makes one per usable core: :mod:`jaxgeo._jaxconfig`) the draws are shared out
-over them (:func:`two_level_sharded`), each device adjusting its draws one after another on its
-own core.
+(on a CPU jaxgeo makes one per usable core: :mod:`jaxgeo._runtime.jaxconfig`) the draws are
+shared out over them (:func:`two_level_sharded`), each device adjusting its draws one after
+another on its own core.
 """
 
 from __future__ import annotations
@@ -19,7 +19,7 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
-from .._shard import shard_map
+from .._runtime.shard import shard_map
 from ._result import StripResult
 from ._solve import Evaluation, TwoLevelSolution, degree_index, two_level_batch, two_level_jit
 

@@ -20,7 +20,8 @@ import jax
 import jax.numpy as jnp
 from jaxtyping import Array, Bool, Float, Int
 
-from .. import _exported, lsq
+from .. import lsq
+from .._runtime import exported as _exported
 from ..geodesy import metres_per_unit
 from ..lsq import Problem, SolverConfig
 from ._config import STRIP_SOLVER

@@ -37,3 +37,4 @@ from ._runner import resolve_workers as resolve_workers
 from ._runner import run_one_tile as run_one_tile
 from ._runner import run_tiles as run_tiles
 from ._runner import work_folder as work_folder
+from ._settings import TileSettings as TileSettings

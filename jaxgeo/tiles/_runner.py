@@ -17,7 +17,7 @@ Where tiles run (``workers``, ``scheduler``): ``workers=0``, or with ``workers=N
 runs them one after the other in this process; otherwise an embedded dask.distributed
 ``LocalCluster`` of ``workers`` (default: one per core) worker processes started with ``spawn`` (JAX
 and ``fork`` deadlock), one thread each, that live for the whole run so compiled programs stay warm
-(and across runs, XLA's compilation cache on disk, :mod:`jaxgeo._jaxconfig`).
+(and across runs, XLA's compilation cache on disk, :mod:`jaxgeo._runtime.jaxconfig`).
 ``scheduler="tcp://host:8786"`` sends the same tasks to an existing dask cluster instead
 (dask-jobqueue on SLURM/PBS, dask-kubernetes, ``dask scheduler`` + ``dask worker``; the workers need
 jaxgeo installed and the same view of the input files and of the work folder, e.g. a shared file

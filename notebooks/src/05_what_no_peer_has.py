@@ -12,7 +12,7 @@
 #    in the bundle adjustment: each image's affine bias plus a cubic B-spline of offsets along
 #    the lines (`jaxgeo.models.JitterBias`), estimated from the tie points alone.
 # 2. **DEM co-registration** (Nuth and Kääb, 2011) in the same package as the DSM:
-#    `jaxgeo.stereo.nuth_kaab` (`jaxgeo coregister` on files) finds the horizontal and vertical
+#    `jaxgeo.coreg.nuth_kaab` (`jaxgeo coregister` on files) finds the horizontal and vertical
 #    shift between a DSM and a reference DEM and gives the statistics users compare (mean,
 #    median, NMAD, RMSE, LE90) before and after.
 # 3. **A height sigma per DSM cell.** `jaxgeo dsm` (`jaxgeo.stereo.dsm_from_images`) writes a

@@ -184,7 +184,7 @@ def test_a_large_solve_runs_as_two_programs_with_the_same_solution(block, monkey
     less memory than the whole solve's: 200 000 observations, Cauchy, jaxlib 0.12.1: peak 665
     -> 645 MiB), with the solution of the one-program solve to rounding: robust loss, a limited
     reweighting and a warm start."""
-    from jaxgeo import _exported
+    from jaxgeo._runtime import exported as _exported
     from jaxgeo.bundle import _snooping
     from jaxgeo.bundle._prepare import prepare
     from jaxgeo.lsq import RESULTS

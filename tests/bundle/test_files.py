@@ -4,7 +4,7 @@ traced (the trace holds the GIL, XLA's compilation does not), and not at all aft
 import pytest
 
 import jaxgeo.bundle._files as files
-from jaxgeo import _exported
+from jaxgeo._runtime import exported as _exported
 from jaxgeo.simulate import demo_dir
 
 

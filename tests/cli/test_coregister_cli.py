@@ -10,7 +10,7 @@ import rasterio
 from affine import Affine
 
 from jaxgeo.cli import build_parser, main
-from tests.stereo.test_coregister import CELL_M, SHIFT, X0, Y0, shifted_pair, write_raster
+from tests.coreg.test_coregister import CELL_M, SHIFT, X0, Y0, shifted_pair, write_raster
 
 STAT_KEYS = {"mean_m", "median_m", "nmad_m", "rmse_m", "le90_m", "cells"}
 

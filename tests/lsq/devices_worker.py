@@ -3,7 +3,7 @@
     JAXGEO_CPU_DEVICES=2 python devices_worker.py batch   # solve_batch over the CPU devices
     JAXGEO_CPU_DEVICES=2 python devices_worker.py strip   # Monte-Carlo strips over them
 
-The devices are jaxgeo's default CPU devices (``jaxgeo._jaxconfig``), here forced to a count
+The devices are jaxgeo's default CPU devices (``jaxgeo._runtime.jaxconfig``), here forced to a count
 so that the test does not depend on the machine's cores. Prints one JSON line: the devices, and
 the largest differences between the sharded results and one device's.
 """

@@ -138,9 +138,10 @@ def test_bad_input(cameras):
 
 def test_refit_through_exported_programs_equals_the_jitted_one(cameras, monkeypatch, tmp_path):
     """The CLI's path (the refit's localisation, fit and check projections as serialized
-    ``jax.export`` programs, ``jaxgeo._exported``): the suite's plain-jit RPC to rounding, and a
-    new process (the programs loaded from disk) exports, so traces, nothing again."""
-    from jaxgeo import _exported
+    ``jax.export`` programs, ``jaxgeo._runtime.exported``): the suite's plain-jit RPC to
+    rounding, and a new process (the programs loaded from disk) exports, so traces, nothing
+    again."""
+    from jaxgeo._runtime import exported as _exported
 
     want = fit_rpc(cameras["aft"], h_range=H_RANGE, grid=(6, 6, 4))
     exported = []
@@ -172,7 +173,7 @@ def test_many_points_in_large_chunks_compiled_for_speed(fitted, monkeypatch, tmp
     from there on in large ones compiled with XLA's defaults (``_exported.call_kernel``, not the
     slow-running quick options); any number of points from the same two programs, the model's
     own results either way."""
-    from jaxgeo import _exported
+    from jaxgeo._runtime import exported as _exported
     from jaxgeo.models import _rpc_fit
 
     monkeypatch.setenv("JAXGEO_CACHE_DIR", str(tmp_path))

@@ -417,8 +417,9 @@ def test_broken_seams_are_attributed(strip_quarter):
 
 def test_exported_programs_give_the_same_strip(quarter, result, tmp_path, monkeypatch):
     """The CLI's warm path (level 1's solve, level 2 and the evaluation through serialized
-    ``jax.export`` programs, ``jaxgeo._exported``): the same numbers as the suite's plain jit."""
-    from jaxgeo import _exported
+    ``jax.export`` programs, ``jaxgeo._runtime.exported``): the same numbers as the suite's
+    plain jit."""
+    from jaxgeo._runtime import exported as _exported
     from jaxgeo.strip import UniversalCorrectionWarning
 
     monkeypatch.setenv("JAXGEO_CACHE_DIR", str(tmp_path))

@@ -14,7 +14,7 @@ from typing import Any
 
 import numpy as np
 
-from ..._arrays import device_array
+from ..._runtime.arrays import device_array
 from ...geodesy import metres_per_unit
 from ...io import GroundPoints, Observations
 from ...lsq import GroundObs, ImageObs, ModelGroup, Problem, make_structure

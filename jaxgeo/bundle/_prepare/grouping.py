@@ -22,7 +22,7 @@ import jax.numpy as jnp
 import numpy as np
 from jaxtyping import PyTree
 
-from ..._arrays import device_array
+from ..._runtime.arrays import device_array
 from ...lsq import ModelGroup
 from .._errors import AdjustmentError
 

@@ -15,7 +15,7 @@ import jax
 import numpy as np
 from jaxtyping import Array, Float
 
-from ..._arrays import device_array
+from ..._runtime.arrays import device_array
 from ...lsq import ModelGroup
 from .._errors import AdjustmentError
 from .checks import label

@@ -1,6 +1,6 @@
-"""jaxgeo._shard.shard_map: zero-size inputs made inside the mapped call, the results those of
-the unmapped function. Over two CPU devices in a subprocess (the device count is fixed when jax
-starts; jaxlib 0.11.2 killed the process compiling this program before, on two devices only)."""
+"""jaxgeo._runtime.shard.shard_map: zero-size inputs made inside the mapped call, the results
+those of the unmapped function. Over two CPU devices in a subprocess (the device count is fixed
+when jax starts; jaxlib 0.11.2 killed the process compiling this program before, on two devices only)."""
 
 import json
 import os
@@ -12,7 +12,7 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
-from jaxgeo._shard import shard_map
+from jaxgeo._runtime.shard import shard_map
 
 REPO = pathlib.Path(__file__).resolve().parents[1]
 
@@ -20,7 +20,7 @@ SCRIPT = """
 import json
 import jax, jax.numpy as jnp, numpy as np
 import jaxgeo
-from jaxgeo._shard import shard_map
+from jaxgeo._runtime.shard import shard_map
 
 P = jax.sharding.PartitionSpec
 mesh = jax.sharding.Mesh(np.array(jax.local_devices()[:2]), ("r",))

@@ -40,7 +40,7 @@ ENVIRONMENT = ("EQX_ON_ERROR", "JAXGEO_TYPECHECK")
 @functools.cache
 def _source_digest() -> str:
     """SHA-256 of every jaxgeo module's source (computed once per process, a few ms)."""
-    root = Path(__file__).resolve().parent
+    root = Path(__file__).resolve().parent.parent  # the jaxgeo package
     h = hashlib.sha256()
     for path in sorted(root.rglob("*.py")):
         h.update(str(path.relative_to(root)).encode())

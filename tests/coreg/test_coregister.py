@@ -10,7 +10,7 @@ import pytest
 import rasterio
 from affine import Affine
 
-from jaxgeo.stereo import (
+from jaxgeo.coreg import (
     CoregistrationError,
     CoregistrationWarning,
     NuthKaab,

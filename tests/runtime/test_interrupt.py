@@ -8,7 +8,7 @@ import textwrap
 
 import pytest
 
-from jaxgeo import _interrupt
+from jaxgeo._runtime import interrupt as _interrupt
 from jaxgeo.io import atomic_output
 
 

@@ -1,5 +1,5 @@
-"""Trace-free warm calls (``jaxgeo._exported``): results bit-equal to ``eqx.filter_jit``, traced
-once per structure across processes, safe fall-backs."""
+"""Trace-free warm calls (``jaxgeo._runtime.exported``): results bit-equal to
+``eqx.filter_jit``, traced once per structure across processes, safe fall-backs."""
 
 import importlib
 import json
@@ -16,7 +16,7 @@ import jax.numpy as jnp
 import numpy as np
 import pytest
 
-from jaxgeo import _exported
+from jaxgeo._runtime import exported as _exported
 from jaxgeo.lsq import RESULTS
 
 REPO = pathlib.Path(__file__).resolve().parents[1]
@@ -240,7 +240,7 @@ def test_solve_options_reach_xla_and_those_jaxlib_does_not_know_are_left_out(
         _exported, "SOLVE_COMPILE", {**_exported.SOLVE_COMPILE, "xla_no_such": True}
     )
     x = np.linspace(0.0, 3.0, 5)
-    with caplog.at_level(logging.DEBUG, logger="jaxgeo._exported"):
+    with caplog.at_level(logging.DEBUG, logger="jaxgeo._runtime.exported"):
         out = _exported.call_solve(fn, x, 2.0)
         again = _exported.call_solve(fn, x, 2.0)
         other = _exported.call(fn, x[:4], 2.0)  # not a solve: XLA's defaults

@@ -1,5 +1,5 @@
-"""``jaxgeo._arrays``: host data onto the device with the values and types of ``jnp.asarray``,
-without compiling an XLA program."""
+"""``jaxgeo._runtime.arrays``: host data onto the device with the values and types of
+``jnp.asarray``, without compiling an XLA program."""
 
 import logging
 
@@ -8,7 +8,7 @@ import jax.numpy as jnp
 import numpy as np
 import pytest
 
-from jaxgeo._arrays import device_array, zeros_like
+from jaxgeo._runtime.arrays import device_array, zeros_like
 
 
 def _compiled(caplog, fn):

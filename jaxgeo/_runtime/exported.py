@@ -57,8 +57,8 @@ from typing import Any
 import equinox as eqx
 import jax
 
-from ._jaxconfig import cache_dir
-from ._program_key import key as _key
+from .jaxconfig import cache_dir
+from .program_key import key as _key
 
 SUFFIX = ".jaxexport"
 MAX_ELEMENTS = 1_000_000

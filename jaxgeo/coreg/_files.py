@@ -21,7 +21,7 @@ from dataclasses import replace
 import numpy as np
 
 from ..io import atomic_output, refuse_existing
-from ._coregister import (
+from ._nuth_kaab import (
     Coregistration,
     CoregistrationError,
     CoregistrationWarning,

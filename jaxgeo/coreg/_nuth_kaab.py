@@ -34,7 +34,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from ..errors import JaxgeoError, JaxgeoWarning
-from ._coregister_stats import DHStats, dh_stats, nmad
+from ._stats import DHStats, dh_stats, nmad
 
 
 class CoregistrationError(JaxgeoError, ValueError):

@@ -1,0 +1,15 @@
+"""The runtime floor: how jaxgeo's pure functions are compiled, kept and run, below every layer.
+
+- :mod:`.jaxconfig` float64, the CPU devices per core, the persistent compilation cache
+  (``JAXGEO_CACHE_DIR``), set before jax starts.
+- :mod:`.exported` entry points kept on disk as serialized ``jax.export`` programs (a warm run
+  neither traces nor compiles them), their XLA options, large programs compiled apart.
+- :mod:`.program_key` the key of a kept program (jaxgeo's source, versions, input structure).
+- :mod:`.arrays` host data onto the device without compiling.
+- :mod:`.shard` ``shard_map`` over the devices, zero-size inputs handled.
+- :mod:`.interrupt` Ctrl-C / SIGTERM as a request the writers check.
+
+Nothing here imports another jaxgeo package (the import contract's bottom layer), and this
+``__init__`` imports nothing: ``jaxgeo`` configures jax through :mod:`.jaxconfig` before jax is
+imported.
+"""

@@ -1,0 +1,35 @@
+"""How a product made tile by tile runs: one settings object for every tiled product."""
+
+from __future__ import annotations
+
+import dataclasses
+import os
+
+from ._runner import DEFAULT_RETRIES
+
+
+@dataclasses.dataclass(frozen=True)
+class TileSettings:
+    """Where and how the tiles of a product (ortho, DSM) run; the same for every product.
+
+    Attributes:
+        workers: worker processes; ``None``: one per core for a large product, none for a small
+            one or on 1-2 cores; ``0``: every tile in this process.
+        scheduler: address of an existing dask scheduler (``tcp://host:8786``) to run the tiles
+            on, instead of local workers.
+        retries: retries of a failing tile, or of a tile whose worker died.
+        resume: a folder that keeps finished tiles; a later run of the same job reuses them.
+        progress: a bar over the tiles on stderr.
+    """
+
+    workers: int | None = None
+    scheduler: str | None = None
+    retries: int = DEFAULT_RETRIES
+    resume: str | os.PathLike | None = None
+    progress: bool = True
+
+    def __post_init__(self):
+        if self.workers is not None and self.workers < 0:
+            raise ValueError(f"workers must be >= 0 (or None), got {self.workers}")
+        if self.retries < 0:
+            raise ValueError(f"retries must be >= 0, got {self.retries}")
