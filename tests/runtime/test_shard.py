@@ -1,6 +1,7 @@
 """jaxgeo._runtime.shard.shard_map: zero-size inputs made inside the mapped call, the results
 those of the unmapped function. Over two CPU devices in a subprocess (the device count is fixed
-when jax starts; jaxlib 0.11.2 killed the process compiling this program before, on two devices only)."""
+when jax starts; jaxlib 0.11.2 killed the process compiling this program before, on two devices
+only)."""
 
 import json
 import os
