@@ -26,8 +26,18 @@ API_NAMES = {
     "tiles": ("run_tiles", "plan_tiles", "TilePlan"),
 }
 # the public packages with a "::: public" page (intersect is a module: plain ":::")
-PUBLIC_PAGES = ("models", "lsq", "io", "bundle", "strip", "ortho", "stereo", "coreg", "simulate",
-                "tiles")
+PUBLIC_PAGES = (
+    "models",
+    "lsq",
+    "io",
+    "bundle",
+    "strip",
+    "ortho",
+    "stereo",
+    "coreg",
+    "simulate",
+    "tiles",
+)
 
 
 def _hooks():

@@ -68,8 +68,18 @@ def test_public_packages():
     their entry points public."""
     from jaxgeo.lsq import solve, solve_batch  # noqa: F401
 
-    for name in ("lsq", "bundle", "strip", "tiles", "ortho", "stereo", "coreg", "models", "io",
-                 "simulate"):
+    for name in (
+        "lsq",
+        "bundle",
+        "strip",
+        "tiles",
+        "ortho",
+        "stereo",
+        "coreg",
+        "models",
+        "io",
+        "simulate",
+    ):
         assert isinstance(getattr(jaxgeo, name), types.ModuleType)
     assert callable(jaxgeo.ortho.orthorectify) and callable(jaxgeo.stereo.dsm_from_images)
     assert jaxgeo.SolverConfig is jaxgeo.lsq.SolverConfig
