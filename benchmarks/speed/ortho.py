@@ -28,6 +28,7 @@ from benchmarks.data import REAL_DATA, VENTOUX_ORIGIN, write_dem, write_index_im
 from benchmarks.harness import emit
 from jaxgeo.io import read_dem, to_rasterio_rpc
 from jaxgeo.ortho import orthorectify
+from jaxgeo.tiles import TileSettings
 
 
 def main(argv=None) -> int:
@@ -57,8 +58,8 @@ def main(argv=None) -> int:
     dem = read_dem(dem_path, height="ellipsoidal")
 
     def ours(i):
-        return orthorectify(index, rpc, dem, tmp / f"o{i}.tif", image_origin=VENTOUX_ORIGIN,
-                            progress=False)  # fmt: skip
+        return orthorectify(index, dem, tmp / f"o{i}.tif", tiles=TileSettings(progress=False),
+                            model=rpc, image_origin=VENTOUX_ORIGIN)  # fmt: skip
 
     t0 = time.perf_counter()
     rep = ours("warm")

@@ -134,25 +134,37 @@ def run(args: argparse.Namespace) -> int:
                 print(f"jaxgeo ortho: warning: {w.message}", file=sys.stderr)
 
 
+def _settings(args: argparse.Namespace):
+    """The product's :class:`~jaxgeo.ortho.OrthoSettings` and the tiles'
+    :class:`~jaxgeo.tiles.TileSettings` from the arguments."""
+    from jaxgeo.ortho import MAX_PIXELS, OrthoSettings
+    from jaxgeo.tiles import TileSettings
+
+    settings = OrthoSettings(
+        crs=args.crs, res_m=args.res, bounds=args.bounds, resampling=args.resampling,
+        occlusion=args.occlusion, tile_px=args.tile or OrthoSettings.tile_px,
+        max_pixels=MAX_PIXELS if args.max_pixels is None else args.max_pixels,
+        compress=args.compress,
+    )  # fmt: skip
+    tiles = TileSettings(workers=args.workers, scheduler=args.scheduler, retries=args.retries,
+                         resume=args.resume, progress=not args.quiet)  # fmt: skip
+    return settings, tiles
+
+
 def _run(args: argparse.Namespace) -> int:
     from jaxgeo.io import read_dem
-    from jaxgeo.ortho import MAX_PIXELS, orthorectify, plan_ortho
+    from jaxgeo.ortho import orthorectify, plan_ortho
     from jaxgeo.tiles import TileError, write_plan
 
     from ._common import check_tile_options, note, open_images, print_json, tiles_kept
 
     (image,) = open_images([args.image], args)
     dem = read_dem(args.dem, height=args.dem_height, geoid=args.geoid)
-    inputs = _inputs(image, dem)
-    check_tile_options(args, inputs, 64)
+    check_tile_options(args, _inputs(image, dem), 64)
     note(dem.describe(), args.quiet)
-    options = dict(
-        crs=args.crs, res_m=args.res, bounds=args.bounds, resampling=args.resampling,
-        occlusion=args.occlusion, tile_px=args.tile or 1024, overwrite=args.overwrite,
-        max_pixels=MAX_PIXELS if args.max_pixels is None else args.max_pixels,
-    )  # fmt: skip
+    settings, tiles = _settings(args)
     if args.plan:
-        setup = plan_ortho(image, None, dem, args.out, **{**options, "overwrite": True})
+        setup = plan_ortho(image, dem, args.out, settings, overwrite=True)
         write_plan(setup.plan, args.plan, overwrite=args.overwrite)
         plan = setup.plan
         if args.json:
@@ -164,11 +176,7 @@ def _run(args: argparse.Namespace) -> int:
                   f"{plan.width} x {plan.height} px ({crs}); nothing computed")  # fmt: skip
         return 0
     try:
-        report = orthorectify(
-            image, None, dem, args.out, **options, compress=args.compress, workers=args.workers,
-            scheduler=args.scheduler, resume=args.resume, retries=args.retries,
-            progress=not args.quiet,
-        )  # fmt: skip
+        report = orthorectify(image, dem, args.out, settings, tiles, overwrite=args.overwrite)
     except (KeyboardInterrupt, TileError):
         tiles_kept(args, "ortho")
         raise

@@ -1,10 +1,13 @@
 """Orthorectification with any sensor model and a DEM (tiled on all cores, COG output, occlusion).
 
-from jaxgeo.ortho import orthorectify
-report = orthorectify("scene.tif", None, read_dem("dem.tif", geoid="egm96"), "ortho.tif")
+from jaxgeo.ortho import OrthoSettings, orthorectify
+report = orthorectify("scene.tif", read_dem("dem.tif", geoid="egm96"), "ortho.tif",
+                      OrthoSettings(crs="EPSG:32631", res_m=0.5))
 
-The tiles of a large product run on dask workers (:mod:`jaxgeo.tiles`); :func:`plan_ortho` checks
-the options and plans the tiles without computing any.
+:class:`OrthoSettings` says what the product is (grid, resampling, occlusion, tiles, limits);
+the tiles of a large product run on dask workers as :class:`jaxgeo.tiles.TileSettings` says;
+:func:`plan_ortho` takes the same arguments, checks them and plans the tiles without computing
+any.
 """
 
 from ._grid import OutputGrid as OutputGrid
@@ -14,5 +17,7 @@ from ._pipeline import OrthoReport as OrthoReport
 from ._pipeline import orthorectify as orthorectify
 from ._plan import OrthoSetup as OrthoSetup
 from ._plan import plan_ortho as plan_ortho
+from ._settings import OCCLUSIONS as OCCLUSIONS
+from ._settings import OrthoSettings as OrthoSettings
 from ._validate import MAX_PIXELS as MAX_PIXELS
 from ._validate import OrthoError as OrthoError

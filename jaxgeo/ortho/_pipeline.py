@@ -16,9 +16,10 @@ import time
 from collections.abc import Sequence
 
 from ..io import DEM, SensorImage
-from ..tiles import mosaic_cog, remove_work, run_tiles, work_folder
+from ..tiles import TileSettings, mosaic_cog, remove_work, run_tiles, work_folder
 from ._plan import plan_ortho
-from ._validate import MAX_PIXELS, OrthoError
+from ._settings import OrthoSettings
+from ._validate import OrthoError
 
 
 @dataclasses.dataclass(frozen=True)
@@ -53,84 +54,64 @@ class OrthoReport:
 
 def orthorectify(
     image: str | os.PathLike | SensorImage,
-    model=None,
-    dem: DEM | str | os.PathLike | None = None,
-    out: str | os.PathLike | None = None,
+    dem: DEM | str | os.PathLike,
+    out: str | os.PathLike,
+    settings: OrthoSettings = OrthoSettings(),  # noqa: B008 (frozen: one default is safe)
+    tiles: TileSettings = TileSettings(),  # noqa: B008 (frozen)
     *,
-    crs=None,
-    res_m: float | None = None,
-    bounds: Sequence[float] | None = None,
-    resampling: str = "bilinear",
-    occlusion: str = "off",
+    model=None,
     image_origin: Sequence[float] | None = None,
-    nodata: float | None = None,
-    tile_px: int = 1024,
-    step_px: int = 16,
-    tol_px: float = 0.01,
-    max_pixels: float | None = MAX_PIXELS,
-    compress: str = "deflate",
-    workers: int | None = None,
-    scheduler: str | None = None,
-    resume: str | os.PathLike | None = None,
-    retries: int = 2,
     overwrite: bool = False,
-    progress: bool = True,
 ) -> OrthoReport:
     """Orthorectify ``image`` with its model on ``dem`` into the COG ``out``.
 
     Args:
         image: a raster path (its model: its RPC, or ``model``) or a :class:`jaxgeo.io.SensorImage`.
+        dem: a :class:`jaxgeo.io.DEM` (heights made ellipsoidal by ``read_dem``) or a path read
+            as ellipsoidal.
+        out: the COG written (atomically, once complete; never an input).
+        settings: the output grid and options (:class:`OrthoSettings`: CRS, resolution, bounds,
+            resampling, occlusion, nodata, tile and coarse-grid sizes, pixel limit, compression).
+        tiles: where the tiles run (:class:`jaxgeo.tiles.TileSettings`, for
+            :func:`jaxgeo.tiles.run_tiles`): ``workers=None`` = in this process for a small
+            product, else one worker process per core; ``0`` = in this process; ``scheduler`` =
+            an existing dask cluster's address; ``retries``; ``resume``: a folder for the
+            finished tiles, kept after an interruption and reused by the next run with the same
+            folder (default: a temporary folder beside ``out``); ``progress``: a bar on stderr.
         model: a sensor model or a model file (default: the raster's own RPC); in the model's
             pixel frame: a crop's pixel-space geotransform gives its origin, ``image_origin``
             ``(col, row)`` overrides it (a conflict is an error). Pixel centres at integers.
-        dem: a :class:`jaxgeo.io.DEM` (heights made ellipsoidal by ``read_dem``) or a path read
-            as ellipsoidal.
-        crs: output CRS (anything pyproj takes, e.g. ``"EPSG:32631"``); default the local UTM
-            zone. res_m: output pixel size in CRS units (degrees in a geographic CRS); default
-            the image's GSD at its centre. bounds: ``(W, S, E, N)`` in the output CRS; default
-            the footprint on the DEM.
-        resampling: ``nearest``, ``bilinear`` or ``cubic`` (Keys, a = -0.5).
-        occlusion: ``off``; ``nodata`` (pixels hidden from the sensor by terrain are nodata);
-            ``band`` (an extra last band, 1 = hidden, 0 = seen).
-        nodata: output nodata value; default NaN for float images, 0 for integer ones.
-        tile_px, step_px, tol_px: tile size, coarse-grid step (px), refinement tolerance (px).
-        max_pixels: refuse a larger product (``None``/0: no limit). compress: COG compression
-            (``deflate``, ``zstd``, ``lzw``, ``none``).
-        workers, scheduler, retries: where the tiles run (:func:`jaxgeo.tiles.run_tiles`):
-            ``None`` = in this process for a small product, else one worker process per core;
-            ``0`` = in this process; ``scheduler`` = an existing dask cluster's address.
-        resume: a folder for the finished tiles, kept after an interruption and reused by the
-            next run with the same folder (default: a temporary folder beside ``out``).
-        overwrite: replace an existing ``out`` (never an input). progress: a bar on stderr.
+        overwrite: replace an existing ``out`` (never an input).
 
     Returns an :class:`OrthoReport`. Raises :class:`OrthoError` (a ``ValueError``) for options
     or inputs that cannot give a product (before any computation), ``FileExistsError`` for an
     existing ``out``, :class:`jaxgeo.tiles.TileError` naming a tile that kept failing.
     """
+    if not isinstance(tiles, TileSettings):
+        raise TypeError(f"tiles must be a jaxgeo.tiles.TileSettings, got {type(tiles).__name__}")
     t_start = time.perf_counter()
     folder, done = None, False
     # the workers start once the plan is made: a refused input is answered without them
-    setup = plan_ortho(
-        image, model, dem, out, crs=crs, res_m=res_m, bounds=bounds, resampling=resampling,
-        occlusion=occlusion, image_origin=image_origin, nodata=nodata, tile_px=tile_px,
-        step_px=step_px, tol_px=tol_px, max_pixels=max_pixels, overwrite=overwrite,
-    )  # fmt: skip
+    setup = plan_ortho(image, dem, out, settings, model=model, image_origin=image_origin,
+                       overwrite=overwrite)  # fmt: skip
     try:
         out = setup.out
-        folder = work_folder(out, resume)
-        run = run_tiles(setup.plan, setup.job, folder, workers=workers, scheduler=scheduler,
-                        retries=retries, progress=progress)  # fmt: skip
+        folder = work_folder(out, tiles.resume)
+        run = run_tiles(setup.plan, setup.job, folder, workers=tiles.workers,
+                        scheduler=tiles.scheduler, retries=tiles.retries,
+                        progress=tiles.progress)  # fmt: skip
         stats = [r.stats for r in run.results.values() if r.path is not None]
         if not stats:
             raise OrthoError(f"{setup.image.path}: no tile of the product holds data (the "
                              "image does not reach the output grid)")  # fmt: skip
-        overviews = "nearest" if resampling == "nearest" else "average"
-        mosaic_cog(run, setup.plan, setup.job.spec, out, overwrite=overwrite, compress=compress,
+        overviews = "nearest" if settings.resampling == "nearest" else "average"
+        mosaic_cog(run, setup.plan, setup.job.spec, out, overwrite=overwrite,
+                   compress=settings.compress,
                    overview_resampling=overviews)  # fmt: skip
         done = True
     finally:
-        if folder is not None and (resume is None or done):
-            remove_work(folder, created=resume is None)
+        if folder is not None and (tiles.resume is None or done):
+            remove_work(folder, created=tiles.resume is None)
     total = setup.plan.width * setup.plan.height
     blocks = sum(s.get("blocks", 0) for s in stats)
     return OrthoReport(
@@ -140,7 +121,7 @@ def orthorectify(
         refined_fraction=sum(s.get("refined_blocks", 0) for s in stats) / max(blocks, 1),
         valid_fraction=sum(s.get("valid_px", 0) for s in stats) / total,
         occluded_fraction=(sum(s.get("occluded_px", 0) for s in stats) / total
-                           if occlusion != "off" else None),
+                           if settings.occlusion != "off" else None),
         seconds=time.perf_counter() - t_start, tiles=len(setup.plan), empty_tiles=run.empty,
         reused_tiles=run.reused, workers=run.workers, scheduler=run.scheduler,
     )  # fmt: skip

@@ -25,19 +25,16 @@ from ..tiles import RasterSpec, TilePlan, overview_factors, plan_tiles
 from ._grid import default_crs, dem_for_image, footprint, ground_sample_distance
 from ._grid import output_grid as make_output_grid
 from ._job import DEMSource, OrthoJob
-from ._kernel import RESAMPLINGS
+from ._settings import OrthoSettings
 from ._validate import (
     M_PER_DEG,
-    MAX_PIXELS,
     OrthoError,
-    check_bounds,
     check_bounds_cover,
     check_crs,
     check_res,
     check_size,
 )
 
-OCCLUSIONS = ("off", "nodata", "band")
 WINDOW_MAX_PX = 2048
 """A tile's image window is kept near this size (px a side): a resolution coarser than the GSD
 gets smaller tiles, so memory per tile stays bounded whatever the resolution."""
@@ -114,34 +111,19 @@ def _tile_inputs(plan_tiles_list, grid, crs, model, h_range, img_size, margin_de
 
 def plan_ortho(
     image: str | os.PathLike | SensorImage,
-    model=None,
-    dem: DEM | str | os.PathLike | None = None,
-    out: str | os.PathLike | None = None,
+    dem: DEM | str | os.PathLike,
+    out: str | os.PathLike,
+    settings: OrthoSettings = OrthoSettings(),  # noqa: B008 (frozen: one default is safe)
     *,
-    crs=None,
-    res_m: float | None = None,
-    bounds: Sequence[float] | None = None,
-    resampling: str = "bilinear",
-    occlusion: str = "off",
+    model=None,
     image_origin: Sequence[float] | None = None,
-    nodata: float | None = None,
-    tile_px: int = 1024,
-    step_px: int = 16,
-    tol_px: float = 0.01,
-    max_pixels: float | None = MAX_PIXELS,
     overwrite: bool = False,
 ) -> OrthoSetup:
-    """Everything :func:`orthorectify` checks and plans before computing a tile (same
-    arguments); raises :class:`OrthoError` (or ``ValueError``/``FileExistsError``) naming
-    what is wrong, before any computation when it is an option."""
-    if resampling not in RESAMPLINGS:
-        raise OrthoError(f"unknown resampling {resampling!r}; expected one of {RESAMPLINGS}")
-    if occlusion not in OCCLUSIONS:
-        raise OrthoError(f"unknown occlusion mode {occlusion!r}; expected one of {OCCLUSIONS}")
-    if step_px < 2 or step_px % 2:
-        raise OrthoError(f"step_px must be an even number >= 2, got {step_px}")
-    if tile_px < 4 * step_px:
-        raise OrthoError(f"tile_px must be >= {4 * step_px} (4 x step_px), got {tile_px}")
+    """Everything :func:`orthorectify` checks and plans before computing a tile (the same
+    arguments but ``tiles``); raises :class:`OrthoError` (or ``ValueError``/``FileExistsError``)
+    naming what is wrong, before any computation when it is an option."""
+    if not isinstance(settings, OrthoSettings):
+        raise TypeError(f"settings must be an OrthoSettings, got {type(settings).__name__}")
     if dem is None or out is None:
         raise TypeError("plan_ortho needs a dem and an out path")
     out = refuse_existing(out, overwrite)  # first: nothing is read for an output kept
@@ -162,12 +144,10 @@ def plan_ortho(
     for p in inputs:
         if out.resolve() == p.resolve():
             raise OrthoError(f"{out}: this output is an input (image, model or DEM); name another")
-    out_crs = check_crs(crs) if crs is not None else None
-    if res_m is not None:
-        check_res(res_m, out_crs, None)  # a number > 0; in degrees or not: once the GSD is known
-    box = check_bounds(bounds) if bounds is not None else None
-    if box is not None and out_crs is None:
-        raise OrthoError("bounds need the output CRS they are in (crs=, --crs)")
+    s = settings  # checked when made (crs, res_m, bounds: the degrees once the GSD is known)
+    resampling, occlusion, step_px, tol_px = s.resampling, s.occlusion, s.step_px, s.tol_px
+    out_crs = check_crs(s.crs) if s.crs is not None else None
+    box = s.bounds
 
     import rasterio
     import rasterio.errors
@@ -183,7 +163,7 @@ def plan_ortho(
     out_crs = out_crs if out_crs is not None else default_crs(ground)
     gsd = ground_sample_distance(model, dem_grid, out_crs, width, height)
     gsd_m = gsd * M_PER_DEG if out_crs.is_geographic else gsd
-    res = check_res(res_m if res_m is not None else gsd, out_crs, gsd_m)
+    res = check_res(s.res_m if s.res_m is not None else gsd, out_crs, gsd_m)
     import pyproj
 
     tr = pyproj.Transformer.from_crs(4326, out_crs, always_xy=True)
@@ -192,12 +172,12 @@ def plan_ortho(
     if box is not None:
         check_bounds_cover(box, poly, str(sensor.path))
     grid = make_output_grid(ground, out_crs, res, box)
-    check_size(grid.width, grid.height, res, max_pixels, gsd)
+    check_size(grid.width, grid.height, res, s.max_pixels, gsd)
 
     # tiles: the image window of a tile stays near WINDOW_MAX_PX whatever the resolution
     scale = res / gsd
-    tile = min(int(tile_px), max(int(WINDOW_MAX_PX / 2 / max(scale, 1e-9)), 4 * step_px))
-    if tile < tile_px:  # a power of two: the tiles' overviews align with the product's
+    tile = min(int(s.tile_px), max(int(WINDOW_MAX_PX / 2 / max(scale, 1e-9)), 4 * step_px))
+    if tile < s.tile_px:  # a power of two: the tiles' overviews align with the product's
         tile = 2 ** int(math.log2(tile))
     tile = max(tile // step_px * step_px, 4 * step_px)
     th = min(tile, math.ceil(grid.height / step_px) * step_px)
@@ -242,6 +222,7 @@ def plan_ortho(
     dem_shape = (int(math.ceil(cells[0] / 8) * 8), int(math.ceil(cells[1] / 8) * 8))
 
     is_float = np.issubdtype(np.dtype(dtype), np.floating)
+    nodata = s.nodata
     if nodata is None:
         nodata = float("nan") if is_float else 0
     out_bands = bands + (1 if occlusion == "band" else 0)

@@ -7,11 +7,12 @@ import pytest
 import rasterio
 
 from jaxgeo.io import read_dem
-from jaxgeo.ortho import orthorectify
+from jaxgeo.ortho import OrthoSettings, orthorectify
+from jaxgeo.tiles import TileSettings
 from tests.ortho.conftest import write_dem
 
 # one pixel lattice for both products (the default GSD is taken on the DEM at the image centre)
-GRID = dict(crs="EPSG:32631", res_m=0.5, progress=False)
+GRID = dict(settings=OrthoSettings(crs="EPSG:32631", res_m=0.5), tiles=TileSettings(progress=False))
 
 
 def test_dem_holes_under_the_border_give_nodata_not_an_error(real_data, ventoux_dem_ellipsoidal,
@@ -19,7 +20,7 @@ def test_dem_holes_under_the_border_give_nodata_not_an_error(real_data, ventoux_
     image = real_data / "ventoux" / "left_image.tif"
     model = real_data / "phr_ventoux__left_image.geom"
     full = tmp_path / "full.tif"
-    orthorectify(image, model, read_dem(ventoux_dem_ellipsoidal), full, **GRID)
+    orthorectify(image, read_dem(ventoux_dem_ellipsoidal), full, **GRID, model=model)
     with rasterio.open(ventoux_dem_ellipsoidal) as src:
         z, t = src.read(1), src.transform
     with rasterio.open(full) as ds:
@@ -37,7 +38,7 @@ def test_dem_holes_under_the_border_give_nodata_not_an_error(real_data, ventoux_
     out = tmp_path / "holes_ortho.tif"
     with pytest.warns(UserWarning, match=r"holes.tif: \d+% of the image border falls where the "
                       "DEM has no height"):  # fmt: skip
-        report = orthorectify(image, model, read_dem(dem), out, **GRID)
+        report = orthorectify(image, read_dem(dem), out, **GRID, model=model)
     # (SRTM cells are 90 m, the crop 250 m wide: a cell beside the holes has no bilinear height)
     assert 0.1 < report.valid_fraction < 0.7
     with rasterio.open(out) as ds, rasterio.open(full) as f:

@@ -17,6 +17,7 @@ from rasterio.warp import Resampling, reproject
 import jaxgeo
 from jaxgeo.io import read_dem, to_rasterio_rpc
 from jaxgeo.ortho import orthorectify
+from jaxgeo.tiles import TileSettings
 from tests.conftest import PLEIADES_TIF
 from tests.ortho.conftest import VENTOUX_ORIGIN, write_index_image
 
@@ -35,8 +36,9 @@ def _gdal(index_path, rpcs, dem_path, ref, use_dem=True):
 def _parity(tmp_path, model, image_origin, rpcs_for_gdal, dem_path, width, height):
     index = write_index_image(tmp_path / "index.tif", width, height)
     out = tmp_path / "ortho.tif"
-    rep = orthorectify(index, model, read_dem(dem_path, height="ellipsoidal"), out,
-                       image_origin=image_origin, progress=False)  # fmt: skip
+    rep = orthorectify(index, read_dem(dem_path, height="ellipsoidal"), out,
+                       tiles=TileSettings(progress=False), model=model,
+                       image_origin=image_origin)  # fmt: skip
     with rasterio.open(out) as ref:
         ours = ref.read()
         assert ref.crs is not None and ref.crs.to_epsg() == int(rep.crs.split(":")[1])
@@ -82,6 +84,7 @@ def test_refuses_to_overwrite(tmp_path, real_data, nice_dem_synthetic):
     out.write_bytes(b"keep")
     rpc = jaxgeo.read_rpc(real_data / PLEIADES_TIF)
     with pytest.raises(FileExistsError):
-        orthorectify(real_data / PLEIADES_TIF, rpc, nice_dem_synthetic, out, progress=False)
+        orthorectify(real_data / PLEIADES_TIF, nice_dem_synthetic, out,
+                     tiles=TileSettings(progress=False), model=rpc)  # fmt: skip
     assert out.read_bytes() == b"keep"
     assert dataclasses.is_dataclass(jaxgeo.ortho.OrthoReport)

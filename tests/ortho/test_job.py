@@ -7,9 +7,11 @@ import pytest
 import rasterio
 
 from jaxgeo.io import read_dem
-from jaxgeo.ortho import orthorectify, plan_ortho
-from jaxgeo.tiles import NoData, Tile
+from jaxgeo.ortho import OrthoSettings, orthorectify, plan_ortho
+from jaxgeo.tiles import NoData, Tile, TileSettings
 from tests.ortho.conftest import ventoux_dem_ellipsoidal  # noqa: F401
+
+IN_PROCESS = TileSettings(workers=0, progress=False)
 
 
 @pytest.fixture(scope="module")
@@ -23,7 +25,7 @@ def crop(real_data, ventoux_dem_ellipsoidal):  # noqa: F811
 def fast(crop, tmp_path_factory):
     image, model, dem = crop
     out = tmp_path_factory.mktemp("fast") / "ortho.tif"
-    report = orthorectify(image, model, dem, out, workers=0, progress=False)
+    report = orthorectify(image, dem, out, tiles=IN_PROCESS, model=model)
     assert report.refined_fraction == 0.0 and report.grid_error_px < 0.01
     with rasterio.open(out) as ds:
         return ds.read(), report
@@ -32,7 +34,7 @@ def fast(crop, tmp_path_factory):
 def test_blocks_refined_in_full_give_the_same_product(crop, fast, tmp_path):
     image, model, dem = crop
     out = tmp_path / "refined.tif"
-    report = orthorectify(image, model, dem, out, tol_px=0.0, workers=0, progress=False)
+    report = orthorectify(image, dem, out, OrthoSettings(tol_px=0.0), IN_PROCESS, model=model)
     assert report.refined_fraction > 0.9  # (blocks without data are not checked)
     with rasterio.open(out) as ds:
         refined = ds.read()
@@ -44,7 +46,8 @@ def test_blocks_refined_in_full_give_the_same_product(crop, fast, tmp_path):
 def test_occlusion_band_on_the_fast_product(crop, fast, tmp_path):
     image, model, dem = crop
     out = tmp_path / "occ.tif"
-    report = orthorectify(image, model, dem, out, occlusion="band", workers=0, progress=False)
+    report = orthorectify(image, dem, out, OrthoSettings(occlusion="band"), IN_PROCESS,
+                          model=model)  # fmt: skip
     with rasterio.open(out) as ds:
         data = ds.read()
     assert data.shape[0] == fast[0].shape[0] + 1 and report.occluded_fraction is not None
@@ -56,7 +59,7 @@ def test_occlusion_band_on_the_fast_product(crop, fast, tmp_path):
 
 def test_a_tile_off_the_image_has_no_data(crop, tmp_path):
     image, model, dem = crop
-    setup = plan_ortho(image, model, dem, tmp_path / "o.tif", tile_px=256)
+    setup = plan_ortho(image, dem, tmp_path / "o.tif", OrthoSettings(tile_px=256), model=model)
     far = Tile("far", 100_000, 100_000, 64, 64)  # 50 km away on the output grid
     with pytest.raises(NoData):
         setup.job(far, tmp_path / "far.tif")

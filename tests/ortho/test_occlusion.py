@@ -8,8 +8,9 @@ import rasterio
 import jaxgeo
 from jaxgeo.io import SensorImage, read_dem
 from jaxgeo.models import DEMGrid, DEMStatus, localize_on_dem
-from jaxgeo.ortho import orthorectify
+from jaxgeo.ortho import OrthoSettings, orthorectify
 from jaxgeo.ortho._occlusion import occluded_pixels
+from jaxgeo.tiles import TileSettings
 from tests.conftest import PLEIADES_TIF
 from tests.ortho.conftest import write_dem
 
@@ -45,7 +46,8 @@ def test_ridge_hides_terrain_behind_it(ridge, tmp_path, real_data):
     # the crop's file carries a flipped pixel-space geotransform open_image refuses: the image
     # is given with its RPC in its own pixel frame
     image = SensorImage("crop", rpc, (0.0, 0.0), real_data / PLEIADES_TIF, (128, 128), None, rpc)
-    rep = orthorectify(image, None, dem, out, occlusion="band", progress=False)
+    rep = orthorectify(image, dem, out, OrthoSettings(occlusion="band"),
+                       TileSettings(progress=False))  # fmt: skip
     assert rep.occluded_fraction > 0.01
     with rasterio.open(out) as ds:
         mask = ds.read(ds.count)

@@ -8,7 +8,8 @@ import rasterio
 import jaxgeo
 from jaxgeo.io import read_dem
 from jaxgeo.models import DEMStatus, localize_on_dem
-from jaxgeo.ortho import orthorectify
+from jaxgeo.ortho import OrthoSettings, orthorectify
+from jaxgeo.tiles import TileSettings
 from tests.conftest import PLEIADES_TIF
 
 WAVELENGTH_M = 12.0
@@ -39,8 +40,8 @@ def test_ortho_of_a_ground_pattern_lands_on_the_truth(tmp_path, real_data, nice_
                        dtype="float64") as dst:  # fmt: skip
         dst.write(bands)
     out = tmp_path / "ortho.tif"
-    rep = orthorectify(image, rpc, dem, out, crs="EPSG:32632", resampling="bilinear",
-                       progress=False)  # fmt: skip
+    rep = orthorectify(image, dem, out, OrthoSettings(crs="EPSG:32632", resampling="bilinear"),
+                       TileSettings(progress=False), model=rpc)  # fmt: skip
     with rasterio.open(out) as ds:
         pattern, de, dn = ds.read()
         rr, cc = np.mgrid[0 : ds.height, 0 : ds.width]

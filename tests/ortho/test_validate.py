@@ -10,7 +10,7 @@ import pytest
 
 import jaxgeo
 from jaxgeo.io import read_dem
-from jaxgeo.ortho import OrthoError, plan_ortho
+from jaxgeo.ortho import OrthoError, OrthoSettings, plan_ortho
 from jaxgeo.ortho._grid import border_pixels, on_dem
 from jaxgeo.ortho._validate import (
     check_bounds,
@@ -68,6 +68,40 @@ def test_size():
         check_size(2000, 1000, 0.5, 1e6, 0.5)
 
 
+def test_settings_are_checked_when_made_and_name_the_field():
+    s = OrthoSettings(crs=32631, res_m=2, bounds=[0, 1, 2, 3])
+    assert s.res_m == 2.0 and s.bounds == (0.0, 1.0, 2.0, 3.0)  # as checked: floats, a tuple
+    assert hash(s) == hash(OrthoSettings(crs=32631, res_m=2.0, bounds=(0, 1, 2, 3)))
+    bad = {
+        "resampling": ({"resampling": "lanczos"}, "unknown resampling 'lanczos'"),
+        "occlusion": ({"occlusion": "yes"}, "unknown occlusion mode 'yes'"),
+        "compress": ({"compress": "jpeg"}, "unknown compression 'jpeg'"),
+        "step odd": ({"step_px": 15}, "step_px must be an even number >= 2"),
+        "tile": ({"tile_px": 32}, "tile_px must be >= 64"),
+        "tol": ({"tol_px": -0.1}, "tol_px must be a finite number >= 0"),
+        "tol nan": ({"tol_px": float("nan")}, "tol_px must be a finite number >= 0"),
+        "limit": ({"max_pixels": -1}, "max_pixels must be >= 0"),
+        "crs": ({"crs": "EPSG:99999"}, "invalid CRS 'EPSG:99999'"),
+        "res": ({"res_m": 0}, "resolution must be > 0"),
+        "bounds": ({"crs": 32631, "bounds": (2, 0, 1, 1)}, "are empty"),
+        "bounds without a CRS": ({"bounds": (0, 0, 1, 1)}, "bounds need the output CRS"),
+    }
+    for kwargs, message in bad.values():
+        with pytest.raises(OrthoError, match=message):
+            OrthoSettings(**kwargs)
+    assert OrthoSettings(max_pixels=None, nodata=float("nan"), tol_px=0).max_pixels is None
+
+
+def test_plan_and_ortho_take_settings_objects_only(tmp_path):
+    from jaxgeo.ortho import orthorectify
+
+    with pytest.raises(TypeError, match="settings"):
+        plan_ortho("i.tif", "dem.tif", tmp_path / "o.tif", {"crs": "EPSG:32631"})
+    with pytest.raises(TypeError, match="tiles"):
+        orthorectify("i.tif", "dem.tif", tmp_path / "o.tif", OrthoSettings(), {"workers": 0})
+    assert list(tmp_path.iterdir()) == []
+
+
 @pytest.fixture(scope="module")
 def ventoux(real_data, ventoux_dem_ellipsoidal):  # noqa: F811
     from jaxgeo.models import Biased, ShiftBias
@@ -94,13 +128,14 @@ def test_plan_refuses_before_computing_and_tiles_follow_the_resolution(ventoux, 
     _, dem, rpc = ventoux  # the crop's frame: its pixel-space geotransform
     image = real_data / "ventoux" / "left_image.tif"
     with pytest.raises(OrthoError, match="is an input"):
-        plan_ortho(image, rpc, dem, image, overwrite=True)
+        plan_ortho(image, dem, image, model=rpc, overwrite=True)
     with pytest.raises(OrthoError, match="bounds need the output CRS"):
-        plan_ortho(image, rpc, dem, tmp_path / "o.tif", bounds=(0, 0, 1, 1))
+        plan_ortho(image, dem, tmp_path / "o.tif", OrthoSettings(bounds=(0, 0, 1, 1)), model=rpc)
     # a resolution 8 x coarser than the GSD: smaller tiles (a power of two), bounded windows
-    fine = plan_ortho(image, rpc, dem, tmp_path / "o.tif", tile_px=256)
+    fine = plan_ortho(image, dem, tmp_path / "o.tif", OrthoSettings(tile_px=256), model=rpc)
     res = fine.job.spec.transform[0]
-    coarse = plan_ortho(image, rpc, dem, tmp_path / "o.tif", res_m=8 * res, tile_px=1024)
+    coarse = plan_ortho(image, dem, tmp_path / "o.tif", OrthoSettings(res_m=8 * res, tile_px=1024),
+                        model=rpc)  # fmt: skip
     assert math.log2(coarse.plan.tile_px).is_integer() and coarse.plan.tile_px < 1024
     windows = [t.inputs["image_window"] for t in coarse.plan.tiles if t.inputs["image_window"]]
     assert max(max(w[2], w[3]) for w in windows) <= 2048 + 64

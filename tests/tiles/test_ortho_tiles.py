@@ -18,7 +18,7 @@ import rasterio
 
 from jaxgeo.cli import main
 from jaxgeo.io import read_dem
-from jaxgeo.ortho import plan_ortho
+from jaxgeo.ortho import OrthoSettings, plan_ortho
 from jaxgeo.tiles import TileError, WorkerPool, mosaic_cog, run_tiles
 from tests.ortho.conftest import ventoux_dem_ellipsoidal  # noqa: F401  (fixture)
 
@@ -42,7 +42,7 @@ def setup(pool, crop, ventoux_dem_ellipsoidal, tmp_path_factory):  # noqa: F811
     image, model = crop
     dem = read_dem(ventoux_dem_ellipsoidal, height="ellipsoidal")
     out = tmp_path_factory.mktemp("ortho") / "ortho.tif"
-    return plan_ortho(image, model, dem, out, tile_px=TILE)
+    return plan_ortho(image, dem, out, OrthoSettings(tile_px=TILE), model=model)
 
 
 def _product(setup, run, out) -> np.ndarray:
