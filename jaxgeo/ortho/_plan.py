@@ -2,9 +2,11 @@
 
 :func:`plan_ortho` works on the host: the image (raster, model, pixel frame:
 :func:`jaxgeo.io.open_image`), the DEM under the image's footprint, the footprint on it, the
-output grid (default: the local UTM zone at the image's GSD), every check of the options
-(:mod:`._validate`), and the tile plan with each tile's ground box and image window, and the
-per-tile job (:class:`._job.OrthoJob`) with the padded shapes all tiles compute with.
+output grid (default: the local UTM zone at the image's GSD), the checks of the options that
+need the inputs (:mod:`._validate`: resolution against the GSD, bounds against the footprint,
+size; the others are checked when the :class:`._settings.OrthoSettings` is made), and the tile
+plan with each tile's ground box and image window, and the per-tile job
+(:class:`._job.OrthoJob`) with the padded shapes all tiles compute with.
 """
 
 from __future__ import annotations
