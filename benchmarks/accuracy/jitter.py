@@ -116,7 +116,7 @@ def run(directory, knot_lines: float | None, smoothness_px: float | None) -> dic
     from jaxgeo.io import open_image
     from jaxgeo.models import AffineBias, JitterBias
     from jaxgeo.simulate import read_stereo_scene
-    from jaxgeo.stereo import tie_points
+    from jaxgeo.stereo import MatchSettings, tie_points
 
     d = pathlib.Path(directory)
     scene = read_stereo_scene(d)
@@ -124,7 +124,9 @@ def run(directory, knot_lines: float | None, smoothness_px: float | None) -> dic
     h_range = (float(h.min()) - HEIGHT_MARGIN_M, float(h.max()) + HEIGHT_MARGIN_M)
     t = time.perf_counter()
     m1, m2 = (open_image(d / f"{n}.tif").model for n in ("left", "right"))
-    ties = tie_points(m1, m2, d / "left.tif", d / "right.tif", height_range_m=h_range)
+    ties = tie_points(
+        m1, m2, d / "left.tif", d / "right.tif", MatchSettings(height_range_m=h_range)
+    )
     t_ties = time.perf_counter() - t
     lines = (0.0, float(scene.size - 1))
     kw = {}

@@ -51,7 +51,7 @@ def tie_points(models, images, n_max, rng):
 
     x1, d1 = sift_features(to_uint8(images[0]))
     x2, d2 = sift_features(to_uint8(images[1]))
-    ties = guided_matches(*models, x1, d1, x2, d2, los_heights(models[0]), epipolar_tol_px=80.0)
+    ties = guided_matches(*models, (x1, d1), (x2, d2), los_heights(models[0]), epipolar_tol_px=80.0)
     keep = rng.choice(len(ties), min(n_max, len(ties)), replace=False)
     return ties.xy1[keep], ties.xy2[keep]
 

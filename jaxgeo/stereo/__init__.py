@@ -20,7 +20,12 @@ from ._dsm import rasterize as rasterize
 from ._dsm import write_dsm as write_dsm
 from ._join import JoinedTies as JoinedTies
 from ._join import join_ties as join_ties
+from ._match_images import NoTiesError as NoTiesError
+from ._match_images import TieResult as TieResult
+from ._match_images import match_images as match_images
+from ._match_settings import MatchSettings as MatchSettings
 from ._matching import Candidates as Candidates
+from ._matching import Features as Features
 from ._matching import Matches as Matches
 from ._matching import epipolar_candidates as epipolar_candidates
 from ._matching import epipolar_offsets as epipolar_offsets

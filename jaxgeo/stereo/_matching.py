@@ -171,22 +171,27 @@ def _unit(desc):
     return desc / np.maximum(np.linalg.norm(desc, axis=1, keepdims=True), 1e-12)
 
 
+Features = tuple[np.ndarray, np.ndarray]
+"""SIFT keypoints ``(n, 2)`` (x, y) px and their descriptors ``(n, 128)``, as
+:func:`sift_features` and :func:`sift_features_raster` return them."""
+
+
 def epipolar_candidates(
     model1: AbstractSensorModel,
     model2: AbstractSensorModel,
-    xy1: np.ndarray,
-    desc1: np.ndarray,
-    xy2: np.ndarray,
-    desc2: np.ndarray,
+    features1: Features,
+    features2: Features,
     height_range_m: Sequence[float],
     epipolar_tol_px: float = 10.0,
     ratio: float = 0.8,
 ) -> Candidates:
-    """For each keypoint of image 1, its nearest descriptor among the image-2 keypoints within
-    ``epipolar_tol_px`` of its epipolar segment (heights ``height_range_m``), kept when it
-    passes Lowe's ratio test ``ratio``. The second-best is taken among candidates at another
-    location than the best: SIFT gives one keypoint several orientations (one descriptor
-    each), which are not rival matches."""
+    """For each keypoint of image 1 (``features1 = (xy1, desc1)``, :data:`Features`), its
+    nearest descriptor among the image-2 keypoints (``features2``) within ``epipolar_tol_px``
+    of its epipolar segment (heights ``height_range_m``), kept when it passes Lowe's ratio test
+    ``ratio``. The second-best is taken among candidates at another location than the best:
+    SIFT gives one keypoint several orientations (one descriptor each), which are not rival
+    matches."""
+    (xy1, desc1), (xy2, desc2) = features1, features2
     xy1, xy2 = np.asarray(xy1, dtype=float), np.asarray(xy2, dtype=float)
     empty = Candidates(*(np.zeros(0, int),) * 2, *(np.zeros(0),) * 3, 0)
     if len(xy1) == 0 or len(xy2) == 0:
@@ -296,24 +301,24 @@ class Matches:
 def guided_matches(
     model1: AbstractSensorModel,
     model2: AbstractSensorModel,
-    xy1: np.ndarray,
-    desc1: np.ndarray,
-    xy2: np.ndarray,
-    desc2: np.ndarray,
+    features1: Features,
+    features2: Features,
     height_range_m: Sequence[float],
     epipolar_tol_px: float = 10.0,
     ratio: float = 0.8,
 ) -> Matches:
-    """Match keypoints of image 1 to image 2 within ``epipolar_tol_px`` of the predicted epipolar
-    segment (heights ``height_range_m``), Lowe ratio ``ratio``
-    (:func:`epipolar_candidates`), then reject outliers across the epipolar direction (module
-    docstring). No check of the heights: :func:`~jaxgeo.stereo.tie_points` verifies every tie
-    (heights, duplicates, one-to-one) and finds the height range itself."""
+    """Match keypoints of image 1 (``features1 = (xy1, desc1)``, :data:`Features`) to those of
+    image 2 (``features2``) within ``epipolar_tol_px`` of the predicted epipolar segment
+    (heights ``height_range_m``), Lowe ratio ``ratio`` (:func:`epipolar_candidates`), then
+    reject outliers across the epipolar direction (module docstring). No check of the heights:
+    :func:`~jaxgeo.stereo.tie_points` verifies every tie (heights, duplicates, one-to-one) and
+    finds the height range itself."""
     empty = Matches(np.zeros((0, 2)), np.zeros((0, 2)), np.zeros(0), 0)
+    xy1, xy2 = np.asarray(features1[0], dtype=float), np.asarray(features2[0], dtype=float)
     if len(xy1) == 0 or len(xy2) < 2:
         return empty
     c = epipolar_candidates(
-        model1, model2, xy1, desc1, xy2, desc2, height_range_m, epipolar_tol_px, ratio
+        model1, model2, features1, features2, height_range_m, epipolar_tol_px, ratio
     )
     if len(c) == 0:
         return empty

@@ -46,7 +46,7 @@ from ._dense import (
 from ._dsm import MAX_HOLE_M, DSMGrid, local_utm_epsg, point_spacing, rasterize, to_map
 from ._matching import sift_features_raster, stretch_limits
 from ._rectification import EpipolarGrids, epipolar_grids
-from ._ties import tie_points
+from ._ties import MatchSettings, tie_points
 from ._triangulation import (
     StereoError,
     check_ties,
@@ -230,8 +230,9 @@ def stereo_pair(
     img1, img2 = read_window(ref_path, data_win), read_window(sec_path, win2)
     log("tie points")
     ties = tie_points(
-        ref, sec, ref_path, sec_path, roi=data_win, dem=dem, height_range_m=height_range_m,
-        epipolar_tol_px=epipolar_tol_px, features1=_reference_keypoints(ref_path, data_win),
+        ref, sec, ref_path, sec_path, MatchSettings(
+            roi=data_win, height_range_m=height_range_m, epipolar_tol_px=epipolar_tol_px),
+        dem=dem, features1=_reference_keypoints(ref_path, data_win),
     )  # fmt: skip
     if len(ties) < MIN_TIE_POINTS:
         raise StereoError(

@@ -1,12 +1,13 @@
 """Tie points that are true by default: guided SIFT matches, each one verified geometrically.
 
 :func:`tie_points` matches two images whose models work in their rasters' pixels
-(:func:`jaxgeo.io.open_image` gives such models, crops included):
+(:func:`jaxgeo.io.open_image` gives such models, crops included), as :class:`MatchSettings`
+says (:func:`jaxgeo.stereo.match_images` matches every pair of several images):
 
 1. **Height range**, the search range along the epipolar curves and a check on every tie, from
    (``TieReport.height_source``): ``"given"`` (``height_range_m``); ``"dem"``: the DEM's
    heights over the footprint of the ROI (its corners and edges localised on the DEM,
-   iterated), +- ``margin_m``, within the models' RPC validity range; ``"coarse matching"``: a
+   iterated), +- ``dem_margin_m``, within the models' RPC validity range; ``"coarse matching"``: a
    sparse subset of keypoints matched over the whole validity range with a strict ratio test,
    verified as below, their heights' 1st-99th percentiles widened by ``max(30 m, 25 %)``;
    ``"rpc validity"`` when that finds too few ties.
@@ -33,41 +34,40 @@ from __future__ import annotations
 
 import os
 import warnings
-from collections.abc import Sequence
 from dataclasses import dataclass, field
 
 import numpy as np
 
-from ..errors import JaxgeoError, JaxgeoWarning
 from ..models import AbstractSensorModel
-from ._matching import Candidates, epipolar_candidates, sift_features_raster
+from ._match_settings import MatchSettings, TieError, TieWarning
+from ._matching import Candidates, Features, epipolar_candidates, sift_features_raster
 from ._rectification import _batched, _loc, _transfer
 from ._triangulation import triangulate
 
 CHECKS = ("duplicate", "ambiguous", "across_epipolar", "triangulation", "height_range",
           "residual", "height_neighbours")  # fmt: skip
 """The checks of a tie, in the order they run (keys of ``TieReport.rejected``)."""
+CHECK_LABELS = {
+    "duplicate": "duplicate",
+    "ambiguous": "ambiguous",
+    "across_epipolar": "across the epipolar curve",
+    "triangulation": "not triangulated",
+    "height_range": "height outside the range",
+    "residual": "reprojection residual",
+    "height_neighbours": "height unlike its neighbours'",
+}
+"""How :meth:`TieReport.summary` names each check's rejections."""
 COARSE_KEYPOINTS = 2000
 COARSE_RATIO = 0.6
 COARSE_MIN_TIES = 20
 COARSE_MARGIN_M = 30.0
 COARSE_MARGIN_FRACTION = 0.25
-DEM_MARGIN_M = 50.0
 NON_RPC_HALF_RANGE_M = 1000.0
 ACROSS_K, ACROSS_FLOOR_PX = 3.5, 0.5
 RESIDUAL_K, RESIDUAL_FLOOR_PX = 4.0, 0.5
 NEIGHBOURS, NEIGHBOUR_K, NEIGHBOUR_FLOOR_M = 8, 5.0, 20.0
 TRIANGULATION_BLOCK = 1024
 """Ties per triangulation call (NaN-padded): one compiled shape whatever the count."""
-
-
-class TieError(JaxgeoError, ValueError):
-    """Tie points cannot be searched as asked (an ROI outside the image, a height range that is
-    empty or outside the models' validity, a DEM of another place)."""
-
-
-class TieWarning(JaxgeoWarning):
-    """Tie points were found, but under an assumption the user should know about."""
 
 
 @dataclass(frozen=True)
@@ -78,7 +78,8 @@ class TieReport:
     ``"coarse matching"``, ``"rpc validity"``), ``validity_m`` (the models' common RPC height
     range), ``n_coarse`` ties of the coarse matching (``None`` when not run), ``heights_m``
     p5/p50/p95 of the kept ties, ``across_px`` median offset across the epipolar curves (the
-    relative bias) and ``across_sigma_px`` its robust spread about its trend."""
+    relative bias) and ``across_sigma_px`` its robust spread about its trend; ``images`` the
+    pair's names (:func:`~jaxgeo.stereo.match_images`; ``None`` from :func:`tie_points`)."""
 
     n_keypoints: tuple[int, int]
     n_candidates: int
@@ -91,9 +92,10 @@ class TieReport:
     heights_m: tuple[float, float, float]
     across_px: float
     across_sigma_px: float
+    images: tuple[str, str] | None = None
 
     def as_dict(self) -> dict:
-        """Plain JSON-able values (NaN as ``None``)."""
+        """Plain JSON-able values (NaN as ``None``; ``images`` first, left out when ``None``)."""
 
         def clean(v):
             if isinstance(v, dict):
@@ -104,7 +106,33 @@ class TieReport:
                 return None
             return v
 
-        return {k: clean(v) for k, v in self.__dict__.items()}
+        fields = {k: clean(v) for k, v in self.__dict__.items() if k != "images"}
+        return fields if self.images is None else {"images": list(self.images), **fields}
+
+    def summary(self) -> list[str]:
+        """The human lines: ties kept of candidates and the rejections by check, the heights
+        searched and their source, the ties' heights and offset across the epipolar curves."""
+        a, b = self.images or ("image 1", "image 2")
+        rejected = ", ".join(f"{n} {CHECK_LABELS.get(k, k)}" for k, n in self.rejected.items() if n)
+        lo, hi = self.height_range_m
+        v0, v1 = self.validity_m
+        lines = [
+            f"{a} - {b}: {self.n_kept} ties kept of {self.n_candidates} candidates"
+            + (f" (rejected: {rejected})" if rejected else "")
+        ]
+        source = self.height_source
+        if self.n_coarse is not None:
+            source += f", {self.n_coarse} coarse ties"
+        lines.append(
+            f"  heights searched {lo:.0f}..{hi:.0f} m ({source}; models valid {v0:.0f}..{v1:.0f} m)"
+        )
+        if self.n_kept:
+            p5, p50, p95 = self.heights_m
+            lines.append(
+                f"  tie heights p5/p50/p95 {p5:.1f} / {p50:.1f} / {p95:.1f} m; offset across the "
+                f"epipolar curves {self.across_px:+.2f} px (sigma {self.across_sigma_px:.2f} px)"
+            )
+        return lines
 
 
 @dataclass(frozen=True)
@@ -329,7 +357,7 @@ def _coarse_range(model1, model2, f1, f2, validity, tol):
     if len(xy1) > COARSE_KEYPOINTS:
         pick = np.sort(np.random.default_rng(0).choice(len(xy1), COARSE_KEYPOINTS, False))
         xy1, d1 = xy1[pick], d1[pick]
-    c = epipolar_candidates(model1, model2, xy1, d1, *f2, validity, tol, COARSE_RATIO)
+    c = epipolar_candidates(model1, model2, (xy1, d1), f2, validity, tol, COARSE_RATIO)
     ties = _verify(model1, model2, xy1, f2[0], c, validity, COARSE_RATIO)
     h = ties[2][:, 2]
     if len(h) < COARSE_MIN_TIES:
@@ -349,10 +377,8 @@ def _height_range(model1, model2, height_range_m, dem, roi1, margin_m, path1):
             f"the models' height validity ranges do not overlap ({v1[0]:.0f}..{v1[1]:.0f} m "
             f"and {v2[0]:.0f}..{v2[1]:.0f} m): are they models of the same area?"
         )
-    if height_range_m is not None:
-        lo, hi = (float(v) for v in height_range_m)
-        if not (np.isfinite(lo) and np.isfinite(hi) and lo < hi):
-            raise TieError(f"height range {lo:g} {hi:g}: need finite HMIN < HMAX (m)")
+    if height_range_m is not None:  # checked by MatchSettings
+        lo, hi = height_range_m
         if lo < validity[0] or hi > validity[1]:
             warnings.warn(
                 f"the height range {lo:.0f}..{hi:.0f} m reaches outside the models' validity "
@@ -388,32 +414,31 @@ def tie_points(
     model2: AbstractSensorModel,
     path1: str | os.PathLike,
     path2: str | os.PathLike,
-    roi: Sequence[int] | None = None,
+    settings: MatchSettings | None = None,
+    *,
     dem=None,
-    height_range_m: Sequence[float] | None = None,
-    epipolar_tol_px: float = 10.0,
-    ratio: float = 0.8,
-    margin_m: float = DEM_MARGIN_M,
-    features1: tuple[np.ndarray, np.ndarray] | None = None,
-    features2: tuple[np.ndarray, np.ndarray] | None = None,
+    features1: Features | None = None,
+    features2: Features | None = None,
 ) -> TiePoints:
-    """Verified tie points between two images (module docstring).
+    """Verified tie points between two images (module docstring), as ``settings`` says
+    (default :class:`MatchSettings()`; its ``sigma_px`` and ``few_ties`` are for
+    :func:`~jaxgeo.stereo.match_images`).
 
     ``model1``, ``model2`` work in the pixels of the rasters ``path1``, ``path2`` (see
-    :func:`jaxgeo.io.open_image`); ``roi = (col, row, width, height)`` restricts image 1's
-    keypoints (px; inside the image, else :class:`TieError`). The height range is
-    ``height_range_m`` (m, ellipsoidal) if given, else from ``dem`` (a :class:`jaxgeo.io.DEM`,
-    +- ``margin_m``), else from a coarse matching. ``features1``/``features2``: SIFT keypoints
-    and descriptors already detected (:func:`~jaxgeo.stereo.sift_features_raster`, raster px)
-    to reuse; by default they are detected over the ROI and the part of image 2 it sees.
+    :func:`jaxgeo.io.open_image`); ``settings.roi = (col, row, width, height)`` restricts image
+    1's keypoints (px; inside the image, else :class:`TieError`). The height range is
+    ``settings.height_range_m`` (m, ellipsoidal) if given, else from ``dem`` (a
+    :class:`jaxgeo.io.DEM`, +- ``settings.dem_margin_m``), else from a coarse matching.
+    ``features1``/``features2``: SIFT keypoints and descriptors already detected
+    (:func:`~jaxgeo.stereo.sift_features_raster`, raster px) to reuse; by default they are
+    detected over the ROI and the part of image 2 it sees.
     """
-    tol = float(epipolar_tol_px)
-    if not (np.isfinite(tol) and tol > 0):
-        raise TieError(f"epipolar tolerance {tol:g} px: must be > 0")
+    settings = MatchSettings() if settings is None else settings
+    roi, tol, ratio = settings.roi, float(settings.epipolar_tol_px), settings.ratio
     size1, size2 = _image_size(path1), _image_size(path2)
     roi1 = _check_roi(roi, size1, path1)
     h_range, source, validity = _height_range(
-        model1, model2, height_range_m, dem, roi1, float(margin_m), path1
+        model1, model2, settings.height_range_m, dem, roi1, float(settings.dem_margin_m), path1
     )
     if features1 is None:
         features1 = sift_features_raster(path1, roi1 if roi is not None else None)
@@ -435,7 +460,7 @@ def tie_points(
         if h_range is None:
             h_range, source = validity, "rpc validity"
     xy1, xy2 = features1[0], features2[0]
-    c = epipolar_candidates(model1, model2, *features1, *features2, h_range, tol, ratio)
+    c = epipolar_candidates(model1, model2, features1, features2, h_range, tol, ratio)
     k1, k2, ground, across, rejected, sigma = _verify(model1, model2, xy1, xy2, c, h_range, ratio)
     h = ground[:, 2]
     report = TieReport(

@@ -47,7 +47,7 @@ from ..tiles import (
 from ._dense import DEFAULT_SGM, SGMSettings
 from ._dsm import DSM_BANDS, MAX_HOLE_M, local_utm_epsg, rasterize, to_map
 from ._pipeline import BAND_ROWS, _height_offsets, _spacing, image_size, stereo_pair
-from ._ties import TieError, tie_points
+from ._ties import MatchSettings, TieError, tie_points
 from ._triangulation import StereoError, los_heights
 from ._uncertainty import Orientation, pair_orientation
 
@@ -225,7 +225,7 @@ def scene_heights(models, paths, roi) -> tuple[float, float] | None:
             with warnings.catch_warnings():
                 warnings.simplefilter("ignore")
                 ties = tie_points(models[0], models[1], paths[0], paths[1],
-                                  roi=(c0, r0, side, side))  # fmt: skip
+                                  MatchSettings(roi=(c0, r0, side, side)))  # fmt: skip
         except (TieError, StereoError):  # no texture there: the other windows
             continue
         found.append(np.asarray(ties.ground)[:, 2])

@@ -57,17 +57,17 @@ def test_ratio_test_ignores_other_orientations_of_the_same_keypoint(ventoux_mode
     # one keypoint at the true spot with two orientations (two descriptors), a far descriptor
     # elsewhere on the segment: the second orientation is not a rival, the match is kept
     xy2 = np.array([true2, true2, other2])
-    c = epipolar_candidates(left, right, xy1, desc1, xy2, np.stack([best, same_spot, far]),
+    c = epipolar_candidates(left, right, (xy1, desc1), (xy2, np.stack([best, same_spot, far])),
                             (500.0, 1500.0))  # fmt: skip
     assert len(c) == 1 and c.i2[0] == 0 and c.ratio[0] < 0.2
     # on the models' epipolar curve (its chord over 1000 m: 0.006 px away from the curve here)
     assert abs(c.across_px[0]) < 0.02
     # the same descriptor at another location of the segment is a rival: ambiguous, dropped
-    c = epipolar_candidates(left, right, xy1, desc1, xy2, np.stack([best, far, same_spot]),
+    c = epipolar_candidates(left, right, (xy1, desc1), (xy2, np.stack([best, far, same_spot])),
                             (500.0, 1500.0))  # fmt: skip
     assert len(c) == 0
     # outside the searched heights (the segment), nothing is a candidate
-    c = epipolar_candidates(left, right, xy1, desc1, xy2, np.stack([best, same_spot, far]),
+    c = epipolar_candidates(left, right, (xy1, desc1), (xy2, np.stack([best, same_spot, far])),
                             (1000.0, 1500.0))  # fmt: skip
     assert len(c) == 0
 
@@ -78,7 +78,7 @@ def test_guided_matches_keeps_its_interface(ventoux_models):
     xy1 = np.column_stack([rng.uniform(14000, 14400, 40), rng.uniform(15900, 16300, 40)])
     xy2 = np.asarray(right.project(left.localize(xy1, 800.0))) + [0.3, -0.2]
     desc = rng.random((40, 128)).astype(np.float32)
-    m = guided_matches(left, right, xy1, desc, xy2, desc, (500.0, 1500.0), epipolar_tol_px=5.0)
+    m = guided_matches(left, right, (xy1, desc), (xy2, desc), (500.0, 1500.0), epipolar_tol_px=5.0)
     assert len(m) == m.n_candidates == 40
     np.testing.assert_allclose(m.xy1, xy1)
     np.testing.assert_allclose(m.xy2, xy2)

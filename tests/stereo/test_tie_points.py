@@ -9,6 +9,7 @@ from rasterio.transform import from_origin
 from jaxgeo.io import open_image, read_dem
 from jaxgeo.models import Biased, ShiftBias
 from jaxgeo.stereo import (
+    MatchSettings,
     TieError,
     join_ties,
     sift_features_raster,
@@ -143,13 +144,13 @@ def test_bad_requests_are_named_errors(ventoux, tmp_path):
     left, right, _, _ = ventoux
     args = (left.model, right.model, left.path, right.path)
     with pytest.raises(TieError, match="HMIN < HMAX"):
-        tie_points(*args, height_range_m=(900.0, 500.0))
+        tie_points(*args, MatchSettings(height_range_m=(900.0, 500.0)))
     with pytest.raises(TieError, match="HMIN < HMAX"):
-        tie_points(*args, height_range_m=(float("nan"), 500.0))
+        tie_points(*args, MatchSettings(height_range_m=(float("nan"), 500.0)))
     with pytest.raises(TieError, match=r"not inside .*left_image.tif \(500 x 500 px\)"):
-        tie_points(*args, roi=(450, 0, 100, 100))
+        tie_points(*args, MatchSettings(roi=(450, 0, 100, 100)))
     with pytest.raises(TieError, match="tolerance"):
-        tie_points(*args, epipolar_tol_px=0.0)
+        tie_points(*args, MatchSettings(epipolar_tol_px=0.0))
     # a DEM 4 km up: outside the models' validity range (190..1960 m), named
     lon, lat = (
         float(v) for v in np.asarray(left.model.localize(np.array([250.0, 250.0]), 500.0))[:2]
