@@ -40,7 +40,12 @@ from ._stats import DHStats, dh_stats, nmad
 class CoregistrationError(JaxgeoError, ValueError):
     """A co-registration jaxgeo refuses: rasters that do not overlap, too few cells, a CRS
     that is not metric, terrain whose aspects cannot determine a shift; the message names the
-    files (file-level calls) or the cause."""
+    files (file-level calls) or the cause. A refused :class:`NuthKaab` names its fields in the
+    message and in ``settings`` (a caller names them its own way: the CLI by its options)."""
+
+    def __init__(self, message: str, settings: tuple[str, ...] = ()):
+        super().__init__(message)
+        self.settings = tuple(settings)
 
 
 class CoregistrationWarning(JaxgeoWarning):
@@ -73,23 +78,24 @@ class NuthKaab:
     pyramid: tuple[int, ...] = (4, 2)
 
     def __post_init__(self):
+        def refuse(message: str, *fields: str):
+            raise CoregistrationError(message, settings=fields)
+
         if self.max_iterations < 1:
-            raise CoregistrationError(f"max_iterations {self.max_iterations}: expected >= 1")
+            refuse(f"max_iterations {self.max_iterations}: expected >= 1", "max_iterations")
         if not self.tolerance_m > 0:
-            raise CoregistrationError(f"tolerance_m {self.tolerance_m}: expected > 0")
+            refuse(f"tolerance_m {self.tolerance_m}: expected > 0 (metres)", "tolerance_m")
         if not 0 <= self.min_slope_deg < self.max_slope_deg <= 90:
-            raise CoregistrationError(
-                f"slope limits [{self.min_slope_deg}, {self.max_slope_deg}] deg: expected "
-                "0 <= min < max <= 90"
-            )
+            refuse(f"min_slope_deg {self.min_slope_deg}, max_slope_deg {self.max_slope_deg}: "
+                   "expected 0 <= min_slope_deg < max_slope_deg <= 90 (degrees)",
+                   "min_slope_deg", "max_slope_deg")  # fmt: skip
         if not self.nmad_k > 0:
-            raise CoregistrationError(f"nmad_k {self.nmad_k}: expected > 0")
+            refuse(f"nmad_k {self.nmad_k}: expected > 0", "nmad_k")
         if any(f < 2 for f in self.pyramid):
-            raise CoregistrationError(f"pyramid {self.pyramid}: expected factors >= 2")
+            refuse(f"pyramid {self.pyramid}: expected factors >= 2", "pyramid")
         if self.aspect_bins < 8 or self.min_bin_cells < 1 or self.min_cells < 10:
-            raise CoregistrationError(
-                "aspect_bins >= 8, min_bin_cells >= 1 and min_cells >= 10 expected"
-            )
+            refuse("aspect_bins >= 8, min_bin_cells >= 1 and min_cells >= 10 expected",
+                   "aspect_bins", "min_bin_cells", "min_cells")  # fmt: skip
 
 
 @dataclass(frozen=True)
