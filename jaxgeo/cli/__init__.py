@@ -76,15 +76,9 @@ def build_parser(command: str | None = None) -> argparse.ArgumentParser:
     return parser
 
 
-OPTION_WORDS = {
-    "(pass overwrite=True)": "(pass --overwrite to replace it)",
-    "(height='orthometric')": "(--dem-height orthometric)",
-    "pass height= and geoid= explicitly": "pass --dem-height and --geoid",
-}
-"""Library messages name the API's keywords; on the command line they are options."""
-
-
 def _one_line(err: BaseException) -> str:
+    from ._common import OPTION_WORDS
+
     msg = err.args[0] if isinstance(err, KeyError) and err.args else err
     text = " ".join(str(msg).split("\n"))
     for words, option in OPTION_WORDS.items():

@@ -376,6 +376,16 @@ def guard_outputs(
     return checked
 
 
+OPTION_WORDS = {
+    "(pass overwrite=True)": "(pass --overwrite to replace it)",
+    "(height='orthometric')": "(--dem-height orthometric)",
+    "pass height= and geoid= explicitly": "pass --dem-height and --geoid",
+    "orthometric heights need a geoid (": "orthometric heights need a geoid (--geoid ",
+}
+"""Library messages name the API's keywords; on the command line they are options (every
+error a command prints goes through these replacements)."""
+
+
 def name_options(message: str, options: dict[str, str], names: Iterable[str] | None = None) -> str:
     """``message`` of a library error with its parameter names (the keys of ``options``, or those
     of them in ``names``) replaced by the command's options (``{"tolerance_m": "--tolerance"}``):

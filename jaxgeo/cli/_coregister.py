@@ -8,7 +8,7 @@ Parse -> :func:`jaxgeo.coreg.coregister` -> print (the human summary, or ``--jso
 it does is ``DESCRIPTION`` (the ``--help`` text) and docs/coregister.md. The reference DEM is
 the positional REF (``--dem`` would only rename it); ``--dem-height`` and ``--geoid`` give its
 height reference, as in every command that reads a DEM. Without them REF's values are compared
-as they are (jaxgeo 0.x's behaviour, kept).
+as they are (the behaviour before these options, kept).
 """
 
 from __future__ import annotations
@@ -113,10 +113,6 @@ def run(args: argparse.Namespace) -> int:
         )
     except CoregistrationError as err:
         raise CommandError(name_options(str(err), OPTIONS, err.settings)) from None
-    ref = args.ref
-    if args.dem_height is not None or args.geoid is not None:
-        ref = read_dem(args.ref, height=args.dem_height, geoid=args.geoid)
-        note(f"REF {ref.describe().removeprefix('DEM ')}", args.quiet)
 
     def progress(it, increment, shift):
         note(f"iteration {it}: increment ({increment[0]:+.3f}, {increment[1]:+.3f}) m, "
@@ -124,6 +120,10 @@ def run(args: argparse.Namespace) -> int:
 
     with warnings.catch_warnings(record=True) as caught:
         warnings.simplefilter("always", CoregistrationWarning)
+        ref = args.ref  # its values as they are, unless its height reference is given
+        if args.dem_height is not None or args.geoid is not None:
+            ref = read_dem(args.ref, height=args.dem_height, geoid=args.geoid)
+            note(f"REF {ref.describe().removeprefix('DEM ')}", args.quiet)
         result = coregister(
             args.dsm, ref, args.out, mask=args.mask, settings=settings,
             overwrite=args.overwrite, callback=progress,
