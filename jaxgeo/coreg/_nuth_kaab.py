@@ -235,9 +235,12 @@ def _spread(dsm, ref, stable, shift, step_m) -> float:
     return nmad(dh) if dh.size >= 10 else math.inf
 
 
-def _iterate(dsm, ref, step_m, stable, settings, shift, tolerance_m, callback, done):
-    """Nuth and Kääb iterations on one grid from ``shift`` (east, north): the new shift, the
-    increments, whether the last one was below ``tolerance_m``, the cells of the last fit."""
+def _iterate(grids, step_m, settings, shift, tolerance_m, callback):
+    """Nuth and Kääb iterations on one grid ``grids = (dsm, ref, stable)`` from ``shift``
+    (east, north): the new shift, the increments, whether the last one was below
+    ``tolerance_m``, the cells of the last fit. ``callback(i, increment, shift)`` after each
+    (``i`` from 1 on this grid)."""
+    dsm, ref, stable = grids
     tan_slope, aspect = slope_aspect(ref, step_m)
     lo, hi = (math.tan(math.radians(d)) for d in (settings.min_slope_deg, settings.max_slope_deg))
     sloped = stable & (tan_slope >= max(lo, 1e-6)) & (tan_slope <= hi)
@@ -265,7 +268,7 @@ def _iterate(dsm, ref, step_m, stable, settings, shift, tolerance_m, callback, d
         shift -= t
         increments.append((-t[0], -t[1]))
         if callback is not None:
-            callback(done + it, (-t[0], -t[1]), (float(shift[0]), float(shift[1])))
+            callback(it, (-t[0], -t[1]), (float(shift[0]), float(shift[1])))
         if math.hypot(*t) < tolerance_m:
             converged = True
             break
@@ -310,14 +313,18 @@ def nuth_kaab(
         )
     before = dh_stats(dsm[both] - ref[both])
     shift, increments, ran = np.zeros(2), [], 0
+
+    def counted(done: int):  # the callback's iteration number counts every level's
+        return None if callback is None else lambda i, *rest: callback(done + i, *rest)
+
     for factor in settings.pyramid:
         coarse = [_block_mean(v, factor) for v in (dsm, ref, stable)]
         if min(coarse[0].shape) < 8:
             continue
         try:  # a coarse level only starts the next one; the full grid decides what fails
             start, steps, _, _ = _iterate(
-                coarse[0], coarse[1], (step_m[0] * factor, step_m[1] * factor), coarse[2] >= 0.5,
-                settings, shift, factor * settings.tolerance_m, callback, ran,
+                (coarse[0], coarse[1], coarse[2] >= 0.5), (step_m[0] * factor, step_m[1] * factor),
+                settings, shift, factor * settings.tolerance_m, counted(ran),
             )  # fmt: skip
         except CoregistrationError:
             continue
@@ -327,7 +334,7 @@ def nuth_kaab(
             shift = start
             increments += steps
     shift, steps, converged, fit_cells = _iterate(
-        dsm, ref, step_m, stable, settings, shift, settings.tolerance_m, callback, ran
+        (dsm, ref, stable), step_m, settings, shift, settings.tolerance_m, counted(ran)
     )
     increments += steps
     ran += len(steps)
