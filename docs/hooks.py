@@ -88,7 +88,7 @@ def cli_parsers() -> list[tuple[str, object]]:
     order of ``jaxgeo --help`` (each command's parser built with its module, as when it runs)."""
     import argparse
 
-    if str(ROOT) not in sys.path:
+    if sys.path[:1] != [str(ROOT)]:  # this tree's commands, not an installed jaxgeo's
         sys.path.insert(0, str(ROOT))
     from jaxgeo.cli import COMMANDS, build_parser
 
