@@ -381,6 +381,7 @@ OPTION_WORDS = {
     "(height='orthometric')": "(--dem-height orthometric)",
     "pass height= and geoid= explicitly": "pass --dem-height and --geoid",
     "orthometric heights need a geoid (": "orthometric heights need a geoid (--geoid ",
+    "(read_dem(REF, height=, geoid=))": "(--dem-height, --geoid)",
 }
 """Library messages name the API's keywords; on the command line they are options (every
 error a command prints goes through these replacements)."""

@@ -88,7 +88,7 @@ def run(args: argparse.Namespace) -> int:
 
     from ..coreg import CoregistrationError, CoregistrationWarning, NuthKaab, coregister
     from ..io import read_dem
-    from . import CommandError
+    from . import CommandError, _one_line
     from ._common import (
         EXIT_NOT_CONVERGED,
         EXIT_OK,
@@ -129,7 +129,7 @@ def run(args: argparse.Namespace) -> int:
             overwrite=args.overwrite, callback=progress,
         )  # fmt: skip
     for w in ours(caught):
-        print(f"jaxgeo coregister: warning: {w.message}", file=sys.stderr)
+        print(f"jaxgeo coregister: warning: {_one_line(w.message)}", file=sys.stderr)
     dx, dy, dz = result.shift_m
     if args.json:
         print_json({"dsm": args.dsm, "ref": args.ref, "mask": args.mask, **result.as_dict()})

@@ -6,7 +6,8 @@ stable-terrain mask may be in any CRS and resolution: REF is warped onto the DSM
 bilinear), the mask with nearest neighbour. Heights are metres in both, in one vertical datum:
 REF's values are used as they are, unless REF is given as a :class:`~jaxgeo.io.DEM`
 (:func:`jaxgeo.io.read_dem` with its ``height=`` / ``geoid=``), whose heights are then made
-ellipsoidal (geoid undulation and offset added on the DSM grid), like a jaxgeo DSM's.
+ellipsoidal (geoid undulation and offset added on the DSM grid), like a jaxgeo DSM's; a REF
+file used as it is while it declares a vertical CRS gets a :class:`CoregistrationWarning`.
 The estimate is made on the DSM grid when it has at most ``max_cells`` cells, else on a grid
 decimated by an integer step (DSM averaged, REF warped onto it); the output is always written
 on the full DSM grid, by bands of rows, so its memory does not grow with the raster.
@@ -128,6 +129,27 @@ def _to_ellipsoidal(dem: DEM, crs, transform, shape) -> np.ndarray | float:
     to_lonlat = Transformer.from_crs(crs.to_wkt(), "EPSG:4326", always_xy=True)
     lon, lat = to_lonlat.transform(x, y)
     return dem.geoid(np.asarray(lon), np.asarray(lat)) + dem.offset_m
+
+
+def _warn_vertical_as_read(ref_path, ref) -> None:
+    """REF given as a file, its values compared as they are: say so when it declares a vertical
+    CRS (an orthometric REF against a jaxgeo DSM, ellipsoidal, would be off by the geoid
+    undulation, tens of metres, taken for a vertical bias)."""
+    import pyproj
+
+    if ref.crs is None:
+        return
+    crs = pyproj.CRS.from_wkt(ref.crs.to_wkt())
+    vertical = [c.name for c in crs.sub_crs_list if c.is_vertical] if crs.is_compound else []
+    if vertical:
+        warnings.warn(
+            f"{ref_path}: REF declares the vertical CRS {vertical[0]!r}; its heights are compared "
+            "with the DSM's as they are (one vertical datum assumed; a jaxgeo DSM is "
+            "ellipsoidal): give REF's height reference (read_dem(REF, height=, geoid=)) to make "
+            "them ellipsoidal",
+            CoregistrationWarning,
+            stacklevel=3,
+        )
 
 
 def _check_overlap(dsm_path, ref_path, dsm, ref) -> None:
@@ -263,6 +285,8 @@ def coregister(
     with _open(dsm_path, "DSM") as d, _open(ref_path, "reference DEM") as r:
         _check_dsm_grid(dsm_path, d)
         _check_overlap(dsm_path, ref_path, d, r)
+        if ref_dem is None:
+            _warn_vertical_as_read(ref_path, r)
         z, transform, step = _read_estimation_grid(d, max_cells)
         zref = _warp_onto(r, z.shape, transform, d.crs, "bilinear", np.nan, np.float64)
         if ref_dem is not None:

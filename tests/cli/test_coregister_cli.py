@@ -159,3 +159,17 @@ def test_orthometric_reference_with_its_geoid(tmp_path, capsys):
     assert main(["coregister", dsm, ortho, "-o", str(tmp_path / "x.tif"), "--dem-height",
                  "orthometric"]) == 2  # fmt: skip
     assert "orthometric heights need a geoid" in capsys.readouterr().err
+
+
+def test_a_declared_vertical_crs_used_as_read_names_the_options(tmp_path, capsys):
+    from tests.coreg.test_coregister import orthometric_pair
+
+    orthometric_pair(tmp_path)
+    with rasterio.open(tmp_path / "ref_orthometric.tif") as f:
+        z = f.read(1)
+    ref = write_raster(tmp_path / "ref_egm96.tif", z, crs="EPSG:32631+5773")
+    out = tmp_path / "aligned.tif"
+    assert main(["coregister", str(tmp_path / "dsm.tif"), str(ref), "-o", str(out), "--quiet"]) == 0
+    err = capsys.readouterr().err
+    assert err.startswith("jaxgeo coregister: warning: ") and err.count("\n") == 1
+    assert "'EGM96 height'" in err and "(--dem-height, --geoid)" in err and "read_dem" not in err

@@ -325,3 +325,27 @@ def test_refused_settings_are_named_by_their_fields():
         with pytest.raises(CoregistrationError) as err:
             NuthKaab(**kwargs)
         assert err.value.settings == fields and all(f in str(err.value) for f in fields)
+
+
+def test_a_reference_declaring_its_vertical_crs_used_as_read_is_named(tmp_path):
+    """REF's file declares EGM96 heights but is given as a path: its values are used as they
+    are (the default, kept), with a warning naming the file and its vertical CRS; given as a
+    DEM with its geoid, no warning."""
+    from jaxgeo.io import read_dem
+
+    undulation = orthometric_pair(tmp_path)
+    with rasterio.open(tmp_path / "ref_orthometric.tif") as f:
+        z = f.read(1)
+    declared = write_raster(tmp_path / "ref_egm96.tif", z, crs="EPSG:32631+5773")
+    with pytest.warns(
+        CoregistrationWarning,
+        match=r"ref_egm96\.tif: REF declares the vertical "
+        r"CRS 'EGM96 height'; its heights are compared with the DSM's as they are",
+    ):
+        as_read = coregister(tmp_path / "dsm.tif", declared)  # fmt: skip
+    plain = coregister(tmp_path / "dsm.tif", tmp_path / "ref_orthometric.tif")
+    assert as_read.shift_m == plain.shift_m  # the same numbers: only the warning is new
+    with warnings.catch_warnings():
+        warnings.simplefilter("error", CoregistrationWarning)
+        converted = coregister(tmp_path / "dsm.tif", read_dem(declared, geoid=GEOID))
+    assert abs(converted.shift_m[2] - plain.shift_m[2] - undulation.mean()) < 0.1
