@@ -1,9 +1,11 @@
 """The documentation site builds without a warning (``mkdocs build --strict``): every API page
-resolves, every link and notebook in the navigation exists. Skipped where the ``docs`` extra is
-not installed."""
+resolves, every link and notebook in the navigation exists, the CLI reference names every
+command, option and exit code. Skipped where the ``docs`` extra is not installed."""
 
+import argparse
 import os
 import pathlib
+import re
 import subprocess
 import sys
 
@@ -68,6 +70,62 @@ def test_mkdocs_build_strict(tmp_path):
         assert not missing, f"api/{page}.md does not render {missing}"
     for name in ("01_cartosat1_sensor_models", "04_differentiable"):
         assert (tmp_path / "site" / "notebooks" / name / "index.html").exists()
+    check_cli_reference((tmp_path / "site" / "cli" / "index.html").read_text())
+
+
+def cli_parsers():
+    """``(command line, parser)`` of every command and sub-command, walked from the parsers
+    here (not by the docs hook)."""
+    from jaxgeo.cli import COMMANDS, build_parser
+
+    out = []
+
+    def walk(path, parser):
+        out.append((path, parser))
+        for action in parser._actions:
+            if isinstance(action, argparse._SubParsersAction):
+                for name, sub in action.choices.items():
+                    walk(f"{path} {name}", sub)
+
+    for name in COMMANDS:
+        top = build_parser(name)
+        walk(f"jaxgeo {name}", top._subparsers._group_actions[0].choices[name])
+    return out
+
+
+def check_cli_reference(html: str) -> None:
+    """The built CLI reference names every command and sub-command (a heading), every option
+    and positional of every parser with its help, every non-trivial default, and every exit
+    code of each command."""
+    import html as html_
+
+    # sections: from one heading <h2|h3 id=...>TITLE<a class="headerlink" ...></h.> to the next
+    parts = re.split(r"<h[23] id=\"[^\"]*\">(.*?)</h[23]>", html)
+    by_path = {
+        html_.unescape(re.sub(r"<a class=\"headerlink\".*?</a>|<[^>]+>", "", title)).strip(): body
+        for title, body in zip(parts[1::2], parts[2::2], strict=True)
+    }
+    parsers = cli_parsers()
+    assert len(parsers) > len(__import__("jaxgeo.cli").cli.COMMANDS)  # simulate's kinds too
+    for path, parser in parsers:
+        assert path in by_path, f"the CLI reference has no section {path!r}"
+        section = by_path[path]
+        for action in parser._actions:
+            if isinstance(action, (argparse._HelpAction, argparse._SubParsersAction)):
+                continue
+            names = action.option_strings or [action.metavar or action.dest]
+            for name in names:
+                assert f"<code>{name}" in section, f"{path}: {name} missing"
+            words = " ".join(action.help.split()).split(" (default")[0][:30]
+            assert html_.escape(words, quote=False) in section.replace("\\", ""), (path, words)
+            default = action.default
+            if isinstance(default, (int, float, str)) and not isinstance(default, bool):
+                assert f"<code>{html_.escape(str(default))}</code>" in section, (path, names)
+        status = (parser.epilog or "").partition("exit status:")[2].split("\n\n")[0]
+        codes = re.findall(r"^\s+(\d+)\s", status, re.M)
+        assert codes or path.count(" ") == 2, f"{path}: no exit codes"
+        for code in codes:
+            assert f"<td>{code}</td>" in section, f"{path}: exit code {code} missing"
 
 
 def _anchor(page: str, name: str) -> str:

@@ -17,7 +17,8 @@ from ..errors import JaxgeoError
 
 COMMANDS = {
     "demo": "direct georeferencing vs bias-corrected adjustment on the embedded scene",
-    "simulate": "write a simulated Cartosat-1 stereo pair or Carto-2S strip",
+    "simulate": "write a simulated scene: cartosat1 (a Cartosat-1 pair), carto2s-strip (a "
+    "Carto-2S strip) or stereo-scene (rendered Pleiades-like images with truth)",
     "adjust": "bundle block adjustment of RPC images (bias compensation)",
     "strip": "two-level full-strip adjustment of a Carto-2S-style strip of sub-scenes",
     "ortho": "orthorectify an image with any sensor model over a DEM (COG out)",
@@ -25,7 +26,8 @@ COMMANDS = {
     "dsm": "digital surface model from a stereo pair or triplet",
     "coregister": "align a DSM onto a reference DEM (Nuth and Kääb), statistics before/after",
 }
-"""Sub-commands (module ``jaxgeo.cli.<name>``) and their one-line help."""
+"""Sub-commands (module ``jaxgeo.cli.<name>``) and their one-line help (``jaxgeo --help``; a
+command with sub-commands of its own, ``simulate``, names them)."""
 
 
 class CommandError(JaxgeoError):
@@ -42,9 +44,14 @@ def version() -> str:
 def build_parser(command: str | None = None) -> argparse.ArgumentParser:
     """The parser; only ``command``'s module is imported (the others get a placeholder that
     shows their help line)."""
+    from ._common import SEE_CONVENTIONS
+
     parser = argparse.ArgumentParser(
         prog="jaxgeo",
         description="Differentiable orientation of high-resolution satellite images.",
+        epilog="'jaxgeo COMMAND --help' describes a command, its options and its exit status.\n"
+        + SEE_CONVENTIONS,
+        formatter_class=argparse.RawDescriptionHelpFormatter,
     )
     parser.add_argument("--version", action="version", version=f"%(prog)s {version()}")
     sub = parser.add_subparsers(dest="command", required=True, metavar="COMMAND")
@@ -70,10 +77,13 @@ def build_parser(command: str | None = None) -> argparse.ArgumentParser:
 
 
 def _one_line(err: BaseException) -> str:
+    from ._common import OPTION_WORDS
+
     msg = err.args[0] if isinstance(err, KeyError) and err.args else err
     text = " ".join(str(msg).split("\n"))
-    # library messages name the API's keyword; on the command line it is an option
-    return text.replace("(pass overwrite=True)", "(pass --overwrite to replace it)")
+    for words, option in OPTION_WORDS.items():
+        text = text.replace(words, option)
+    return text
 
 
 def _interrupt_handler(signum, frame):  # pragma: no cover - exercised through a subprocess

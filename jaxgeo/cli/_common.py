@@ -5,7 +5,8 @@ command writes several), ``--overwrite`` allows replacing an earlier output (nev
 ``--quiet`` silences progress, ``--json`` prints the result as one JSON object on stdout instead
 of the human summary. Images are given as rasters (their RPC inside or beside them) with
 ``--model IMG=FILE`` for a separate model file and ``--image-origin IMG=COL,ROW`` for a crop
-whose pixel frame the raster does not carry (:func:`jaxgeo.io.open_image`).
+whose pixel frame the raster does not carry (:func:`jaxgeo.io.open_image`). The whole
+convention, for users, is :data:`CONVENTIONS_PAGE` (named at the end of every ``--help``).
 """
 
 from __future__ import annotations
@@ -29,11 +30,19 @@ _BASE_CODES = {
 }
 
 
+CONVENTIONS_PAGE = "docs/cli-conventions.md"
+"""The page of the options every command shares and of the exit codes (in the docs site:
+"CLI conventions and exit codes"); ``docs/cli.md`` is the reference of every option."""
+SEE_CONVENTIONS = f"conventions and exit codes: {CONVENTIONS_PAGE}; every option: docs/cli.md"
+"""The last line of every command's ``--help`` (and of ``jaxgeo --help``)."""
+
+
 def exit_codes(extra: dict[int, str] | None = None) -> str:
-    """The ``exit status`` epilog of a sub-command: the shared codes plus ``extra``."""
+    """The ``exit status`` epilog of a sub-command: the shared codes plus ``extra``, then the
+    line naming the conventions page (:data:`SEE_CONVENTIONS`)."""
     codes = {**_BASE_CODES, **(extra or {})}
     lines = [f"  {code:>3}  {text}" for code, text in sorted(codes.items())]
-    return "exit status:\n" + "\n".join(lines)
+    return "exit status:\n" + "\n".join(lines) + "\n\n" + SEE_CONVENTIONS
 
 
 def add_command(sub, name: str, help: str, doc: str, extra_codes: dict[int, str] | None = None):
@@ -91,19 +100,39 @@ def add_image_options(parser: argparse.ArgumentParser) -> None:
 def add_dem_options(parser: argparse.ArgumentParser, use: str) -> None:
     """``--dem``, ``--dem-height``, ``--geoid`` (``use``: what the DEM is for, in the help)."""
     parser.add_argument("--dem", default=None, metavar="DEM", help=f"DEM raster (any CRS): {use}")
+    add_height_options(parser)
+
+
+def add_height_options(
+    parser: argparse.ArgumentParser,
+    dem: str = "the DEM",
+    default: str = "the file's vertical CRS if it declares EGM96/EGM2008, else ellipsoidal",
+) -> None:
+    """``--dem-height`` and ``--geoid``: the height reference of ``dem`` (a phrase for the help:
+    ``"REF"`` where the DEM is a positional argument); ``default``: what is assumed without
+    them. The values go to :func:`jaxgeo.io.read_dem` (``height=``, ``geoid=``)."""
     parser.add_argument(
         "--dem-height",
         choices=("ellipsoidal", "orthometric"),
         default=None,
-        help="height reference of the DEM values (default: the file's vertical CRS if it "
-        "declares EGM96/EGM2008, else ellipsoidal)",
+        help=f"height reference of the values of {dem} (default: {default})",
     )
     parser.add_argument(
         "--geoid",
         default=None,
-        help="egm96, egm2008 (PROJ grids) or a geoid grid file, for orthometric DEMs (implies "
-        "--dem-height orthometric)",
+        help=f"egm96, egm2008 (PROJ grids) or a geoid grid file, for orthometric heights of {dem} "
+        "(implies --dem-height orthometric)",
     )
+
+
+def check_height_options(args: argparse.Namespace) -> None:
+    """``--geoid`` not with ``--dem-height ellipsoidal`` (a geoid converts orthometric
+    heights)."""
+    from . import CommandError
+
+    if args.geoid is not None and args.dem_height == "ellipsoidal":
+        raise CommandError(f"--geoid {args.geoid}: a geoid converts orthometric heights; not with "
+                           "--dem-height ellipsoidal")  # fmt: skip
 
 
 def add_heights(parser: argparse.ArgumentParser) -> None:
@@ -243,7 +272,8 @@ def tiles_kept(args: argparse.Namespace, command: str) -> None:
 
 def _by_image(specs: Sequence[str], images: Sequence[str], option: str) -> dict[str, str]:
     """``{image path: value}`` from ``IMG=VALUE`` specs; IMG is the path as given, its file name
-    or its stem; a spec without ``IMG=`` is allowed when there is one image."""
+    or its stem; a spec without ``IMG=`` is allowed when there is one image. An IMG that names
+    no image is refused with the names accepted (:func:`image_names`)."""
     from . import CommandError
 
     aliases = {}
@@ -259,14 +289,25 @@ def _by_image(specs: Sequence[str], images: Sequence[str], option: str) -> dict[
         if not sep and len(images) != 1 or key not in aliases:
             expected = "FILE" if option == "--model" else "COL,ROW"
             raise CommandError(
-                f"{option} {spec!r}: expected IMG={expected} with IMG one of the images "
-                f"({', '.join(images)})"
+                f"{option} {spec!r}: expected IMG={expected} with IMG one of the images, by its "
+                f"path, file name or stem: {image_names(images)}"
             )
         img = aliases[key]
         if img in out:
             raise CommandError(f"{option}: image {img} given twice")
         out[img] = value
     return out
+
+
+def image_names(images: Sequence[str]) -> str:
+    """The names an ``IMG`` may take for each image (its path as given, file name, stem), for a
+    message: ``"a/left.tif (left.tif, left); b/right.tif (right.tif, right)"``."""
+    out = []
+    for img in images:
+        path = pathlib.Path(img)
+        others = list(dict.fromkeys(a for a in (path.name, path.stem) if a != img))
+        out.append(f"{img} ({', '.join(others)})" if others else img)
+    return "; ".join(out)
 
 
 def _origin(text: str, option_value: str):
@@ -333,6 +374,29 @@ def guard_outputs(
             raise CommandError(f"{out}: the output folder {parent} is not writable")
         checked.append(out)
     return checked
+
+
+OPTION_WORDS = {
+    "(pass overwrite=True)": "(pass --overwrite to replace it)",
+    "(height='orthometric')": "(--dem-height orthometric)",
+    "pass height= and geoid= explicitly": "pass --dem-height and --geoid",
+    "orthometric heights need a geoid (": "orthometric heights need a geoid (--geoid ",
+    "(read_dem(REF, height=, geoid=))": "(--dem-height, --geoid)",
+}
+"""Library messages name the API's keywords; on the command line they are options (every
+error a command prints goes through these replacements)."""
+
+
+def name_options(message: str, options: dict[str, str], names: Iterable[str] | None = None) -> str:
+    """``message`` of a library error with its parameter names (the keys of ``options``, or those
+    of them in ``names``) replaced by the command's options (``{"tolerance_m": "--tolerance"}``):
+    errors name what the user typed."""
+    import re
+
+    for name in options if names is None else names:
+        if name in options:
+            message = re.sub(rf"\b{re.escape(name)}\b", options[name], message)
+    return message
 
 
 def print_json(result: dict) -> None:

@@ -1,11 +1,14 @@
 """``jaxgeo coregister``: align a DSM onto a reference DEM (Nuth and Kääb 2011).
 
-    jaxgeo coregister DSM REF -o OUT [--mask MASK] [--min-slope DEG] [--max-slope DEG]
-                      [--nmad-k K] [--max-iterations N] [--tolerance M] [--json] [--quiet]
-                      [--overwrite]
+    jaxgeo coregister DSM REF -o OUT [--dem-height {ellipsoidal,orthometric}] [--geoid G]
+                      [--mask MASK] [--min-slope DEG] [--max-slope DEG] [--nmad-k K]
+                      [--max-iterations N] [--tolerance M] [--json] [--quiet] [--overwrite]
 
 Parse -> :func:`jaxgeo.coreg.coregister` -> print (the human summary, or ``--json``); what
-it does is ``DESCRIPTION`` (the ``--help`` text) and docs/coregister.md.
+it does is ``DESCRIPTION`` (the ``--help`` text) and docs/coregister.md. The reference DEM is
+the positional REF (``--dem`` would only rename it); ``--dem-height`` and ``--geoid`` give its
+height reference, as in every command that reads a DEM. Without them REF's values are compared
+as they are (the behaviour before these options, kept).
 """
 
 from __future__ import annotations
@@ -23,10 +26,18 @@ DESCRIPTION = (
     "resampled onto the DSM grid, bilinear). OUT is never one of the inputs."
 )
 EXTRA_CODES = {1: "the iterations did not converge (OUT written with the last shift, reported)"}
+OPTIONS = {
+    "max_iterations": "--max-iterations",
+    "tolerance_m": "--tolerance",
+    "min_slope_deg": "--min-slope",
+    "max_slope_deg": "--max-slope",
+    "nmad_k": "--nmad-k",
+}
+"""The option of each :class:`jaxgeo.coreg.NuthKaab` field (a refused value is named by it)."""
 
 
 def register(sub) -> None:
-    from ._common import add_command, add_json, add_out, add_quiet
+    from ._common import add_command, add_height_options, add_json, add_out, add_quiet
 
     parser = add_command(
         sub,
@@ -38,6 +49,9 @@ def register(sub) -> None:
     parser.add_argument("dsm", metavar="DSM", help="DSM to align (band 1; projected CRS, m)")
     parser.add_argument("ref", metavar="REF", help="reference DEM (band 1; any CRS, heights m)")
     add_out(parser, "OUT", "the shifted DSM (GeoTIFF, float32, on the DSM's grid)")
+    add_height_options(parser, "REF", "its values as they are, in the DSM's vertical datum; "
+                       "with either option REF's heights are made ellipsoidal, like a jaxgeo "
+                       "DSM's")  # fmt: skip
     parser.add_argument("--mask", metavar="MASK",
                         help="raster of stable terrain (non-zero = stable, any CRS); only those "
                         "cells are used, for the fit and the statistics")  # fmt: skip
@@ -72,18 +86,33 @@ def _table(result) -> str:
 def run(args: argparse.Namespace) -> int:
     import warnings
 
-    from ..coreg import CoregistrationWarning, NuthKaab, coregister
-    from ._common import EXIT_NOT_CONVERGED, EXIT_OK, guard_outputs, note, ours, print_json
+    from ..coreg import CoregistrationError, CoregistrationWarning, NuthKaab, coregister
+    from ..io import read_dem
+    from . import CommandError, _one_line
+    from ._common import (
+        EXIT_NOT_CONVERGED,
+        EXIT_OK,
+        check_height_options,
+        guard_outputs,
+        name_options,
+        note,
+        ours,
+        print_json,
+    )
 
+    check_height_options(args)
     inputs = [args.dsm, args.ref] + ([args.mask] if args.mask else [])
     guard_outputs([args.out], inputs, args.overwrite)
-    settings = NuthKaab(
-        max_iterations=args.max_iterations,
-        tolerance_m=args.tolerance,
-        min_slope_deg=args.min_slope,
-        max_slope_deg=args.max_slope,
-        nmad_k=args.nmad_k,
-    )
+    try:
+        settings = NuthKaab(
+            max_iterations=args.max_iterations,
+            tolerance_m=args.tolerance,
+            min_slope_deg=args.min_slope,
+            max_slope_deg=args.max_slope,
+            nmad_k=args.nmad_k,
+        )
+    except CoregistrationError as err:
+        raise CommandError(name_options(str(err), OPTIONS, err.settings)) from None
 
     def progress(it, increment, shift):
         note(f"iteration {it}: increment ({increment[0]:+.3f}, {increment[1]:+.3f}) m, "
@@ -91,12 +120,16 @@ def run(args: argparse.Namespace) -> int:
 
     with warnings.catch_warnings(record=True) as caught:
         warnings.simplefilter("always", CoregistrationWarning)
+        ref = args.ref  # its values as they are, unless its height reference is given
+        if args.dem_height is not None or args.geoid is not None:
+            ref = read_dem(args.ref, height=args.dem_height, geoid=args.geoid)
+            note(f"REF {ref.describe().removeprefix('DEM ')}", args.quiet)
         result = coregister(
-            args.dsm, args.ref, args.out, mask=args.mask, settings=settings,
+            args.dsm, ref, args.out, mask=args.mask, settings=settings,
             overwrite=args.overwrite, callback=progress,
         )  # fmt: skip
     for w in ours(caught):
-        print(f"jaxgeo coregister: warning: {w.message}", file=sys.stderr)
+        print(f"jaxgeo coregister: warning: {_one_line(w.message)}", file=sys.stderr)
     dx, dy, dz = result.shift_m
     if args.json:
         print_json({"dsm": args.dsm, "ref": args.ref, "mask": args.mask, **result.as_dict()})

@@ -15,7 +15,7 @@ import dataclasses
 
 def register(sub) -> None:
     from ..models import BIAS_KINDS
-    from ._common import add_command
+    from ._common import add_command, add_json, add_quiet
 
     parser = add_command(
         sub,
@@ -30,7 +30,8 @@ def register(sub) -> None:
         default="affine",
         help="bias model of the adjustment (default affine)",
     )
-    parser.add_argument("--json", action="store_true", help="print one JSON object")
+    add_json(parser)
+    add_quiet(parser)  # (the demo shows no progress: accepted like every command's)
     parser.set_defaults(func=run)
 
 

@@ -3,7 +3,11 @@
 
 The DSM must be in a projected CRS in metres (shifts and slopes are metric); REF and the
 stable-terrain mask may be in any CRS and resolution: REF is warped onto the DSM grid (GDAL,
-bilinear), the mask with nearest neighbour. Heights are metres in both, in one vertical datum.
+bilinear), the mask with nearest neighbour. Heights are metres in both, in one vertical datum:
+REF's values are used as they are, unless REF is given as a :class:`~jaxgeo.io.DEM`
+(:func:`jaxgeo.io.read_dem` with its ``height=`` / ``geoid=``), whose heights are then made
+ellipsoidal (geoid undulation and offset added on the DSM grid), like a jaxgeo DSM's; a REF
+file used as it is while it declares a vertical CRS gets a :class:`CoregistrationWarning`.
 The estimate is made on the DSM grid when it has at most ``max_cells`` cells, else on a grid
 decimated by an integer step (DSM averaged, REF warped onto it); the output is always written
 on the full DSM grid, by bands of rows, so its memory does not grow with the raster.
@@ -20,7 +24,7 @@ from dataclasses import replace
 
 import numpy as np
 
-from ..io import atomic_output, refuse_existing
+from ..io import DEM, atomic_output, refuse_existing
 from ._nuth_kaab import (
     Coregistration,
     CoregistrationError,
@@ -108,6 +112,44 @@ def _warp_onto(ds, shape, transform, crs, resampling: str, fill: float, dtype) -
         resampling=getattr(Resampling, resampling),
     )  # fmt: skip
     return out
+
+
+def _to_ellipsoidal(dem: DEM, crs, transform, shape) -> np.ndarray | float:
+    """What turns ``dem``'s values into WGS84 ellipsoidal heights at the centres of a grid of
+    ``crs``: its geoid undulation ``N`` there (orthometric heights: ``h = H + N``) plus its
+    ``offset_m``."""
+    if dem.geoid is None:
+        return dem.offset_m
+    from pyproj import Transformer
+
+    rows, cols = np.indices(shape, dtype=np.float64)
+    t = transform
+    x = t.c + t.a * (cols + 0.5) + t.b * (rows + 0.5)
+    y = t.f + t.d * (cols + 0.5) + t.e * (rows + 0.5)
+    to_lonlat = Transformer.from_crs(crs.to_wkt(), "EPSG:4326", always_xy=True)
+    lon, lat = to_lonlat.transform(x, y)
+    return dem.geoid(np.asarray(lon), np.asarray(lat)) + dem.offset_m
+
+
+def _warn_vertical_as_read(ref_path, ref) -> None:
+    """REF given as a file, its values compared as they are: say so when it declares a vertical
+    CRS (an orthometric REF against a jaxgeo DSM, ellipsoidal, would be off by the geoid
+    undulation, tens of metres, taken for a vertical bias)."""
+    import pyproj
+
+    if ref.crs is None:
+        return
+    crs = pyproj.CRS.from_wkt(ref.crs.to_wkt())
+    vertical = [c.name for c in crs.sub_crs_list if c.is_vertical] if crs.is_compound else []
+    if vertical:
+        warnings.warn(
+            f"{ref_path}: REF declares the vertical CRS {vertical[0]!r}; its heights are compared "
+            "with the DSM's as they are (one vertical datum assumed; a jaxgeo DSM is "
+            "ellipsoidal): give REF's height reference (read_dem(REF, height=, geoid=)) to make "
+            "them ellipsoidal",
+            CoregistrationWarning,
+            stacklevel=3,
+        )
 
 
 def _check_overlap(dsm_path, ref_path, dsm, ref) -> None:
@@ -206,7 +248,7 @@ def _write_shifted(dsm_path, ds, out, shift_m, overwrite, ref_name) -> None:
 
 def coregister(
     dsm: str | os.PathLike,
-    ref: str | os.PathLike,
+    ref: str | os.PathLike | DEM,
     out: str | os.PathLike | None = None,
     *,
     mask: str | os.PathLike | None = None,
@@ -217,15 +259,20 @@ def coregister(
 ) -> Coregistration:
     """Co-register the DSM file ``dsm`` onto the reference DEM ``ref`` (Nuth and Kääb).
 
-    ``mask``: a raster of stable terrain (non-zero = stable, any CRS); ``settings``: the
-    method's (default ``NuthKaab()``). ``out``: where the
+    ``ref``: a raster file, whose values are compared with the DSM's as they are (one vertical
+    datum in both), or a :class:`~jaxgeo.io.DEM` (``read_dem(path, height=, geoid=)``), whose
+    heights are made ellipsoidal first, like a jaxgeo DSM's (e.g. an orthometric reference:
+    ``read_dem("srtm.tif", geoid="egm96")``). ``mask``: a raster of stable terrain (non-zero =
+    stable, any CRS); ``settings``: the method's (default ``NuthKaab()``). ``out``: where the
     shifted DSM goes (GeoTIFF, float32, same grid as ``dsm``; atomic; an existing file only
     with ``overwrite``; never one of the inputs). Returns :class:`Coregistration` (``shift_m``
     is what was added to the DSM). Bad input raises :class:`CoregistrationError` (a
     ``ValueError``) naming the file.
     """
     settings = NuthKaab() if settings is None else settings
-    dsm_path, ref_path = pathlib.Path(dsm), pathlib.Path(ref)
+    ref_dem = ref if isinstance(ref, DEM) else None
+    dsm_path = pathlib.Path(dsm)
+    ref_path = pathlib.Path(ref_dem.path if ref_dem is not None else ref)
     mask_path = None if mask is None else pathlib.Path(mask)
     if out is not None:
         out = pathlib.Path(out)
@@ -238,8 +285,12 @@ def coregister(
     with _open(dsm_path, "DSM") as d, _open(ref_path, "reference DEM") as r:
         _check_dsm_grid(dsm_path, d)
         _check_overlap(dsm_path, ref_path, d, r)
+        if ref_dem is None:
+            _warn_vertical_as_read(ref_path, r)
         z, transform, step = _read_estimation_grid(d, max_cells)
         zref = _warp_onto(r, z.shape, transform, d.crs, "bilinear", np.nan, np.float64)
+        if ref_dem is not None:
+            zref += _to_ellipsoidal(ref_dem, d.crs, transform, z.shape)
         stable = None if mask_path is None else _stable_mask(mask_path, d, z.shape, transform)
         if not np.any(np.isfinite(z) & np.isfinite(zref)):
             raise CoregistrationError(

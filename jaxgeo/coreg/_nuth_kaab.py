@@ -40,7 +40,12 @@ from ._stats import DHStats, dh_stats, nmad
 class CoregistrationError(JaxgeoError, ValueError):
     """A co-registration jaxgeo refuses: rasters that do not overlap, too few cells, a CRS
     that is not metric, terrain whose aspects cannot determine a shift; the message names the
-    files (file-level calls) or the cause."""
+    files (file-level calls) or the cause. A refused :class:`NuthKaab` names its fields in the
+    message and in ``settings`` (a caller names them its own way: the CLI by its options)."""
+
+    def __init__(self, message: str, settings: tuple[str, ...] = ()):
+        super().__init__(message)
+        self.settings = tuple(settings)
 
 
 class CoregistrationWarning(JaxgeoWarning):
@@ -73,23 +78,24 @@ class NuthKaab:
     pyramid: tuple[int, ...] = (4, 2)
 
     def __post_init__(self):
+        def refuse(message: str, *fields: str):
+            raise CoregistrationError(message, settings=fields)
+
         if self.max_iterations < 1:
-            raise CoregistrationError(f"max_iterations {self.max_iterations}: expected >= 1")
+            refuse(f"max_iterations {self.max_iterations}: expected >= 1", "max_iterations")
         if not self.tolerance_m > 0:
-            raise CoregistrationError(f"tolerance_m {self.tolerance_m}: expected > 0")
+            refuse(f"tolerance_m {self.tolerance_m}: expected > 0 (metres)", "tolerance_m")
         if not 0 <= self.min_slope_deg < self.max_slope_deg <= 90:
-            raise CoregistrationError(
-                f"slope limits [{self.min_slope_deg}, {self.max_slope_deg}] deg: expected "
-                "0 <= min < max <= 90"
-            )
+            refuse(f"min_slope_deg {self.min_slope_deg}, max_slope_deg {self.max_slope_deg}: "
+                   "expected 0 <= min_slope_deg < max_slope_deg <= 90 (degrees)",
+                   "min_slope_deg", "max_slope_deg")  # fmt: skip
         if not self.nmad_k > 0:
-            raise CoregistrationError(f"nmad_k {self.nmad_k}: expected > 0")
+            refuse(f"nmad_k {self.nmad_k}: expected > 0", "nmad_k")
         if any(f < 2 for f in self.pyramid):
-            raise CoregistrationError(f"pyramid {self.pyramid}: expected factors >= 2")
+            refuse(f"pyramid {self.pyramid}: expected factors >= 2", "pyramid")
         if self.aspect_bins < 8 or self.min_bin_cells < 1 or self.min_cells < 10:
-            raise CoregistrationError(
-                "aspect_bins >= 8, min_bin_cells >= 1 and min_cells >= 10 expected"
-            )
+            refuse("aspect_bins >= 8, min_bin_cells >= 1 and min_cells >= 10 expected",
+                   "aspect_bins", "min_bin_cells", "min_cells")  # fmt: skip
 
 
 @dataclass(frozen=True)
@@ -229,9 +235,12 @@ def _spread(dsm, ref, stable, shift, step_m) -> float:
     return nmad(dh) if dh.size >= 10 else math.inf
 
 
-def _iterate(dsm, ref, step_m, stable, settings, shift, tolerance_m, callback, done):
-    """Nuth and Kääb iterations on one grid from ``shift`` (east, north): the new shift, the
-    increments, whether the last one was below ``tolerance_m``, the cells of the last fit."""
+def _iterate(grids, step_m, settings, shift, tolerance_m, callback):
+    """Nuth and Kääb iterations on one grid ``grids = (dsm, ref, stable)`` from ``shift``
+    (east, north): the new shift, the increments, whether the last one was below
+    ``tolerance_m``, the cells of the last fit. ``callback(i, increment, shift)`` after each
+    (``i`` from 1 on this grid)."""
+    dsm, ref, stable = grids
     tan_slope, aspect = slope_aspect(ref, step_m)
     lo, hi = (math.tan(math.radians(d)) for d in (settings.min_slope_deg, settings.max_slope_deg))
     sloped = stable & (tan_slope >= max(lo, 1e-6)) & (tan_slope <= hi)
@@ -259,7 +268,7 @@ def _iterate(dsm, ref, step_m, stable, settings, shift, tolerance_m, callback, d
         shift -= t
         increments.append((-t[0], -t[1]))
         if callback is not None:
-            callback(done + it, (-t[0], -t[1]), (float(shift[0]), float(shift[1])))
+            callback(it, (-t[0], -t[1]), (float(shift[0]), float(shift[1])))
         if math.hypot(*t) < tolerance_m:
             converged = True
             break
@@ -304,14 +313,18 @@ def nuth_kaab(
         )
     before = dh_stats(dsm[both] - ref[both])
     shift, increments, ran = np.zeros(2), [], 0
+
+    def counted(done: int):  # the callback's iteration number counts every level's
+        return None if callback is None else lambda i, *rest: callback(done + i, *rest)
+
     for factor in settings.pyramid:
         coarse = [_block_mean(v, factor) for v in (dsm, ref, stable)]
         if min(coarse[0].shape) < 8:
             continue
         try:  # a coarse level only starts the next one; the full grid decides what fails
             start, steps, _, _ = _iterate(
-                coarse[0], coarse[1], (step_m[0] * factor, step_m[1] * factor), coarse[2] >= 0.5,
-                settings, shift, factor * settings.tolerance_m, callback, ran,
+                (coarse[0], coarse[1], coarse[2] >= 0.5), (step_m[0] * factor, step_m[1] * factor),
+                settings, shift, factor * settings.tolerance_m, counted(ran),
             )  # fmt: skip
         except CoregistrationError:
             continue
@@ -321,7 +334,7 @@ def nuth_kaab(
             shift = start
             increments += steps
     shift, steps, converged, fit_cells = _iterate(
-        dsm, ref, step_m, stable, settings, shift, settings.tolerance_m, callback, ran
+        (dsm, ref, stable), step_m, settings, shift, settings.tolerance_m, counted(ran)
     )
     increments += steps
     ran += len(steps)

@@ -107,3 +107,69 @@ def test_not_converged_exit_1_with_a_warning(pair, tmp_path, capsys):
     captured = capsys.readouterr()
     assert "NOT converged" in captured.out and out.is_file()  # the last shift, written
     assert captured.err.startswith("jaxgeo coregister: warning: co-registration did not converge")
+
+
+@pytest.mark.parametrize(
+    "options, named",
+    [
+        (["--max-iterations", "0"], "--max-iterations 0: expected >= 1"),
+        (["--tolerance", "-1"], "--tolerance -1.0: expected > 0"),
+        (["--tolerance", "nan"], "--tolerance nan: expected > 0"),
+        (["--nmad-k", "0"], "--nmad-k 0.0: expected > 0"),
+        (["--min-slope", "80"], "--min-slope 80.0, --max-slope 70.0: expected 0 <= --min-slope"),
+        (["--max-slope", "95"], "--max-slope 95.0: expected"),
+        (["--geoid", "egm96", "--dem-height", "ellipsoidal"], "not with --dem-height ellipsoidal"),
+    ],
+)
+def test_bad_values_are_named_by_their_options(pair, tmp_path, capsys, options, named):
+    dsm, ref = pair
+    out = tmp_path / "out.tif"
+    assert main(["coregister", str(dsm), str(ref), "-o", str(out), *options]) == 2
+    err = capsys.readouterr().err
+    assert err.startswith("jaxgeo coregister: error: ") and err.count("\n") == 1
+    assert named in err, err
+    for internal in ("max_iterations", "tolerance_m", "nmad_k", "slope_deg", "height="):
+        assert internal not in err
+    assert not out.exists()
+
+
+def test_orthometric_reference_with_its_geoid(tmp_path, capsys):
+    """``--geoid`` (or ``--dem-height orthometric``): REF's orthometric heights are made
+    ellipsoidal, like the DSM's; without it the values are compared as they are (today's
+    default), the undulation taken for a vertical shift."""
+    from tests.coreg.test_coregister import GEOID, orthometric_pair
+
+    undulation = orthometric_pair(tmp_path)
+    dsm, ref, ortho = (str(tmp_path / n) for n in ("dsm.tif", "ref.tif", "ref_orthometric.tif"))
+
+    def shift(*argv):
+        out = tmp_path / "aligned.tif"
+        assert main(["coregister", *argv, "-o", str(out), "--json", "--overwrite"]) == 0
+        captured = capsys.readouterr()
+        return np.array(json.loads(captured.out)["shift_m"]), captured.err
+
+    truth, _ = shift(dsm, ref, "--quiet")
+    converted, err = shift(dsm, ortho, "--geoid", str(GEOID))
+    assert np.allclose(converted, truth, atol=0.01)
+    assert f"REF {ortho.rsplit('/', 1)[1]}: orthometric heights + {GEOID.name}" in err
+    as_is, _ = shift(dsm, ortho, "--quiet")
+    assert abs(as_is[2] - truth[2] + undulation.mean()) < 0.1
+    quiet, err = shift(dsm, ortho, "--geoid", str(GEOID), "--dem-height", "orthometric", "--quiet")
+    assert np.allclose(quiet, converted, atol=1e-9) and err == ""
+    assert main(["coregister", dsm, ortho, "-o", str(tmp_path / "x.tif"), "--dem-height",
+                 "orthometric"]) == 2  # fmt: skip
+    assert "orthometric heights need a geoid" in capsys.readouterr().err
+
+
+def test_a_declared_vertical_crs_used_as_read_names_the_options(tmp_path, capsys):
+    from tests.coreg.test_coregister import orthometric_pair
+
+    orthometric_pair(tmp_path)
+    with rasterio.open(tmp_path / "ref_orthometric.tif") as f:
+        z = f.read(1)
+    ref = write_raster(tmp_path / "ref_egm96.tif", z, crs="EPSG:32631+5773")
+    out = tmp_path / "aligned.tif"
+    assert main(["coregister", str(tmp_path / "dsm.tif"), str(ref), "-o", str(out), "--quiet"]) == 0
+    err = capsys.readouterr().err
+    assert err.startswith("jaxgeo coregister: warning: ") and err.count("\n") == 1
+    assert "'EGM96 height'" in err and "(--dem-height, --geoid)" in err and "read_dem" not in err

@@ -91,3 +91,24 @@ def test_entry_exits_with_the_status_the_collector_tuned_and_objects_frozen(monk
     finally:
         gc.unfreeze()
         gc.set_threshold(*before)
+
+
+def test_help_names_every_command_simulates_kinds_and_the_conventions_page(capsys):
+    """``jaxgeo --help``: one line per command; ``simulate``'s line names its kinds (the
+    stereo scene was missing); the epilog points to the conventions and exit codes."""
+    import argparse
+    import re
+
+    from jaxgeo.cli import build_parser
+    from jaxgeo.cli._common import CONVENTIONS_PAGE
+
+    with pytest.raises(SystemExit):
+        main(["--help"])
+    out = re.sub(r"-\s*\n\s*", "-", capsys.readouterr().out)  # (argparse wraps at hyphens)
+    out = " ".join(out.split())
+    simulate = build_parser("simulate")._subparsers._group_actions[0].choices["simulate"]
+    kinds = next(a for a in simulate._actions if isinstance(a, argparse._SubParsersAction))
+    assert set(kinds.choices) == {"cartosat1", "carto2s-strip", "stereo-scene"}
+    for name in (*COMMANDS, *kinds.choices):
+        assert name in out, name
+    assert f"conventions and exit codes: {CONVENTIONS_PAGE}" in out and "docs/cli.md" in out

@@ -3,6 +3,7 @@ the statistics are numpy's, the stable mask, nodata and the refusals work; on th
 a georeferencing shift is recovered."""
 
 import math
+import pathlib
 import warnings
 
 import numpy as np
@@ -269,3 +270,82 @@ def test_a_dem_given_as_the_mask_is_named(tmp_path):
     write_raster(tmp_path / "ref.tif", ref)
     with pytest.warns(CoregistrationWarning, match=r"ref\.tif: the stable-terrain mask has \d+"):
         coregister(tmp_path / "dsm.tif", tmp_path / "ref.tif", mask=tmp_path / "ref.tif")
+
+
+GEOID = pathlib.Path(__file__).parents[1] / "data" / "real" / "ventoux" / "dem"
+GEOID = GEOID / "egm96_15_crop_lon3-8_lat42-47.gtx"
+
+
+def orthometric_pair(folder):
+    """The DSM (ellipsoidal, like a jaxgeo DSM) and its reference in orthometric heights above
+    EGM96 (``H = h - N``; N about +49.5 m here, varying by millimetres over the grid)."""
+    import pyproj
+
+    from jaxgeo.io._geoid import read_geoid
+
+    dsm, ref = shifted_pair(seed=3)
+    e, n = grid_centres()
+    lon, lat = pyproj.Transformer.from_crs(CRS, 4326, always_xy=True).transform(e, n)
+    undulation = read_geoid(GEOID)(np.asarray(lon), np.asarray(lat))
+    write_raster(folder / "dsm.tif", dsm)
+    write_raster(folder / "ref.tif", ref)
+    write_raster(folder / "ref_orthometric.tif", ref - undulation)
+    return undulation
+
+
+def test_an_orthometric_reference_is_made_ellipsoidal(tmp_path):
+    """REF given as a DEM (``read_dem(path, geoid=)``): its heights get the geoid undulation,
+    so the shift is that against the ellipsoidal reference; as a path its values are used as
+    they are (the default kept): dz then holds the undulation."""
+    from jaxgeo.io import read_dem
+
+    undulation = orthometric_pair(tmp_path)
+    assert 40 < undulation.mean() < 60 and np.ptp(undulation) > 0.005
+    dsm = tmp_path / "dsm.tif"
+    truth = coregister(dsm, tmp_path / "ref.tif")
+    ref = read_dem(tmp_path / "ref_orthometric.tif", geoid=GEOID)
+    assert ref.height_reference == "orthometric"
+    converted = coregister(dsm, ref)
+    assert np.allclose(converted.shift_m, truth.shift_m, atol=0.01), (converted, truth)
+    assert abs(converted.after.median_m) < 0.05
+    as_read = coregister(dsm, tmp_path / "ref_orthometric.tif")  # the values as they are
+    assert np.allclose(as_read.shift_m[:2], truth.shift_m[:2], atol=0.05)
+    assert abs(as_read.shift_m[2] - truth.shift_m[2] + undulation.mean()) < 0.1
+    same = coregister(dsm, read_dem(tmp_path / "ref.tif", height="ellipsoidal"))
+    assert np.allclose(same.shift_m, truth.shift_m, atol=1e-9)
+
+
+def test_refused_settings_are_named_by_their_fields():
+    for kwargs, fields in (
+        ({"max_iterations": 0}, ("max_iterations",)),
+        ({"tolerance_m": -1.0}, ("tolerance_m",)),
+        ({"nmad_k": 0.0}, ("nmad_k",)),
+        ({"min_slope_deg": 80.0}, ("min_slope_deg", "max_slope_deg")),
+    ):
+        with pytest.raises(CoregistrationError) as err:
+            NuthKaab(**kwargs)
+        assert err.value.settings == fields and all(f in str(err.value) for f in fields)
+
+
+def test_a_reference_declaring_its_vertical_crs_used_as_read_is_named(tmp_path):
+    """REF's file declares EGM96 heights but is given as a path: its values are used as they
+    are (the default, kept), with a warning naming the file and its vertical CRS; given as a
+    DEM with its geoid, no warning."""
+    from jaxgeo.io import read_dem
+
+    undulation = orthometric_pair(tmp_path)
+    with rasterio.open(tmp_path / "ref_orthometric.tif") as f:
+        z = f.read(1)
+    declared = write_raster(tmp_path / "ref_egm96.tif", z, crs="EPSG:32631+5773")
+    with pytest.warns(
+        CoregistrationWarning,
+        match=r"ref_egm96\.tif: REF declares the vertical "
+        r"CRS 'EGM96 height'; its heights are compared with the DSM's as they are",
+    ):
+        as_read = coregister(tmp_path / "dsm.tif", declared)  # fmt: skip
+    plain = coregister(tmp_path / "dsm.tif", tmp_path / "ref_orthometric.tif")
+    assert as_read.shift_m == plain.shift_m  # the same numbers: only the warning is new
+    with warnings.catch_warnings():
+        warnings.simplefilter("error", CoregistrationWarning)
+        converted = coregister(tmp_path / "dsm.tif", read_dem(declared, geoid=GEOID))
+    assert abs(converted.shift_m[2] - plain.shift_m[2] - undulation.mean()) < 0.1
