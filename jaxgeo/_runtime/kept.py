@@ -59,19 +59,22 @@ def kept(fn: Callable) -> Callable:
     return program
 
 
-def kept_points(chunks: tuple[int, int], fixed: int = 1) -> Callable[[Callable], Callable]:
+def kept_points(chunks: int | tuple[int, int], fixed: int = 1) -> Callable[[Callable], Callable]:
     """Decorator of a kernel over points: ``fn(*head, *points)`` with ``fixed`` leading
-    arguments passed whole (a model) and point arrays whose first axes have one length ``n``.
+    arguments passed whole (a model, a DEM) and point arrays whose first axes have one length
+    ``n``, each point's result independent of the others'.
 
     The decorated function takes any ``n`` and returns ``fn``'s result for all ``n`` points
     (numpy, ``n`` rows): the points are run in chunks of ``chunks[0]`` points below
     ``chunks[1]`` points, compiled quickly (small programs: their run takes little, their
     compilation most), and of ``chunks[1]`` points from there on, compiled with XLA's defaults
     (:func:`.exported.call_kernel`: the run of many chunks matters more than one compilation);
-    the last chunk is padded by repeating the last point (zeros when there are none), the
-    padding's results cut off. At most two programs per structure of the fixed arguments,
-    whatever ``n``. Within a transformation: ``fn`` on all the points at once, jitted."""
-    small, large = (int(c) for c in chunks)
+    one size ``chunks`` (an int): chunks of that size, compiled quickly unless large
+    (:func:`.exported.call`). The last chunk is padded by repeating the last point (zeros when
+    there are none), the padding's results cut off. At most two programs per structure of the
+    fixed arguments, whatever ``n``. Within a transformation: ``fn`` on all the points at once,
+    jitted."""
+    small, large = (chunks, None) if isinstance(chunks, int) else (int(c) for c in chunks)
 
     def decorate(fn: Callable) -> Callable:
         @functools.wraps(fn)
@@ -80,7 +83,7 @@ def kept_points(chunks: tuple[int, int], fixed: int = 1) -> Callable[[Callable],
                 return exported.call(fn, *args)
             head, points = args[:fixed], [np.asarray(p) for p in args[fixed:]]
             n = len(points[0])
-            if n < large:
+            if large is None or n < large:
                 chunk, call = small, exported.call
             else:
                 chunk, call = large, exported.call_kernel

@@ -8,14 +8,14 @@ import warnings
 
 import numpy as np
 
-from .._runtime.kept import kept
+from .._runtime.kept import kept, kept_points
 from ..errors import JaxgeoWarning
 from ..geodesy import utm_epsg, utm_zone
 from ..io import dem_coverage
 
 BATCH = 64
-"""Host-side localisations on the DEM are padded to a multiple of ``BATCH`` points: one shape,
-one compilation."""
+"""Host-side localisations on the DEM run in chunks of ``BATCH`` points (the last one padded):
+one shape, one compilation."""
 ON_DEM_STEPS = 24
 """Regula falsi (Illinois) steps of :func:`on_dem`."""
 ON_DEM_TOL_M = 0.01
@@ -27,8 +27,8 @@ def _at_height(model, xy, h):
     return model.localize(xy, h)
 
 
-@kept
-def _on_dem_bracketed(model, xy, grid, lo, hi):
+@kept_points(BATCH, fixed=4)
+def _on_dem_bracketed(model, grid, lo, hi, xy):
     """Image points ``xy`` ``(n, 2)`` on the DEM: a root of ``f(h) = DEM(localize(xy, h)) - h``
     between ``lo`` (f >= 0) and ``hi`` (f <= 0) by the Illinois method. Returns the ground
     points and the last ``|f|`` (m; NaN where the DEM has no height)."""
@@ -78,18 +78,14 @@ def on_dem(model, xy: np.ndarray, grid) -> tuple[np.ndarray, np.ndarray]:
     the first one :func:`~jaxgeo.models.localize_on_dem` marches to (hidden terrain decides no
     border of a footprint): a bracketed root between the grid's lowest and highest heights, a
     few dozen localisations of one compiled program (tracing the march took 3-8 s of every run,
-    compiling it a minute in the test suite). Traced once per shape across runs
-    (a kept program, :mod:`jaxgeo._runtime.kept`); padded to ``BATCH`` points.
+    compiling it a minute in the test suite). Traced once across runs (a kept program over
+    chunks of ``BATCH`` points, :mod:`jaxgeo._runtime.kept`).
     """
     xy = np.asarray(xy, dtype=float).reshape(-1, 2)
-    n = len(xy)
     z = np.asarray(grid.heights_m)
     lo, hi = float(np.nanmin(z)) - 1.0, float(np.nanmax(z)) + 1.0
-    size = int(math.ceil(max(n, 1) / BATCH) * BATCH)
-    pad = np.concatenate([xy, np.repeat(xy[:1], size - n, axis=0)]) if n else np.zeros((size, 2))
     bracket = np.asarray(lo), np.asarray(hi)  # arrays: the DEM's range is no part of the program
-    g, res = _on_dem_bracketed(model, pad, grid, *bracket)
-    g, res = np.asarray(g)[:n], np.asarray(res)[:n]
+    g, res = _on_dem_bracketed(model, grid, *bracket, xy)
     ok = np.isfinite(res) & (res < ON_DEM_TOL_M) & np.all(np.isfinite(g), axis=-1)
     return g, ok
 

@@ -106,6 +106,11 @@ def test_kept_points_any_number_of_points_from_two_programs(cache, monkeypatch):
         np.testing.assert_array_equal(twice, h * 2.0)
     assert kernels == [16] * (1 + 3)  # 16 points: one large chunk, 40: three
     assert TRACES == ["points", "points"] and len(_exported._runners) == 2
+    # one chunk size: chunks of it whatever the number of points, never ``call_kernel``
+    one_size = kept_points(4)(_scaled.__wrapped__)
+    xy, h = rng.normal(size=(40, 2)), rng.normal(size=40)
+    np.testing.assert_array_equal(one_size(model, xy, h)[1], h * 2.0)
+    assert kernels == [16] * (1 + 3) and TRACES == ["points", "points"]
     # within a transformation: the function on all the points, jitted
     xy = jnp.ones((5, 2))
     out, _ = jax.jit(lambda v: _scaled(model, v, jnp.zeros(5)))(xy)
