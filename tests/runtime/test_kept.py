@@ -181,3 +181,24 @@ def test_work_beside_a_solve_starts_once_it_is_traced(cache):
     with beside_solve(None, "nothing") as future:
         solved(x, scale, shift=1.0)
     assert future.result() is None
+
+
+def test_no_module_outside_the_runtime_decides_how_a_function_compiles():
+    """Geometry and workflows declare kept programs where functions are defined; none calls the
+    exported machinery or names its compile strategies (the command line only says that it owns
+    the process: ``exported.own_process``)."""
+    import pathlib
+
+    import jaxgeo
+
+    strategy = ("exported.call", "call_kernel", "call_solve", "compiled_apart", "QUICK_COMPILE",
+                "SOLVE_COMPILE", "when_solve_traced", "_solve_traced")  # fmt: skip
+    root = pathlib.Path(jaxgeo.__file__).parent
+    found = [
+        f"{path.relative_to(root)}: {name}"
+        for path in sorted(root.rglob("*.py"))
+        if "_runtime" not in path.relative_to(root).parts
+        for name in strategy
+        if name in path.read_text()
+    ]
+    assert found == []
