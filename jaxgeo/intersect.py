@@ -25,7 +25,7 @@ import jax.numpy as jnp
 import numpy as np
 from jaxtyping import Array, ArrayLike, Bool, Float, Int
 
-from ._runtime import exported as _exported
+from ._runtime.kept import kept
 from .geodesy import metres_per_unit
 from .lsq import inv3_spd
 from .models import AbstractSensorModel, newton_root
@@ -134,6 +134,7 @@ def _weights(xy, sigma, mask):
     return jnp.where(valid[..., None], xy, 0.0), weight, valid
 
 
+@kept
 def _intersect_flat(models, xy, sigma, mask, max_steps, batch):
     lin = _linear_terms(models)
     xy, weight, valid = _weights(xy, sigma, mask)
@@ -191,6 +192,7 @@ def _intersect_flat(models, xy, sigma, mask, max_steps, batch):
     )
 
 
+@kept
 def _linear_flat(models, xy, sigma, mask, batch):
     lin = _linear_terms(models)
     xy, weight, valid = _weights(xy, sigma, mask)
@@ -236,7 +238,7 @@ def intersect_linear(
     two rays come back as NaN.
     """
     models, batch, xy, sigma, mask = _prepare(models, image_points, sigma_px, mask)
-    return _exported.call(_linear_flat, models, xy, sigma, mask, tuple(batch))
+    return _linear_flat(models, xy, sigma, mask, tuple(batch))
 
 
 def intersect(
@@ -256,4 +258,4 @@ def intersect(
     """
     models, batch, xy, sigma, mask = _prepare(models, image_points, sigma_px, mask)
     # compiled, and traced once per structure across runs when the inputs are concrete
-    return _exported.call(_intersect_flat, models, xy, sigma, mask, int(max_steps), tuple(batch))
+    return _intersect_flat(models, xy, sigma, mask, int(max_steps), tuple(batch))

@@ -2,6 +2,9 @@
 
 - :mod:`.jaxconfig` float64, the CPU devices per core, the persistent compilation cache
   (``JAXGEO_CACHE_DIR``), set before jax starts.
+- :mod:`.kept` the decorators a pure function gets where it is defined (``@kept``,
+  ``@kept_points``, :func:`~.kept.kept_solve`): its callers call it as a function, and how it
+  compiles is decided here, not by them.
 - :mod:`.exported` entry points kept on disk as serialized ``jax.export`` programs (a warm run
   neither traces nor compiles them), their XLA options, large programs compiled apart.
 - :mod:`.program_key` the key of a kept program (jaxgeo's source, versions, input structure).

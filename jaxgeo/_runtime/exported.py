@@ -34,6 +34,10 @@ Where jaxgeo owns the process (the command line, :func:`own_process`), jax's own
 cleared before and after a large program is compiled: they held its jaxpr and MLIR lowering
 (46-53 MB for that pair) through its compilation and every run.
 Files are written atomically; at most ``MAX_ENTRIES`` are kept (least recently used first out).
+
+jaxgeo's modules do not call this module: they declare their kept programs where the functions
+are defined (:mod:`.kept`: ``@kept``, ``@kept_points``, ``kept_solve``), which calls
+:func:`call`, :func:`call_kernel` and :func:`call_solve` as it decides.
 """
 
 from __future__ import annotations
@@ -140,7 +144,8 @@ def when_solve_traced(callback: Callable[[], None]) -> Iterator[None]:
     (:func:`call_solve`) has been traced, before XLA compiles (or, warm, runs) it. Work
     on another thread started then does not compete with the trace for the GIL; XLA's
     compilation and runs release it (``jaxgeo demo`` cold: the direct georeferencing, traced
-    beside the solve's trace, delayed it by ~1 s on 2 cores)."""
+    beside the solve's trace, delayed it by ~1 s on 2 cores). The hook of
+    :func:`.kept.beside_solve`, which starts such work."""
     previous = getattr(_solve_hooks, "callback", None)
     _solve_hooks.callback = callback
     try:

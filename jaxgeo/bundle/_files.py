@@ -15,17 +15,15 @@ models.
 
 from __future__ import annotations
 
-import concurrent.futures
 import dataclasses
 import os
 import pathlib
-import threading
 from collections.abc import Callable, Mapping, Sequence
 from typing import Any
 
 import numpy as np
 
-from .._runtime import exported as _exported
+from .._runtime.kept import beside_solve
 from ..io import (
     DEM,
     SensorImage,
@@ -283,36 +281,22 @@ def adjust_files(
                 "of its product: its measurements and adjusted RPC are in the crop's pixels"
             )
     prior = bias_prior_sigma(models, bias_prior_shift_px, bias_prior_matrix)
-    # direct georeferencing (the given models, for the report) on a thread beside the adjustment,
-    # started once the solve is traced: XLA compiles and runs without holding the GIL, tracing
-    # holds it (`jaxgeo demo` cold: see the closing notes of issue 29); an error of the
-    # adjustment comes first and the thread then does nothing
-    go, abandon = threading.Event(), threading.Event()
-
-    def after_trace(*args, **kwargs):
-        go.wait()
-        return None if abandon.is_set() else direct_georeferencing(*args, **kwargs)
-
-    with concurrent.futures.ThreadPoolExecutor(1, thread_name_prefix="direct") as pool:
-        direct = None
-        if points is not None and len(models) >= 2:
-            if progress is not None:
-                progress("direct georeferencing: intersecting the control points with the given "
-                         "models (beside the adjustment)")  # fmt: skip
-            direct = pool.submit(after_trace, models, obs, points, roles=tuple(direct_roles))
-        try:
-            with _exported.when_solve_traced(go.set):
-                result = adjust(
-                    models, obs, points, prior_sigma=prior, solver=solver, sources=sources,
-                    tie_height=dem, tie_height_sigma_m=tie_height_sigma_m,
-                    image_domains=domains, progress=progress,
-                )  # fmt: skip
-        except BaseException:
-            abandon.set()
-            raise
-        finally:
-            go.set()
-        direct = direct.result() if direct is not None else None
+    # direct georeferencing (the given models, for the report) beside the adjustment, from the
+    # moment the runtime has traced the solve (`jaxgeo demo` cold: see the closing notes of
+    # issue 29); an error of the adjustment comes first and it then does not run
+    work = None
+    if points is not None and len(models) >= 2:
+        if progress is not None:
+            progress("direct georeferencing: intersecting the control points with the given "
+                     "models (beside the adjustment)")  # fmt: skip
+        work = direct_georeferencing
+    with beside_solve(work, models, obs, points, roles=tuple(direct_roles)) as direct:
+        result = adjust(
+            models, obs, points, prior_sigma=prior, solver=solver, sources=sources,
+            tie_height=dem, tie_height_sigma_m=tie_height_sigma_m,
+            image_domains=domains, progress=progress,
+        )  # fmt: skip
+    direct = direct.result()
     inputs = [p for img in opened.values() for p in image_inputs(img)]
     inputs += [observations] + ([ground] if ground is not None else [])
     inputs += [dem.path] if isinstance(dem, DEM) else []

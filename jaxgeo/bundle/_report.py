@@ -21,7 +21,7 @@ import jax
 import numpy as np
 
 from .. import geodesy
-from .._runtime import exported as _exported
+from .._runtime.kept import kept
 from ..intersect import intersect
 from ..io import GroundPoints, Observations
 
@@ -86,14 +86,16 @@ def _stats(errors: np.ndarray):
 
 def project(model, ground) -> np.ndarray:
     """``model.project`` compiled once per model structure and number of points, traced once
-    across runs (:mod:`jaxgeo._runtime.exported`; reports run at Python level)."""
-    return np.asarray(_exported.call(_project, model, np.asarray(ground, float)))
+    across runs (a kept program, :mod:`jaxgeo._runtime.kept`; reports run at Python level)."""
+    return np.asarray(_project(model, np.asarray(ground, float)))
 
 
+@kept
 def _project(model, ground):
     return model.project(ground)
 
 
+@kept
 def _enu(estimated, truth):
     return jax.vmap(geodesy.geodetic_to_enu)(estimated, truth)
 
@@ -102,7 +104,7 @@ def enu_errors(estimated: np.ndarray, truth: np.ndarray) -> np.ndarray:
     """``(n, 3)`` estimated - true in east/north/up metres about each true point."""
     if len(truth) == 0:
         return np.zeros((0, 3))
-    return np.asarray(_exported.call(_enu, np.asarray(estimated, float), np.asarray(truth, float)))
+    return np.asarray(_enu(np.asarray(estimated, float), np.asarray(truth, float)))
 
 
 def image_rms(

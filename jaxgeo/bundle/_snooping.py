@@ -34,7 +34,6 @@ import equinox as eqx
 import jax.numpy as jnp
 import numpy as np
 
-from .._runtime import exported as _exported
 from .._runtime.arrays import device_array
 from ..lsq import (
     BLUNDER_K,
@@ -43,9 +42,7 @@ from ..lsq import (
     Solution,
     SolverConfig,
     initial_unknowns,
-    solve,
-    solve_finished,
-    solve_iterations,
+    solve_kept,
 )
 from ._prepare import Prepared
 from ._prepare.checks import listing
@@ -119,16 +116,9 @@ def solve_settings(solver: SolverConfig) -> SolverConfig:
     )
 
 
-def _solve(problem, solver: SolverConfig, **kwargs) -> Solution:
-    """:func:`jaxgeo.lsq.solve` compiled and traced once per structure, across runs too
-    (:mod:`jaxgeo._runtime.exported`; unless small, with ``SOLVE_COMPILE``'s XLA options, which
-    compile and run it in less memory). A problem compiled apart (large) as two programs, the
-    iterations and what follows them, whose compilations each need less memory than the whole
-    solve's."""
-    if not _exported.compiled_apart(problem, solver, **kwargs):
-        return _exported.call_solve(solve, problem, solver, **kwargs)
-    done = _exported.call_solve(solve_iterations, problem, solver, **kwargs)
-    return _exported.call_solve(solve_finished, problem, solver, done, **kwargs)
+_solve = solve_kept
+"""The solve of every round (:func:`jaxgeo.lsq.solve_kept`: compiled and traced once per
+structure, across runs too; the runtime decides how)."""
 
 
 def removal_cap(n: int) -> int:

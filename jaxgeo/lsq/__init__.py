@@ -47,11 +47,9 @@ from ._residuals import residuals as residuals
 from ._results import RESULTS as RESULTS
 from ._results import describe as describe
 from ._schur import reduced_system as reduced_system
-from ._solve import Iterations as Iterations
 from ._solve import Solution as Solution
 from ._solve import blocks_at as blocks_at
 from ._solve import initial_unknowns as initial_unknowns
 from ._solve import solve as solve
-from ._solve import solve_finished as solve_finished
-from ._solve import solve_iterations as solve_iterations
+from ._solve import solve_kept as solve_kept
 from ._solve import unit_scales as unit_scales

@@ -20,6 +20,7 @@ import optimistix as optx
 from jaxtyping import Array, Bool, Float, Int
 
 from .._runtime.arrays import zeros_like
+from .._runtime.kept import kept_solve
 from ._band import Band
 from ._config import DEFAULT_SOLVER, SolverConfig
 from ._covariance import cofactors, undetermined_unknowns
@@ -260,6 +261,19 @@ def solve_finished(
     st = solve_setup(problem, solver, **kwargs)
     it = iterations
     return solve_finish(problem, solver, st, it.y, it.result, it.steps, it.weights)
+
+
+_kept = kept_solve(solve, parts=(solve_iterations, solve_finished))
+
+
+def solve_kept(problem: Problem, solver: SolverConfig = DEFAULT_SOLVER, **kwargs) -> Solution:
+    """:func:`solve` (the same arguments) of concrete arrays, called from the host: kept as a
+    compiled program, traced at most once per problem structure across runs (a warm process
+    traces nothing); a large problem as two programs, the iterations and what follows them,
+    whose compilations each need less memory than the whole solve's. How it compiles is
+    :func:`jaxgeo._runtime.kept.kept_solve`'s decision; the same solution as ``solve``, to the
+    rounding of XLA's options. Within a transformation, ``solve`` jitted."""
+    return _kept(problem, solver, **kwargs)
 
 
 def _iterate(st: SolveSetup, solver: SolverConfig, verbose: bool):

@@ -14,7 +14,7 @@ Accuracy is reported on the fit grid and on an independent check grid placed at 
 midpoints (half a cell away in column, row and height).
 
 The localisation, the fit and the check projections run as kept programs
-(:func:`jaxgeo._runtime.exported.call`): a second run of ``jaxgeo adjust`` or ``jaxgeo strip``
+(:mod:`jaxgeo._runtime.kept`): a second run of ``jaxgeo adjust`` or ``jaxgeo strip``
 traces none of them (a 10 000-tie ``jaxgeo adjust``, paired: 0.5 s less warm, ~1 s less cold).
 """
 
@@ -27,7 +27,7 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
-from .._runtime import exported as _exported
+from .._runtime.kept import kept, kept_points
 from ._base import AbstractSensorModel
 from ._rpc import B_TO_A, RPC, TermOrder, monomials
 
@@ -71,28 +71,13 @@ def _grid(n_cols, n_rows, h_range, grid, check: bool):
 
 
 CHUNKS = (512, 8192)
-"""Points per compiled call: the small size below ``CHUNKS[1]`` points (a refit grid, GCPs),
-compiled quickly (:data:`jaxgeo._runtime.exported.QUICK_COMPILE`); the large one from there on,
-compiled for speed (:func:`jaxgeo._runtime.exported.call_kernel`; a call's own cost, ~0.3 ms,
-spread over 16x the points). At most two programs per model type whatever the number of points."""
+"""Points per compiled call (:func:`jaxgeo._runtime.kept.kept_points`): the small size below
+``CHUNKS[1]`` points (a refit grid, GCPs), compiled quickly; the large one from there on,
+compiled for speed (a call's own cost, ~0.3 ms, spread over 16x the points). At most two
+programs per model type whatever the number of points."""
 
 
-def _chunked(fn, model, *points) -> np.ndarray:
-    """``fn(model, *chunk)`` over fixed-size chunks of the ``points`` arrays (first axis),
-    padded by repeating the last point; the results concatenated, ``len(points[0])`` rows."""
-    n = len(points[0])
-    small = n < CHUNKS[1]
-    chunk, call = (CHUNKS[0], _exported.call) if small else (CHUNKS[1], _exported.call_kernel)
-    n_pad = -(-max(n, 1) // chunk) * chunk
-    mode = "edge" if n else "constant"  # no points: one chunk of zeros, its results cut off
-    padded = [np.pad(p, [(0, n_pad - n)] + [(0, 0)] * (p.ndim - 1), mode=mode) for p in points]
-    out = [
-        np.asarray(call(fn, model, *(p[i : i + chunk] for p in padded)))
-        for i in range(0, n_pad, chunk)
-    ]
-    return np.concatenate(out)[:n]
-
-
+@kept_points(CHUNKS)
 def _localize_chunk(model, image, h):
     return model.localize(image, h)
 
@@ -103,9 +88,10 @@ def localize_points(model: AbstractSensorModel, image, h) -> np.ndarray:
     points."""
     image = np.asarray(image, dtype=float).reshape(-1, 2)
     h = np.broadcast_to(np.asarray(h, dtype=float), image.shape[:1])
-    return _chunked(_localize_chunk, model, image, h)
+    return _localize_chunk(model, image, h)
 
 
+@kept_points(CHUNKS)
 def _project_chunk(model, ground):
     return model.project(ground)
 
@@ -114,10 +100,11 @@ def project_points(model: AbstractSensorModel, ground) -> np.ndarray:
     """``model.project`` of ``(..., 3)`` points, compiled over fixed-size chunks (as
     :func:`localize_points`)."""
     ground = np.asarray(ground, dtype=float)
-    out = _chunked(_project_chunk, model, ground.reshape(-1, 3))
+    out = _project_chunk(model, ground.reshape(-1, 3))
     return out.reshape(*ground.shape[:-1], 2)
 
 
+@kept
 def _project_rpc(rpc, ground):
     return rpc.project(ground)
 
@@ -144,6 +131,7 @@ def _solve(design, target, mask, reg, iterations):
     return jax.lax.fori_loop(0, iterations, step, jnp.zeros(2 * n - 1))
 
 
+@kept
 def _fit_normalized(ground_n, image_n, mask, reg, perm, iterations):
     design = monomials(ground_n)[:, perm]
     coef = jax.vmap(lambda v: _solve(design, v, mask, reg, iterations))(image_n.T)
@@ -216,13 +204,13 @@ def fit_rpcs(
         g_off, g_scale = 0.5 * (lo + hi), 0.5 * (hi - lo)
         g_off[2], g_scale[2] = 0.5 * (h0 + h1), 0.5 * (h1 - h0)
         ground_n = np.where(mask[:, None], (ground - g_off) / g_scale, 0.0)
-        num, den = _exported.call(
-            _fit_normalized, ground_n, image_n, mask.astype(float),
-            np.asarray(float(regularization)), perm, int(iterations),
+        num, den = _fit_normalized(
+            ground_n, image_n, mask.astype(float), np.asarray(float(regularization)), perm,
+            int(iterations),
         )  # fmt: skip
         rpc = RPC(num, den, g_off, g_scale, i_off, i_scale, order=order)
-        fit_res = np.asarray(_exported.call(_project_rpc, rpc, np.nan_to_num(ground))) - image
-        chk_res = np.asarray(_exported.call(_project_rpc, rpc, np.nan_to_num(c_ground))) - c_image
+        fit_res = np.asarray(_project_rpc(rpc, np.nan_to_num(ground))) - image
+        chk_res = np.asarray(_project_rpc(rpc, np.nan_to_num(c_ground))) - c_image
         f = _stats(np.where(mask[:, None], fit_res, np.nan))
         c = _stats(np.where(c_mask[:, None], chk_res, np.nan))
         report = RPCFitReport(*f, *c, int(mask.sum()), int(c_mask.sum()), (nx, ny, nh), (h0, h1))

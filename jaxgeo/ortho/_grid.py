@@ -8,25 +8,27 @@ import warnings
 
 import numpy as np
 
-from .._runtime import exported as _exported
+from .._runtime.kept import kept, kept_points
 from ..errors import JaxgeoWarning
 from ..geodesy import utm_epsg, utm_zone
 from ..io import dem_coverage
 
 BATCH = 64
-"""Host-side localisations on the DEM are padded to a multiple of ``BATCH`` points: one shape,
-one compilation."""
+"""Host-side localisations on the DEM run in chunks of ``BATCH`` points (the last one padded):
+one shape, one compilation."""
 ON_DEM_STEPS = 24
 """Regula falsi (Illinois) steps of :func:`on_dem`."""
 ON_DEM_TOL_M = 0.01
 """A point of :func:`on_dem` is kept when ``|DEM(ground) - h|`` ends below this (m)."""
 
 
+@kept
 def _at_height(model, xy, h):
     return model.localize(xy, h)
 
 
-def _on_dem_bracketed(model, xy, grid, lo, hi):
+@kept_points(BATCH, fixed=4)
+def _on_dem_bracketed(model, grid, lo, hi, xy):
     """Image points ``xy`` ``(n, 2)`` on the DEM: a root of ``f(h) = DEM(localize(xy, h)) - h``
     between ``lo`` (f >= 0) and ``hi`` (f <= 0) by the Illinois method. Returns the ground
     points and the last ``|f|`` (m; NaN where the DEM has no height)."""
@@ -76,18 +78,14 @@ def on_dem(model, xy: np.ndarray, grid) -> tuple[np.ndarray, np.ndarray]:
     the first one :func:`~jaxgeo.models.localize_on_dem` marches to (hidden terrain decides no
     border of a footprint): a bracketed root between the grid's lowest and highest heights, a
     few dozen localisations of one compiled program (tracing the march took 3-8 s of every run,
-    compiling it a minute in the test suite). Traced once per shape across runs
-    (:mod:`jaxgeo._runtime.exported`); padded to ``BATCH`` points.
+    compiling it a minute in the test suite). Traced once across runs (a kept program over
+    chunks of ``BATCH`` points, :mod:`jaxgeo._runtime.kept`).
     """
     xy = np.asarray(xy, dtype=float).reshape(-1, 2)
-    n = len(xy)
     z = np.asarray(grid.heights_m)
     lo, hi = float(np.nanmin(z)) - 1.0, float(np.nanmax(z)) + 1.0
-    size = int(math.ceil(max(n, 1) / BATCH) * BATCH)
-    pad = np.concatenate([xy, np.repeat(xy[:1], size - n, axis=0)]) if n else np.zeros((size, 2))
     bracket = np.asarray(lo), np.asarray(hi)  # arrays: the DEM's range is no part of the program
-    g, res = _exported.call(_on_dem_bracketed, model, pad, grid, *bracket)
-    g, res = np.asarray(g)[:n], np.asarray(res)[:n]
+    g, res = _on_dem_bracketed(model, grid, *bracket, xy)
     ok = np.isfinite(res) & (res < ON_DEM_TOL_M) & np.all(np.isfinite(g), axis=-1)
     return g, ok
 
@@ -128,9 +126,7 @@ def rough_bounds(model, border_xy: np.ndarray, dh_m: float = 500.0, heights=None
     h0 = float(model.reference_ground()[2])
     pts = []
     for h in heights if heights is not None else (h0 - dh_m, h0, h0 + dh_m):
-        g = np.asarray(
-            _exported.call(_at_height, model, border_xy, np.full(len(border_xy), float(h)))
-        )
+        g = np.asarray(_at_height(model, border_xy, np.full(len(border_xy), float(h))))
         pts.append(g[:, :2])
     pts = np.concatenate(pts)
     if not np.all(np.isfinite(pts)):
@@ -190,7 +186,7 @@ def footprint(model, grid, width: int, height: int, source: str = "the DEM") -> 
         )
     z = np.asarray(grid.heights_m)
     h = float(np.nanmedian(z))
-    far = np.asarray(_exported.call(_at_height, model, border[~ok], np.full(int((~ok).sum()), h)))
+    far = np.asarray(_at_height(model, border[~ok], np.full(int((~ok).sum()), h)))
     if not np.all(np.isfinite(far)):
         raise ValueError(f"{source}: the model cannot localise the image border")
     warnings.warn(
@@ -222,7 +218,7 @@ def ground_sample_distance(model, grid, crs, width: int, height: int) -> float:
     g, ok = on_dem(model, pts, grid)
     if not np.all(ok):  # a hole of the DEM under the centre: at its median height
         h = float(np.nanmedian(np.asarray(grid.heights_m)))
-        g = np.asarray(_exported.call(_at_height, model, pts, np.full(len(pts), h)))
+        g = np.asarray(_at_height(model, pts, np.full(len(pts), h)))
     tr = pyproj.Transformer.from_crs(4326, crs, always_xy=True)
     x, y = tr.transform(g[:, 0], g[:, 1])
     a = np.array([[x[1] - x[0], x[2] - x[0]], [y[1] - y[0], y[2] - y[0]]])

@@ -19,7 +19,6 @@ import warnings
 
 import numpy as np
 
-from .._runtime import exported as _exported
 from ..models import AbstractSensorModel, DEMGrid
 from ..tiles import NoData, RasterSpec, Tile, write_tile
 from ._kernel import map_pixels, sample_window
@@ -181,8 +180,7 @@ class OrthoJob:
         nodes = self.nodes(tile)
         dem = self.dem_window(nodes)
         dtype = "float64" if np.dtype(self.spec.dtype) == np.float64 else "float32"
-        xy, ref, lo, hi, err = _exported.call(map_pixels, self.model, dem, nodes, self.step_px,
-                                              dtype)  # fmt: skip
+        xy, ref, lo, hi, err = map_pixels(self.model, dem, nodes, self.step_px, dtype)
         ref, err = np.asarray(ref), np.asarray(err)
         win = self.image_window(ref, np.asarray(lo), np.asarray(hi))
         if win is None:

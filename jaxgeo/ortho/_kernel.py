@@ -25,6 +25,7 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
+from .._runtime.kept import kept
 from ..models import AbstractSensorModel, DEMGrid
 
 RESAMPLINGS = ("nearest", "bilinear", "cubic")
@@ -66,6 +67,7 @@ def _bilinear(z, c, r):
     return jnp.where(inside, top + tr * (bottom - top), jnp.nan)
 
 
+@kept
 def map_pixels(model: AbstractSensorModel, dem: DEMGrid, nodes_lonlat, step: int, dtype: str):
     """Image positions of a tile's pixels, their range, and the check error of every block.
 

@@ -21,7 +21,7 @@ from collections.abc import Sequence
 
 import numpy as np
 
-from .._runtime import exported as _exported
+from .._runtime.kept import kept
 from ..io import DEM, SensorImage, open_image, read_dem, refuse_existing
 from ..tiles import RasterSpec, TilePlan, overview_factors, plan_tiles
 from ._grid import default_crs, dem_for_image, footprint, ground_sample_distance
@@ -69,6 +69,7 @@ def _file_id(path) -> dict:
     return {"path": str(path), "bytes": st.st_size, "mtime": st.st_mtime}
 
 
+@kept
 def _project(model, ground):
     return model.project(ground)
 
@@ -92,7 +93,7 @@ def _tile_inputs(plan_tiles_list, grid, crs, model, h_range, img_size, margin_de
     ll = np.stack([lon, lat], -1).reshape(len(plan_tiles_list), len(outline), 2)
     ground = np.concatenate([np.concatenate([ll, np.full(ll.shape[:2] + (1,), h)], -1)
                              for h in h_range], axis=1)  # fmt: skip
-    xy = np.asarray(_exported.call(_project, model, ground.reshape(-1, 3)))
+    xy = np.asarray(_project(model, ground.reshape(-1, 3)))
     xy = xy.reshape(len(plan_tiles_list), -1, 2)
     w, h = img_size
     out = {}

@@ -21,7 +21,7 @@ import jax.numpy as jnp
 from jaxtyping import Array, Bool, Float, Int
 
 from .. import lsq
-from .._runtime import exported as _exported
+from .._runtime.kept import kept
 from ..geodesy import metres_per_unit
 from ..lsq import Problem, SolverConfig
 from ._config import STRIP_SOLVER
@@ -190,6 +190,9 @@ def _evaluate(group, data: Level2Data, theta, corr: UniversalCorrection) -> Eval
 
 
 two_level_jit = eqx.filter_jit(two_level)
+# kept programs (traced once per strip layout, across runs too); ``level_two`` and ``evaluate``
+# call the functions themselves, inlined in their callers' programs
+_kept_level_two, _kept_evaluate = kept(_level_two), kept(_evaluate)
 
 
 def level_two_jit(
@@ -201,15 +204,13 @@ def level_two_jit(
     """:func:`level_two` compiled once per strip layout (model group and level-2 data): level-1
     problems of one strip with or without GCPs share it."""
     (group,) = problem.groups
-    return TwoLevelSolution(
-        level1, *_exported.call(_level_two, group, data, level1.theta[0], degree)
-    )
+    return TwoLevelSolution(level1, *_kept_level_two(group, data, level1.theta[0], degree))
 
 
 def evaluate_jit(problem: Problem, data: Level2Data, sol: TwoLevelSolution) -> Evaluation:
     """:func:`evaluate` compiled once per strip layout (as :func:`level_two_jit`)."""
     (group,) = problem.groups
-    return _exported.call(_evaluate, group, data, sol.level1.theta[0], sol.correction)
+    return _kept_evaluate(group, data, sol.level1.theta[0], sol.correction)
 
 
 @eqx.filter_jit
