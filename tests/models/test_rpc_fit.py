@@ -160,9 +160,10 @@ def test_refit_through_exported_programs_equals_the_jitted_one(cameras, monkeypa
     assert len(exported) == 4  # nothing traced again
     ground, image = random_points(cameras["aft"], 200, seed=4)
     for rpc, report in (got, again):
-        # the suite compiles with other XLA options (tests/conftest.py): equal to rounding
+        # the suite compiles with other XLA options (tests/conftest.py): equal to rounding, the
+        # refit's own floor (~1e-6 px): 1.03e-6 px on an AVX-512 CPU, < 1e-6 without
         err = np.abs(project_points(rpc, ground) - project_points(want[0], ground)).max()
-        assert err < 1e-6, err
+        assert err < 2e-6, err
         # the grid's errors are ~1e-6 px, at the roundings' floor
         assert report.check_max_px == pytest.approx(want[1].check_max_px, abs=1e-5)
         assert report.n_fit == want[1].n_fit == 6 * 6 * 4
