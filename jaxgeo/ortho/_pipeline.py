@@ -16,7 +16,7 @@ import time
 from collections.abc import Sequence
 
 from ..io import DEM, SensorImage
-from ..tiles import mosaic_cog, remove_work, run_tiles, work_folder
+from ..tiles import EmptyProduct, TileSettings, make_product
 from ._plan import plan_ortho
 from ._validate import MAX_PIXELS, OrthoError
 
@@ -108,39 +108,29 @@ def orthorectify(
     existing ``out``, :class:`jaxgeo.tiles.TileError` naming a tile that kept failing.
     """
     t_start = time.perf_counter()
-    folder, done = None, False
     # the workers start once the plan is made: a refused input is answered without them
     setup = plan_ortho(
         image, model, dem, out, crs=crs, res_m=res_m, bounds=bounds, resampling=resampling,
         occlusion=occlusion, image_origin=image_origin, nodata=nodata, tile_px=tile_px,
         step_px=step_px, tol_px=tol_px, max_pixels=max_pixels, overwrite=overwrite,
     )  # fmt: skip
+    tiles = TileSettings(workers=workers, scheduler=scheduler, retries=retries, resume=resume,
+                         progress=progress)  # fmt: skip
     try:
-        out = setup.out
-        folder = work_folder(out, resume)
-        run = run_tiles(setup.plan, setup.job, folder, workers=workers, scheduler=scheduler,
-                        retries=retries, progress=progress)  # fmt: skip
-        stats = [r.stats for r in run.results.values() if r.path is not None]
-        if not stats:
-            raise OrthoError(f"{setup.image.path}: no tile of the product holds data (the "
-                             "image does not reach the output grid)")  # fmt: skip
-        overviews = "nearest" if resampling == "nearest" else "average"
-        mosaic_cog(run, setup.plan, setup.job.spec, out, overwrite=overwrite, compress=compress,
-                   overview_resampling=overviews)  # fmt: skip
-        done = True
-    finally:
-        if folder is not None and (resume is None or done):
-            remove_work(folder, created=resume is None)
-    total = setup.plan.width * setup.plan.height
-    blocks = sum(s.get("blocks", 0) for s in stats)
+        product = make_product(setup.plan, setup.job, setup.out, setup.job.spec, tiles,
+                               overwrite=overwrite, compress=compress)  # fmt: skip
+    except EmptyProduct:
+        raise OrthoError(f"{setup.image.path}: no tile of the product holds data (the "
+                         "image does not reach the output grid)") from None  # fmt: skip
+    total, cells = product.total, setup.plan.width * setup.plan.height
     return OrthoReport(
-        path=out, crs=setup.crs.to_string(), res_m=float(setup.job.spec.transform[0]),
+        path=product.path, crs=setup.crs.to_string(), res_m=float(setup.job.spec.transform[0]),
         width=setup.plan.width, height=setup.plan.height, bounds=setup.bounds,
-        grid_error_px=float(max((s.get("grid_error_px", 0.0) for s in stats), default=0.0)),
-        refined_fraction=sum(s.get("refined_blocks", 0) for s in stats) / max(blocks, 1),
-        valid_fraction=sum(s.get("valid_px", 0) for s in stats) / total,
-        occluded_fraction=(sum(s.get("occluded_px", 0) for s in stats) / total
-                           if occlusion != "off" else None),
-        seconds=time.perf_counter() - t_start, tiles=len(setup.plan), empty_tiles=run.empty,
-        reused_tiles=run.reused, workers=run.workers, scheduler=run.scheduler,
+        grid_error_px=total.grid_error_px,
+        refined_fraction=total.refined_blocks / max(total.blocks, 1),
+        valid_fraction=total.valid_px / cells,
+        occluded_fraction=total.occluded_px / cells if occlusion != "off" else None,
+        seconds=time.perf_counter() - t_start, tiles=product.tiles,
+        empty_tiles=product.empty_tiles, reused_tiles=product.reused_tiles,
+        workers=product.workers, scheduler=product.scheduler,
     )  # fmt: skip

@@ -20,6 +20,7 @@ from ._dsm import rasterize as rasterize
 from ._dsm import write_dsm as write_dsm
 from ._join import JoinedTies as JoinedTies
 from ._join import join_ties as join_ties
+from ._make import make_dsm as make_dsm
 from ._matching import Candidates as Candidates
 from ._matching import Matches as Matches
 from ._matching import epipolar_candidates as epipolar_candidates
@@ -32,6 +33,9 @@ from ._pipeline import dsm_from_images as dsm_from_images
 from ._pipeline import stereo_pair as stereo_pair
 from ._rectification import EpipolarGrids as EpipolarGrids
 from ._rectification import epipolar_grids as epipolar_grids
+from ._settings import MAX_CELLS as MAX_CELLS
+from ._settings import DSMSettings as DSMSettings
+from ._settings import DSMSettingsError as DSMSettingsError
 from ._ties import TieError as TieError
 from ._ties import TiePoints as TiePoints
 from ._ties import TieReport as TieReport
@@ -42,8 +46,10 @@ from ._ties import validity_heights as validity_heights
 from ._tiled import TILE_CELLS as TILE_CELLS
 from ._tiled import TILED_MIN_PX as TILED_MIN_PX
 from ._tiled import DSMJob as DSMJob
+from ._tiled import DSMReport as DSMReport
 from ._tiled import DSMSetup as DSMSetup
-from ._tiled import TiledDSMReport as TiledDSMReport
+from ._tiled import WholeDSMJob as WholeDSMJob
+from ._tiled import dsm_heights as dsm_heights
 from ._tiled import dsm_workers as dsm_workers
 from ._tiled import plan_dsm as plan_dsm
 from ._tiled import reference_window as reference_window

@@ -20,6 +20,8 @@ class TileSettings:
         retries: retries of a failing tile, or of a tile whose worker died.
         resume: a folder that keeps finished tiles; a later run of the same job reuses them.
         progress: a bar over the tiles on stderr.
+        plan: write the tile plan (JSON) to this file and stop, computing nothing
+            (:func:`jaxgeo.tiles.make_product`).
     """
 
     workers: int | None = None
@@ -27,6 +29,7 @@ class TileSettings:
     retries: int = DEFAULT_RETRIES
     resume: str | os.PathLike | None = None
     progress: bool = True
+    plan: str | os.PathLike | None = None
 
     def __post_init__(self):
         if self.workers is not None and self.workers < 0:

@@ -18,8 +18,15 @@ from rasterio.warp import Resampling, reproject
 from jaxgeo.cli import main
 from jaxgeo.io import open_image
 from jaxgeo.simulate import stereo_scene
-from jaxgeo.stereo import StereoError, dsm_from_images, plan_dsm, tiled_dsm, write_dsm
-from jaxgeo.tiles import NoData, Tile, TileError, WorkerPool, mosaic_cog, run_tiles
+from jaxgeo.stereo import (
+    DSMSettings,
+    StereoError,
+    dsm_from_images,
+    plan_dsm,
+    tiled_dsm,
+    write_dsm,
+)
+from jaxgeo.tiles import NoData, Tile, TileError, TileSettings, WorkerPool, mosaic_cog, run_tiles
 from tests.tiles.test_ortho_tiles import FailOn  # a job failing on one tile
 
 SIZE, SEED, RES, TILE = 400, 3, 0.65, 256
@@ -36,13 +43,13 @@ def scene(tmp_path_factory):
 @pytest.fixture(scope="module")
 def setup(scene):
     _, models, paths = scene
-    return plan_dsm(models, paths, res_m=RES, tile_px=TILE)
+    return plan_dsm(models, paths, DSMSettings(res_m=RES, tile_px=TILE))
 
 
 @pytest.fixture(scope="module")
 def tiled(setup, tmp_path_factory):
     out = tmp_path_factory.mktemp("tiled") / "dsm.tif"
-    report = tiled_dsm(setup, out, workers=0, progress=False)
+    report = tiled_dsm(setup, out, TileSettings(workers=0, progress=False))
     return out, report
 
 
@@ -70,7 +77,7 @@ def test_tiled_dsm_equals_the_untiled_one_and_the_truth(scene, setup, tiled, tmp
         )
         assert ds.units[0] == "m" and "meaning" in ds.tags(1)
         assert ds.res == (RES, RES)
-    full, _ = dsm_from_images(models, paths, res_m=RES, epsg=setup.job.epsg)
+    full, _ = dsm_from_images(models, paths, DSMSettings(res_m=RES, epsg=setup.job.epsg))
     write_dsm(full, tmp_path / "full.tif")
     a = _height_on(out, out)
     b = _height_on(out, tmp_path / "full.tif")
@@ -117,7 +124,9 @@ def test_resume_reuses_the_tiles_a_failed_run_finished(setup, tiled, tmp_path):
     with pytest.raises(TileError, match=last):
         run_tiles(setup.plan, FailOn(setup.job, last), work, workers=0, retries=0,
                   progress=False)  # fmt: skip
-    report = tiled_dsm(setup, tmp_path / "dsm.tif", workers=0, resume=work, progress=False)
+    report = tiled_dsm(
+        setup, tmp_path / "dsm.tif", TileSettings(workers=0, resume=work, progress=False)
+    )
     assert report.reused_tiles == len(setup.plan) - 1
     assert not work.exists()  # after success the work folder is removed
     with rasterio.open(out) as a, rasterio.open(tmp_path / "dsm.tif") as b:
@@ -140,9 +149,9 @@ def test_a_scene_without_texture_is_an_error_naming_the_image(scene, tmp_path):
         with rasterio.open(target, "w", **profile) as dst:
             dst.write(np.full_like(data, 1000))
         flat.append(target)
-    setup = plan_dsm(models, flat, res_m=RES, tile_px=TILE)
+    setup = plan_dsm(models, flat, DSMSettings(res_m=RES, tile_px=TILE))
     with pytest.raises(StereoError, match="left.tif"):
-        tiled_dsm(setup, tmp_path / "dsm.tif", workers=0, progress=False)
+        tiled_dsm(setup, tmp_path / "dsm.tif", TileSettings(workers=0, progress=False))
     assert not (tmp_path / "dsm.tif").exists()
 
 
