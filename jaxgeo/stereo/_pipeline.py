@@ -168,8 +168,8 @@ def _in_window(xy, window):
 
 
 def stereo_pair(
-    models: tuple[AbstractSensorModel, AbstractSensorModel],
-    paths: tuple[str | os.PathLike, str | os.PathLike],
+    models: Sequence[AbstractSensorModel],
+    paths: Sequence[str | os.PathLike],
     settings: DSMSettings = DEFAULT_DSM,
     *,
     dem=None,

@@ -53,7 +53,7 @@ from ..tiles import (
 from ._dsm import DSM_BANDS, local_utm_epsg, rasterize, to_map
 from ._pipeline import _height_offsets, _spacing, dsm_from_images, image_size, stereo_pair
 from ._settings import DEFAULT_DSM, DSMSettings
-from ._ties import TieError, footprint_dem_heights, tie_points
+from ._ties import TieError, footprint_dem_heights, tie_points, validity_heights
 from ._triangulation import StereoError, los_heights
 from ._uncertainty import Orientation, pair_orientation
 
@@ -215,17 +215,32 @@ def scene_heights(models, paths, roi) -> tuple[float, float] | None:
     :data:`HEIGHT_MARGIN_M` or a quarter of the span; ``None`` with fewer than 20 ties. A tile's
     reference window is projected at these heights: the models' whole validity range instead
     (hundreds of metres) widens every window by its parallax (a 1 Mpx tile read 1.7 Mpx)."""
+    return _sampled_heights(models, paths, _sample_windows(roi), los_heights(models[0]))
+
+
+def _sample_windows(roi) -> list[tuple[int, int, int, int]]:
+    """The five windows of :func:`scene_heights` in ``roi`` (the same window more than once
+    where the ROI is smaller than :data:`SAMPLE_WINDOW_PX`)."""
     col, row, w, h = roi
     side = min(SAMPLE_WINDOW_PX, w, h)
-    found = []
+    windows = []
     for fx, fy in ((0.5, 0.5), (0.25, 0.25), (0.75, 0.25), (0.25, 0.75), (0.75, 0.75)):
         c0 = int(min(max(col + fx * w - side / 2, col), col + w - side))
         r0 = int(min(max(row + fy * h - side / 2, row), row + h - side))
+        windows.append((c0, r0, side, side))
+    return windows
+
+
+def _sampled_heights(models, paths, windows, limits) -> tuple[float, float] | None:
+    """The 0.5-99.5 percentiles of the tie points' heights in ``windows`` widened by
+    :data:`HEIGHT_MARGIN_M` or a quarter of the span, within ``limits``; ``None`` with fewer
+    than 20 ties."""
+    found = []
+    for window in windows:
         try:
             with warnings.catch_warnings():
                 warnings.simplefilter("ignore")
-                ties = tie_points(models[0], models[1], paths[0], paths[1],
-                                  roi=(c0, r0, side, side))  # fmt: skip
+                ties = tie_points(models[0], models[1], paths[0], paths[1], roi=window)
         except (TieError, StereoError):  # no texture there: the other windows
             continue
         found.append(np.asarray(ties.ground)[:, 2])
@@ -235,8 +250,7 @@ def scene_heights(models, paths, roi) -> tuple[float, float] | None:
         return None
     lo, hi = (float(v) for v in np.percentile(heights, [0.5, 99.5]))
     margin = max(HEIGHT_MARGIN_M, 0.25 * (hi - lo))
-    v_lo, v_hi = los_heights(models[0])
-    lo, hi = max(lo - margin, v_lo), min(hi + margin, v_hi)
+    lo, hi = max(lo - margin, limits[0]), min(hi + margin, limits[1])
     return (lo, hi) if lo < hi else None
 
 
@@ -320,21 +334,28 @@ def _model_digest(models) -> str:
     return h.hexdigest()
 
 
-def dsm_heights(models, paths, settings: DSMSettings, dem=None) -> tuple[tuple[float, float], str]:
+def dsm_heights(
+    models, paths, settings: DSMSettings, dem=None, tiled: bool = True
+) -> tuple[tuple[float, float], str]:
     """The terrain's height range (m, ellipsoidal) over ``settings.roi`` and where it comes
     from: ``settings.heights`` (``"given"``), else the DEM's heights over the footprint +-50 m
-    (``"dem"``), else :func:`scene_heights` (``"tie points"``), else the reference model's
-    validity range."""
+    (``"dem"``), else the tie points' (``"tie points"``: :func:`scene_heights`; for an untiled
+    DSM, ``tiled=False``, within the models' whole validity cube, whose points it keeps, and
+    each window once), else the reference model's validity range."""
     if settings.heights is not None:
         return settings.heights, "given"
     roi = settings.roi or (0, 0, *image_size(paths[0]))
     if dem is not None:
         lo, hi = footprint_dem_heights(models[0], dem, roi)
         return (lo - HEIGHT_MARGIN_M, hi + HEIGHT_MARGIN_M), "dem"
-    heights = scene_heights(models, paths, roi)
+    if tiled:
+        heights = scene_heights(models, paths, roi)
+    else:
+        windows = list(dict.fromkeys(_sample_windows(roi)))
+        heights = _sampled_heights(models, paths, windows, validity_heights(models[0]))
     if heights is not None:
         return heights, "tie points"
-    return los_heights(models[0]), "the model's validity range"
+    return (los_heights if tiled else validity_heights)(models[0]), "the model's validity range"
 
 
 def plan_dsm(
@@ -367,7 +388,7 @@ def plan_dsm(
     ref = models[0]
     w, h = image_size(paths[0])
     col, row, rw, rh = settings.roi if settings.roi is not None else (0, 0, w, h)
-    (lo, hi), source = dsm_heights(models, paths, settings, dem)
+    (lo, hi), source = dsm_heights(models, paths, settings, dem, tiled)
     t = np.linspace(0.0, 1.0, 17)
     c, r, one = col - 0.5 + t * rw, row - 0.5 + t * rh, np.ones_like(t)
     edge = np.concatenate([np.stack(xy, -1) for xy in ((c, one * (row - 0.5)),

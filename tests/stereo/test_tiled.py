@@ -213,3 +213,28 @@ def test_default_workers_are_one_per_core_for_several_tiles(monkeypatch):
     assert dsm_workers(None, tiles=1) == 0 and dsm_workers(0) == 0 and dsm_workers(3, tiles=1) == 3
     monkeypatch.setattr(_tiled, "cores", lambda: 1)
     assert dsm_workers(None) == 0 and dsm_workers(2) == 2
+
+
+def test_an_untiled_dsm_is_a_plan_of_one_tile_with_the_same_cells(scene, tmp_path):
+    """``make_dsm`` of a small scene: one tile made here, on a grid that holds the footprint; its
+    cells those of ``dsm_from_images`` on that grid (the same chain), its report the pairs'."""
+    from jaxgeo.stereo import make_dsm
+
+    _, models, paths = scene
+    out = tmp_path / "dsm.tif"
+    report = make_dsm(paths, out, DSMSettings(res_m=RES), TileSettings(progress=False))
+    assert not report.tiled and report.tiles == 1 and report.workers == 0
+    assert len(report.pairs) == 1 and report.pairs[0]["n_ties"] > 100
+    assert report.names == ("left", "right") and report.as_dict()["pairs"][0]["images"] == [
+        "left",
+        "right",
+    ]
+    with rasterio.open(out) as ds:
+        made, t = ds.read(), ds.transform
+    assert report.plan.job["heights_from"] == "tie points"
+    grid, _ = dsm_from_images(models, paths, DSMSettings(res_m=RES, epsg=report.epsg),
+                              origin=(t.c, t.f), shape=made.shape[1:])  # fmt: skip
+    bands = np.stack(list(grid.bands().values()))
+    np.testing.assert_array_equal(made, bands)
+    assert report.filled == pytest.approx(np.isfinite(bands[0]).mean())
+    assert [p.name for p in tmp_path.iterdir()] == ["dsm.tif"]  # no work folder left
