@@ -31,7 +31,6 @@ from ._product import EmptyProduct as EmptyProduct
 from ._product import ProductRun as ProductRun
 from ._product import TileStats as TileStats
 from ._product import make_product as make_product
-from ._runner import DEFAULT_RETRIES as DEFAULT_RETRIES
 from ._runner import IN_PROCESS_MAX_PX as IN_PROCESS_MAX_PX
 from ._runner import NoData as NoData
 from ._runner import TileError as TileError
@@ -45,4 +44,5 @@ from ._runner import resolve_workers as resolve_workers
 from ._runner import run_one_tile as run_one_tile
 from ._runner import run_tiles as run_tiles
 from ._runner import work_folder as work_folder
+from ._settings import DEFAULT_RETRIES as DEFAULT_RETRIES
 from ._settings import TileSettings as TileSettings

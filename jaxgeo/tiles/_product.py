@@ -172,9 +172,7 @@ def make_product(
     folder, done, mosaic_s = None, False, 0.0
     try:
         folder = work_folder(out, resume)
-        run = run_tiles(plan, work, folder, workers=settings.workers,
-                        scheduler=settings.scheduler, pool=pool, retries=settings.retries,
-                        progress=settings.progress)  # fmt: skip
+        run = run_tiles(plan, work, folder, settings, pool=pool)
         stats = {k: _stats(r) for k, r in run.results.items()}
         if all(r.path is None for r in run.results.values()):
             raise EmptyProduct(f"no tile of the {plan.kind} holds data", stats)

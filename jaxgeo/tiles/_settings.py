@@ -5,7 +5,9 @@ from __future__ import annotations
 import dataclasses
 import os
 
-from ._runner import DEFAULT_RETRIES
+DEFAULT_RETRIES = 2
+"""Retries of a failed tile (and reschedulings of a tile whose worker died) before the run
+stops."""
 
 
 @dataclasses.dataclass(frozen=True)

@@ -30,6 +30,7 @@ from jaxgeo.tiles import NoData, Tile, TileError, TileSettings, WorkerPool, mosa
 from tests.tiles.test_ortho_tiles import FailOn  # a job failing on one tile
 
 SIZE, SEED, RES, TILE = 400, 3, 0.65, 256
+QUIET = TileSettings(progress=False)
 
 
 @pytest.fixture(scope="module")
@@ -95,7 +96,7 @@ def test_tiled_dsm_equals_the_untiled_one_and_the_truth(scene, setup, tiled, tmp
 def test_tiles_on_two_spawned_workers_equal_those_made_here(setup, tiled, tmp_path):
     out, _ = tiled
     with WorkerPool(2, retries=1, warm=("jaxgeo.stereo",)) as pool:
-        run = run_tiles(setup.plan, setup.job, tmp_path / "work", pool=pool, progress=False)
+        run = run_tiles(setup.plan, setup.job, tmp_path / "work", QUIET, pool=pool)
     assert run.workers == 2
     mosaic_cog(run, setup.plan, setup.job.spec, tmp_path / "dask.tif")
     with rasterio.open(out) as a, rasterio.open(tmp_path / "dask.tif") as b:
@@ -122,8 +123,8 @@ def test_resume_reuses_the_tiles_a_failed_run_finished(setup, tiled, tmp_path):
     work = tmp_path / "work"
     last = setup.plan.tiles[-1].id
     with pytest.raises(TileError, match=last):
-        run_tiles(setup.plan, FailOn(setup.job, last), work, workers=0, retries=0,
-                  progress=False)  # fmt: skip
+        run_tiles(setup.plan, FailOn(setup.job, last), work,
+                  TileSettings(workers=0, retries=0, progress=False))  # fmt: skip
     report = tiled_dsm(
         setup, tmp_path / "dsm.tif", TileSettings(workers=0, resume=work, progress=False)
     )
