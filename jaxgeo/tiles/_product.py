@@ -63,6 +63,8 @@ class TileStats:
     grid_error_px: float = 0.0
     no_data: str | None = None
     details: dict = dataclasses.field(default_factory=dict, compare=False)
+    reported: tuple[str, ...] = dataclasses.field(default=(), compare=False, repr=False)
+    """The counters the tile's work reported (:meth:`as_dict` writes those)."""
 
     @classmethod
     def from_dict(cls, record: Mapping | None) -> TileStats:
@@ -76,14 +78,15 @@ class TileStats:
         for k in _MAXIMA:
             if k in known:
                 known[k] = float(known[k])
-        return cls(**known, details=record)
+        reported = tuple(k for k in (*_COUNTERS, *_MAXIMA) if k in known)
+        return cls(**known, details=record, reported=reported)
 
     def as_dict(self) -> dict:
-        """JSON: a tile without data as ``{"no_data": why}``, else the counters and
-        ``details``."""
+        """JSON: a tile without data as ``{"no_data": why}``, else the counters its work
+        reported (all of them for a sum) and ``details``."""
         if self.no_data is not None:
             return {"no_data": self.no_data}
-        out = {k: getattr(self, k) for k in (*_COUNTERS, *_MAXIMA)}
+        out = {k: getattr(self, k) for k in self.reported or (*_COUNTERS, *_MAXIMA)}
         return {**out, **self.details}
 
     def __add__(self, other: TileStats) -> TileStats:
@@ -91,7 +94,9 @@ class TileStats:
             return NotImplemented
         sums = {k: getattr(self, k) + getattr(other, k) for k in _COUNTERS}
         maxima = {k: max(getattr(self, k), getattr(other, k)) for k in _MAXIMA}
-        return TileStats(**sums, **maxima)
+        reported = tuple(k for k in (*_COUNTERS, *_MAXIMA)
+                         if k in self.reported or k in other.reported)  # fmt: skip
+        return TileStats(**sums, **maxima, reported=reported)
 
     @staticmethod
     def total(stats: Iterable[TileStats]) -> TileStats:

@@ -52,10 +52,12 @@ class Ramp:
 def test_stats_sum_counters_and_keep_the_largest_error():
     a = TileStats.from_dict({"valid_px": 3, "blocks": 2, "grid_error_px": 0.5, "pairs": [1]})
     b = TileStats.from_dict({"valid_px": 4, "occluded_px": 1, "grid_error_px": 0.2})
-    assert a.details == {"pairs": [1]} and a.as_dict()["pairs"] == [1]
+    assert a.details == {"pairs": [1]}
+    assert a.as_dict() == {"valid_px": 3, "blocks": 2, "grid_error_px": 0.5, "pairs": [1]}
     total = TileStats.total([a, b])
     assert (total.valid_px, total.blocks, total.occluded_px) == (7, 2, 1)
     assert total.grid_error_px == 0.5 and total.details == {}
+    assert total.as_dict() == {"valid_px": 7, "occluded_px": 1, "blocks": 2, "grid_error_px": 0.5}
     assert TileStats.from_dict({"no_data": "water"}).as_dict() == {"no_data": "water"}
     assert TileStats.total([]) == TileStats()
 
