@@ -1,4 +1,5 @@
-"""The DSM of images, one call (:func:`make_dsm`): what ``jaxgeo dsm`` does.
+"""The DSM of images, one call (:func:`make_dsm`): what ``jaxgeo dsm`` does; the run of a
+planned DSM (:func:`tiled_dsm`, through :func:`jaxgeo.tiles.make_product`).
 
 Always through a tile plan (:func:`~jaxgeo.stereo.plan_dsm`): a reference window larger than
 :data:`~jaxgeo.stereo.TILED_MIN_PX` px a side, or any tile option (a tile size, workers, a
@@ -21,9 +22,18 @@ from collections.abc import Sequence
 import numpy as np
 
 from ..io import SensorImage, open_image
-from ..tiles import DEFAULT_TILES, TileSettings, WorkerPool
+from ..tiles import (
+    DEFAULT_TILES,
+    EmptyProduct,
+    TileError,
+    TileSettings,
+    TileStats,
+    WorkerPool,
+    make_product,
+)
+from ._report import DSMReport
 from ._settings import DEFAULT_DSM, DSMSettings, DSMSettingsError
-from ._tiled import TILED_MIN_PX, DSMReport, dsm_workers, plan_dsm, tiled_dsm
+from ._tiled import TILED_MIN_PX, DSMSetup, dsm_workers, plan_dsm
 from ._triangulation import StereoError
 from ._uncertainty import Orientation
 
@@ -95,6 +105,58 @@ def _early_pool(tiles: TileSettings) -> WorkerPool | None:
         return WorkerPool(0, tiles.scheduler, tiles.retries, warm=("jaxgeo.stereo",))
     n = dsm_workers(tiles.workers)
     return WorkerPool(n, retries=tiles.retries, warm=("jaxgeo.stereo",)) if n else None
+
+
+def tiled_dsm(
+    setup: DSMSetup,
+    out: str | os.PathLike,
+    tiles: TileSettings = DEFAULT_TILES,
+    *,
+    overwrite: bool = False,
+    compress: str = "deflate",
+    pool: WorkerPool | None = None,
+) -> DSMReport:
+    """Run the tiles of ``setup`` (:func:`plan_dsm`) and write the DSM as one COG at ``out``
+    (atomic: complete or absent; :func:`jaxgeo.tiles.make_product`). ``tiles``: where the
+    tiles run (by default one worker process per core when there are several tiles: a tile
+    takes tens of seconds, a worker's start a few), ``resume`` (a folder for the finished
+    tiles, kept after an interruption and reused by the next run), ``plan`` (only the plan
+    written); ``pool``: workers started earlier (:class:`~jaxgeo.tiles.WorkerPool`, e.g. before
+    the planning, left open), used instead of ``tiles.workers`` and ``tiles.scheduler``.
+    The one tile of an untiled setup runs in this process (its errors as they are raised).
+    :class:`StereoError` when no tile gets a height."""
+    t0 = time.perf_counter()
+    plan = setup.plan
+    if not setup.tiled:
+        tiles = dataclasses.replace(tiles, workers=0, scheduler=None, retries=0, progress=False)
+        pool = None
+    elif not tiles.scheduler:
+        tiles = dataclasses.replace(tiles, workers=dsm_workers(tiles.workers, len(plan)))
+    try:
+        product = make_product(plan, setup.job, out, setup.job.spec, tiles, overwrite=overwrite,
+                               compress=compress, pool=pool)  # fmt: skip
+    except EmptyProduct as err:
+        why = err.reasons()
+        raise StereoError(f"dsm: no tile of {setup.job.paths[0]} got a height"
+                          + (f" ({'; '.join(why)[:300]})" if why else "")) from None  # fmt: skip
+    except TileError as err:
+        if not setup.tiled and err.__cause__ is not None:  # the DSM's own error, as it was
+            raise err.__cause__ from None
+        raise
+    cells = plan.width * plan.height
+    one = next(iter(product.stats.values()), TileStats())
+    return DSMReport(
+        path=product.path, epsg=setup.job.epsg, res_m=setup.job.res_m, width=plan.width,
+        height=plan.height, filled=product.total.valid_px / cells,
+        interpolated=product.total.filled_px / cells, seconds=time.perf_counter() - t0,
+        tiles=product.tiles, empty_tiles=product.empty_tiles,
+        reused_tiles=product.reused_tiles, workers=product.workers,
+        scheduler=product.scheduler, tile_stats=product.stats, tiles_s=product.tiles_s,
+        mosaic_s=product.mosaic_s, tiled=setup.tiled,
+        pairs=() if setup.tiled else tuple(one.details.get("pairs", ())),
+        median_height_sigma_m=None if setup.tiled else one.details.get("median_height_sigma_m"),
+        plan=plan, plan_path=product.plan_path,
+    )  # fmt: skip
 
 
 def make_dsm(

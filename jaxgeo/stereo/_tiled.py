@@ -35,17 +35,11 @@ import numpy as np
 
 from ..models import AbstractSensorModel
 from ..tiles import (
-    DEFAULT_TILES,
-    EmptyProduct,
     NoData,
     RasterSpec,
     Tile,
     TilePlan,
-    TileSettings,
-    TileStats,
-    WorkerPool,
     cores,
-    make_product,
     overview_factors,
     plan_tiles,
     write_tile,
@@ -485,106 +479,6 @@ def _wkt(epsg: int) -> str:
     return pyproj.CRS.from_epsg(epsg).to_wkt()
 
 
-@dataclasses.dataclass(frozen=True)
-class DSMReport:
-    """What :func:`make_dsm` (or :func:`tiled_dsm`) made: ``path`` (``None``: only the plan
-    was written, at ``plan_path``), its grid (``epsg``, ``res_m``, ``width`` x ``height``
-    cells), ``filled`` (share of cells with a height), ``interpolated`` (share of cells
-    interpolated), the run (``tiles``, ``empty_tiles``: nodata, ``reused_tiles``, ``workers``,
-    ``scheduler``, ``seconds``: of which ``plan_s`` planning, ``tiles_s`` running the tiles
-    and ``mosaic_s`` writing the COG), per tile its :class:`~jaxgeo.tiles.TileStats`
-    (``tile_stats``: a tile's pairs' numbers in ``details``, or why it is empty in
-    ``no_data``); ``tiled``: made tile by tile (else one tile of the whole ROI, whose pairs'
-    stats are ``pairs`` and median height sigma ``median_height_sigma_m``); the ``plan``."""
-
-    path: pathlib.Path | None
-    epsg: int
-    res_m: float
-    width: int
-    height: int
-    filled: float
-    interpolated: float
-    seconds: float
-    tiles: int
-    empty_tiles: int
-    reused_tiles: int
-    workers: int
-    scheduler: str | None
-    tile_stats: dict[str, TileStats]
-    tiles_s: float = 0.0
-    mosaic_s: float = 0.0
-    plan_s: float = 0.0
-    tiled: bool = True
-    pairs: tuple[dict, ...] = ()
-    median_height_sigma_m: float | None = None
-    plan: TilePlan | None = None
-    plan_path: pathlib.Path | None = None
-    names: tuple[str, ...] = ()
-    """The images' names (file stems), the reference first (for :meth:`as_dict`)."""
-
-    def empty(self) -> dict[str, str]:
-        """Why each tile without data has none (tile id -> reason)."""
-        return {k: s.no_data for k, s in self.tile_stats.items() if s.no_data is not None}
-
-    def as_dict(self) -> dict:
-        """The report as JSON (what ``jaxgeo dsm --json`` prints): the DSM's grid, the share of
-        cells filled and interpolated; untiled: the median height sigma and each pair's stats;
-        tiled: the run (tiles, the empty ones' reasons, times, each tile's stats)."""
-        out = {"output": str(self.path), "epsg": self.epsg, "res_m": self.res_m,
-               "shape": [self.height, self.width], "filled": round(self.filled, 4),
-               "interpolated": round(self.interpolated, 4)}  # fmt: skip
-        if not self.tiled:
-            ref = self.names[0] if self.names else ""
-            pairs = [{"images": [ref, self.names[i + 1] if i + 1 < len(self.names) else ""],
-                      **st} for i, st in enumerate(self.pairs)]  # fmt: skip
-            return {**out, "median_height_sigma_m": self.median_height_sigma_m, "pairs": pairs}
-        return {**out, "tiles": self.tiles, "empty_tiles": self.empty(),
-                "reused_tiles": self.reused_tiles, "workers": self.workers,
-                "scheduler": self.scheduler, "seconds": round(self.seconds, 1),
-                "plan_s": round(self.plan_s, 1), "tiles_s": round(self.tiles_s, 1),
-                "mosaic_s": round(self.mosaic_s, 1),
-                "tile_stats": {k: s.as_dict() for k, s in self.tile_stats.items()}}  # fmt: skip
-
-    def summary(self, out: str | None = None) -> str:
-        """The report in a few lines for people (what ``jaxgeo dsm`` prints); ``out``: the
-        output's name as the user gave it."""
-        out = out or str(self.path)
-        if not self.tiled:
-            sigma = self.median_height_sigma_m
-            lines = [f"wrote {out}: {self.width} x {self.height} cells of {self.res_m:g} m, "
-                     f"EPSG:{self.epsg}, {100 * self.filled:.1f}% with a height (ellipsoidal, "
-                     f"m), {100 * self.interpolated:.1f}% of them interpolated (band "
-                     f"'filled'); median height_sigma {sigma or float('nan'):.2f} m"]  # fmt: skip
-            for pair in self.as_dict()["pairs"]:
-                lines.append(f"  {pair['images'][0]} - {pair['images'][1]}: " + _pair_line(pair))
-            return "\n".join(lines)
-        empty = self.empty()
-        where = (f"{self.workers} worker(s) at {self.scheduler}" if self.scheduler
-                 else "this process")  # fmt: skip
-        lines = [f"wrote {self.path}: {self.width} x {self.height} cells of {self.res_m:g} m, "
-                 f"EPSG:{self.epsg}, {100 * self.filled:.1f}% with a height (ellipsoidal, m), "
-                 f"{100 * self.interpolated:.1f}% interpolated (band 'filled'); {self.tiles} "
-                 f"tiles ({len(empty)} without data, {self.reused_tiles} reused) on {where}; "
-                 f"{self.seconds:.1f} s"]  # fmt: skip
-        lines += [f"  tile {k}: no data ({why[:160]})" for k, why in list(empty.items())[:5]]
-        return "\n".join(lines)
-
-
-def _pair_line(pair: dict) -> str:
-    """One pair's numbers: ties, points dropped, vertical disparity, fill, height offset."""
-    parts = [f"{pair.get('n_ties', '?')} ties"]
-    if pair.get("n_points_outside_validity"):
-        parts.append(f"{pair['n_points_outside_validity']} points outside the models' "
-                     "validity cube dropped")  # fmt: skip
-    if "vertical_disparity_px" in pair:
-        parts.append(f"vertical disparity {pair['vertical_disparity_px']:+.2f} px removed")
-    if "disparity_fill" in pair:
-        parts.append(f"{100 * pair['disparity_fill']:.1f}% of pixels matched")
-    if "height_offset_removed_m" in pair:
-        parts.append(f"height offset {pair['height_offset_removed_m']:+.2f} m removed")
-    return ", ".join(parts)
-
-
 def dsm_workers(workers: int | None, tiles: int | None = None) -> int:
     """Worker processes of a tiled DSM: ``workers`` where given, else one per core on 2+ cores
     (a DSM tile is tens of seconds: workers pay off) for several tiles (``tiles``; unknown
@@ -592,59 +486,3 @@ def dsm_workers(workers: int | None, tiles: int | None = None) -> int:
     if workers is not None:
         return workers
     return cores() if cores() > 1 and (tiles is None or tiles > 1) else 0
-
-
-def tiled_dsm(
-    setup: DSMSetup,
-    out: str | os.PathLike,
-    tiles: TileSettings = DEFAULT_TILES,
-    *,
-    overwrite: bool = False,
-    compress: str = "deflate",
-    pool: WorkerPool | None = None,
-) -> DSMReport:
-    """Run the tiles of ``setup`` (:func:`plan_dsm`) and write the DSM as one COG at ``out``
-    (atomic: complete or absent; :func:`jaxgeo.tiles.make_product`). ``tiles``: where the
-    tiles run (by default one worker process per core when there are several tiles: a tile
-    takes tens of seconds, a worker's start a few), ``resume`` (a folder for the finished
-    tiles, kept after an interruption and reused by the next run), ``plan`` (only the plan
-    written); ``pool``: workers started earlier (:class:`~jaxgeo.tiles.WorkerPool`, e.g. before
-    the planning, left open), used instead of ``tiles.workers`` and ``tiles.scheduler``.
-    The one tile of an untiled setup runs in this process (its errors as they are raised).
-    :class:`StereoError` when no tile gets a height."""
-    import time
-
-    from ..tiles import TileError
-
-    t0 = time.perf_counter()
-    plan = setup.plan
-    if not setup.tiled:
-        tiles = dataclasses.replace(tiles, workers=0, scheduler=None, retries=0, progress=False)
-        pool = None
-    elif not tiles.scheduler:
-        tiles = dataclasses.replace(tiles, workers=dsm_workers(tiles.workers, len(plan)))
-    try:
-        product = make_product(plan, setup.job, out, setup.job.spec, tiles, overwrite=overwrite,
-                               compress=compress, pool=pool)  # fmt: skip
-    except EmptyProduct as err:
-        why = err.reasons()
-        raise StereoError(f"dsm: no tile of {setup.job.paths[0]} got a height"
-                          + (f" ({'; '.join(why)[:300]})" if why else "")) from None  # fmt: skip
-    except TileError as err:
-        if not setup.tiled and err.__cause__ is not None:  # the DSM's own error, as it was
-            raise err.__cause__ from None
-        raise
-    cells = plan.width * plan.height
-    one = next(iter(product.stats.values()), TileStats())
-    return DSMReport(
-        path=product.path, epsg=setup.job.epsg, res_m=setup.job.res_m, width=plan.width,
-        height=plan.height, filled=product.total.valid_px / cells,
-        interpolated=product.total.filled_px / cells, seconds=time.perf_counter() - t0,
-        tiles=product.tiles, empty_tiles=product.empty_tiles,
-        reused_tiles=product.reused_tiles, workers=product.workers,
-        scheduler=product.scheduler, tile_stats=product.stats, tiles_s=product.tiles_s,
-        mosaic_s=product.mosaic_s, tiled=setup.tiled,
-        pairs=() if setup.tiled else tuple(one.details.get("pairs", ())),
-        median_height_sigma_m=None if setup.tiled else one.details.get("median_height_sigma_m"),
-        plan=plan, plan_path=product.plan_path,
-    )  # fmt: skip
