@@ -205,14 +205,15 @@ def true_models(scene) -> dict:
 
 def dsm_case(models, directory, truth, h_range, lines, args) -> dict:
     """A DSM of the whole left image with ``models`` on the truth's grid, and its errors."""
-    from jaxgeo.stereo import dsm_from_images
+    from jaxgeo.stereo import DSMSettings, dsm_from_images
 
     truth_h, _, _, res, epsg, origin = truth
     d = pathlib.Path(directory)
     t = time.perf_counter()
     dsm, stats = dsm_from_images(
-        [models["left"], models["right"]], [d / "left.tif", d / "right.tif"], res_m=res,
-        epsg=epsg, origin=origin, shape=truth_h.shape, height_range_m=h_range, register=False,
+        [models["left"], models["right"]], [d / "left.tif", d / "right.tif"],
+        DSMSettings(res_m=res, epsg=epsg, heights=h_range, register=False), origin=origin,
+        shape=truth_h.shape,
     )  # fmt: skip
     size = int(args.size)
     out = errors(np.asarray(dsm.height, np.float64), truth_h, lines, size, args)

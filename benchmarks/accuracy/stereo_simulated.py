@@ -136,11 +136,13 @@ def adjust_kepler(scene, start, obs, ground):
 def chain(models, paths, truth_rpcs, rendered, cell_gsd, method, tol_px):
     """Rectify, match densely, triangulate, grid; errors against the true surface."""
     from jaxgeo.simulate._dsm_truth import height_errors
-    from jaxgeo.stereo import rasterize, stereo_pair
+    from jaxgeo.stereo import DSMSettings, rasterize, stereo_pair
 
     t = time.perf_counter()
     pair = stereo_pair(
-        models[0], models[1], paths[0], paths[1], method=method, epipolar_tol_px=tol_px
+        (models[0], models[1]),
+        (paths[0], paths[1]),
+        DSMSettings(triangulation=method, epipolar_tol_px=tol_px),
     )
     dsm = rasterize(pair.points, cell_gsd * rendered.gsd_m)
     shapes = [im.shape for im in rendered.images.values()]

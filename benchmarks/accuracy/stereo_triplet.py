@@ -23,7 +23,7 @@ import rasterio
 from benchmarks.data import S2P_TRIPLET as SHARED
 from benchmarks.harness import emit
 from jaxgeo.io import read_rpc
-from jaxgeo.stereo import dsm_from_images
+from jaxgeo.stereo import DSMSettings, dsm_from_images
 
 jax.config.update("jax_enable_x64", True)
 
@@ -42,9 +42,10 @@ def main():
         ref, tr = f.read(1), f.transform
     t0 = time.perf_counter()
     dsm, stats = dsm_from_images(
-        models, paths, roi=(150, 150, 700, 700), res_m=0.5, epsg=32631,
-        origin=(tr.c, tr.f), shape=ref.shape, method=args.triangulation,
-        register=not args.no_register, progress=True,
+        models, paths,
+        DSMSettings(roi=(150, 150, 700, 700), res_m=0.5, epsg=32631,
+                    triangulation=args.triangulation, register=not args.no_register),
+        origin=(tr.c, tr.f), shape=ref.shape, progress=True,
     )  # fmt: skip
     elapsed = time.perf_counter() - t0
     h = dsm.height

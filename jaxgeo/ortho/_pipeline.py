@@ -16,7 +16,7 @@ import time
 from collections.abc import Sequence
 
 from ..io import DEM, SensorImage
-from ..tiles import TileSettings, mosaic_cog, remove_work, run_tiles, work_folder
+from ..tiles import EmptyProduct, TileSettings, make_product
 from ._plan import plan_ortho
 from ._settings import OrthoSettings
 from ._validate import OrthoError
@@ -90,38 +90,27 @@ def orthorectify(
     if not isinstance(tiles, TileSettings):
         raise TypeError(f"tiles must be a jaxgeo.tiles.TileSettings, got {type(tiles).__name__}")
     t_start = time.perf_counter()
-    folder, done = None, False
     # the workers start once the plan is made: a refused input is answered without them
     setup = plan_ortho(image, dem, out, settings, model=model, image_origin=image_origin,
                        overwrite=overwrite)  # fmt: skip
+    # the mosaic's overviews: nearest for a nearest-resampled product (classes stay classes)
+    overviews = "nearest" if settings.resampling == "nearest" else "average"
+    spec = dataclasses.replace(setup.job.spec, overview_resampling=overviews)
     try:
-        out = setup.out
-        folder = work_folder(out, tiles.resume)
-        run = run_tiles(setup.plan, setup.job, folder, workers=tiles.workers,
-                        scheduler=tiles.scheduler, retries=tiles.retries,
-                        progress=tiles.progress)  # fmt: skip
-        stats = [r.stats for r in run.results.values() if r.path is not None]
-        if not stats:
-            raise OrthoError(f"{setup.image.path}: no tile of the product holds data (the "
-                             "image does not reach the output grid)")  # fmt: skip
-        overviews = "nearest" if settings.resampling == "nearest" else "average"
-        mosaic_cog(run, setup.plan, setup.job.spec, out, overwrite=overwrite,
-                   compress=settings.compress,
-                   overview_resampling=overviews)  # fmt: skip
-        done = True
-    finally:
-        if folder is not None and (tiles.resume is None or done):
-            remove_work(folder, created=tiles.resume is None)
-    total = setup.plan.width * setup.plan.height
-    blocks = sum(s.get("blocks", 0) for s in stats)
+        product = make_product(setup.plan, setup.job, setup.out, spec, tiles,
+                               overwrite=overwrite, compress=settings.compress)  # fmt: skip
+    except EmptyProduct:
+        raise OrthoError(f"{setup.image.path}: no tile of the product holds data (the "
+                         "image does not reach the output grid)") from None  # fmt: skip
+    total, cells = product.total, setup.plan.width * setup.plan.height
     return OrthoReport(
-        path=out, crs=setup.crs.to_string(), res_m=float(setup.job.spec.transform[0]),
+        path=product.path, crs=setup.crs.to_string(), res_m=float(setup.job.spec.transform[0]),
         width=setup.plan.width, height=setup.plan.height, bounds=setup.bounds,
-        grid_error_px=float(max((s.get("grid_error_px", 0.0) for s in stats), default=0.0)),
-        refined_fraction=sum(s.get("refined_blocks", 0) for s in stats) / max(blocks, 1),
-        valid_fraction=sum(s.get("valid_px", 0) for s in stats) / total,
-        occluded_fraction=(sum(s.get("occluded_px", 0) for s in stats) / total
-                           if settings.occlusion != "off" else None),
-        seconds=time.perf_counter() - t_start, tiles=len(setup.plan), empty_tiles=run.empty,
-        reused_tiles=run.reused, workers=run.workers, scheduler=run.scheduler,
+        grid_error_px=total.grid_error_px,
+        refined_fraction=total.refined_blocks / max(total.blocks, 1),
+        valid_fraction=total.valid_px / cells,
+        occluded_fraction=total.occluded_px / cells if settings.occlusion != "off" else None,
+        seconds=time.perf_counter() - t_start, tiles=product.tiles,
+        empty_tiles=product.empty_tiles, reused_tiles=product.reused_tiles,
+        workers=product.workers, scheduler=product.scheduler,
     )  # fmt: skip

@@ -20,6 +20,8 @@ from ._dsm import rasterize as rasterize
 from ._dsm import write_dsm as write_dsm
 from ._join import JoinedTies as JoinedTies
 from ._join import join_ties as join_ties
+from ._make import make_dsm as make_dsm
+from ._make import tiled_dsm as tiled_dsm
 from ._match_images import NoTiesError as NoTiesError
 from ._match_images import TieResult as TieResult
 from ._match_images import match_images as match_images
@@ -37,6 +39,10 @@ from ._pipeline import dsm_from_images as dsm_from_images
 from ._pipeline import stereo_pair as stereo_pair
 from ._rectification import EpipolarGrids as EpipolarGrids
 from ._rectification import epipolar_grids as epipolar_grids
+from ._report import DSMReport as DSMReport
+from ._settings import MAX_CELLS as MAX_CELLS
+from ._settings import DSMSettings as DSMSettings
+from ._settings import DSMSettingsError as DSMSettingsError
 from ._ties import TieError as TieError
 from ._ties import TiePoints as TiePoints
 from ._ties import TieReport as TieReport
@@ -48,12 +54,12 @@ from ._tiled import TILE_CELLS as TILE_CELLS
 from ._tiled import TILED_MIN_PX as TILED_MIN_PX
 from ._tiled import DSMJob as DSMJob
 from ._tiled import DSMSetup as DSMSetup
-from ._tiled import TiledDSMReport as TiledDSMReport
+from ._tiled import WholeDSMJob as WholeDSMJob
+from ._tiled import dsm_heights as dsm_heights
 from ._tiled import dsm_workers as dsm_workers
 from ._tiled import plan_dsm as plan_dsm
 from ._tiled import reference_window as reference_window
 from ._tiled import scene_heights as scene_heights
-from ._tiled import tiled_dsm as tiled_dsm
 from ._triangulation import StereoError as StereoError
 from ._triangulation import disparity_to_matches as disparity_to_matches
 from ._triangulation import los_heights as los_heights

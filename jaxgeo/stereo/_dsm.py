@@ -131,11 +131,16 @@ def _median_per_cell(cell, h, size):
     return median, count, spread
 
 
-def _footprint_fill(height, count, spread, xyh, x0, y0, res_m, radius_m, k=4, extra=()):
-    """Empty cells within ``radius_m`` of points: median, count and spread of the (up to
-    ``k``) nearest points within that radius of the cell centre (in place); each ``(grid,
-    values)`` of ``extra`` (per-point values) takes the mean of those points' values."""
+def _footprint_fill(grids, xyh, origin, res_m, radius_m, k=4, extra=()):
+    """Empty cells of ``grids = (height, count, spread)`` (cells of ``res_m``, upper-left
+    corner ``origin = (x0, y0)``) within ``radius_m`` of points ``xyh``: median, count and
+    spread of the (up to ``k``) nearest points within that radius of the cell centre (in
+    place); each ``(grid, values)`` of ``extra`` (per-point values) takes the mean of those
+    points' values."""
     from scipy import ndimage
+
+    height, count, spread = grids
+    x0, y0 = origin
     from scipy.spatial import cKDTree
 
     reach = int(np.ceil(radius_m / res_m))
@@ -281,7 +286,8 @@ def rasterize(
     if footprint_m is None:
         footprint_m = point_spacing(xyh[inside, :2])
     if footprint_m > 0 and np.isfinite(height).any():
-        _footprint_fill(height, count, spread, xyh, x0, y0, res_m, float(footprint_m), extra=extra)
+        _footprint_fill((height, count, spread), xyh, (x0, y0), res_m, float(footprint_m),
+                        extra=extra)  # fmt: skip
     sigma = None
     if sigmas is not None:
         sigma = cell_sigma(extra[0][0], extra[1][0], spread, count, height, res_m)

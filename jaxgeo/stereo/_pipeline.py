@@ -36,16 +36,15 @@ import numpy as np
 
 from ..models import AbstractSensorModel
 from ._dense import (
-    DEFAULT_SGM,
     BandMatcher,
-    SGMSettings,
     disparity_range,
     vertical_disparity,
     y_shift_at,
 )
-from ._dsm import MAX_HOLE_M, DSMGrid, local_utm_epsg, point_spacing, rasterize, to_map
+from ._dsm import DSMGrid, local_utm_epsg, point_spacing, rasterize, to_map
 from ._matching import sift_features_raster, stretch_limits
 from ._rectification import EpipolarGrids, epipolar_grids
+from ._settings import DEFAULT_DSM, DSMSettings
 from ._ties import MatchSettings, tie_points
 from ._triangulation import (
     StereoError,
@@ -59,8 +58,6 @@ from ._uncertainty import Orientation, pair_orientation, point_height_sigmas
 MIN_TIE_POINTS = 10
 CONTEXT_PX = 16
 """Reference-image pixels matched around the ROI (context at its edges; not in the output)."""
-BAND_ROWS = 512
-"""Epipolar rows per band of dense matching (memory grows with the band, not the image)."""
 TRIANGULATION_CHUNK = 65536
 TIE_KEYPOINTS = 10_000
 """Reference keypoints matched per pair (a random subset of them when there are more): the tie
@@ -171,34 +168,30 @@ def _in_window(xy, window):
 
 
 def stereo_pair(
-    ref: AbstractSensorModel,
-    sec: AbstractSensorModel,
-    ref_path: str | os.PathLike,
-    sec_path: str | os.PathLike,
-    roi: tuple[int, int, int, int] | None = None,
-    epi_step: int = 30,
-    sgm: SGMSettings = DEFAULT_SGM,
-    method: str = "intersect",
+    models: Sequence[AbstractSensorModel],
+    paths: Sequence[str | os.PathLike],
+    settings: DSMSettings = DEFAULT_DSM,
+    *,
+    dem=None,
+    orientation: Orientation = None,
     keep: bool = False,
     log: Callable[[str], None] | None = None,
-    band_rows: int | None = BAND_ROWS,
     on_band: Callable[[int, int], None] | None = None,
-    epipolar_tol_px: float = 10.0,
-    dem=None,
-    height_range_m: tuple[float, float] | None = None,
-    orientation: Orientation = None,
 ) -> PairProducts:
-    """3D points of a pair over ``roi = (col, row, width, height)`` of the reference image
-    (whole image by default); ``method`` the triangulation (``intersect`` or
-    ``los_midpoint``).
+    """3D points of a pair ``models = (ref, sec)`` of the images ``paths`` over
+    ``settings.roi = (col, row, width, height)`` of the reference image (whole image by
+    default); ``settings.triangulation``: ``intersect`` or ``los_midpoint``
+    (:class:`~jaxgeo.stereo.DSMSettings`: also ``epi_step``, ``sgm``, ``band_rows``,
+    ``heights``, ``epipolar_tol_px``).
 
     The epipolar images cover the ROI and ``CONTEXT_PX`` around it (the image pixels there,
     where there are some, are context for matching at the ROI's edges); the points kept are
     those whose reference pixel lies in the ROI. Dense matching and triangulation run over
     bands of ``band_rows`` epipolar rows (``None``: one band), each resampled from the sensor
-    pixels it needs; ``on_band(done, total)`` is called after each band (progress).
+    pixels it needs; ``on_band(done, total)`` is called after each band and ``log(message)`` at
+    each stage (progress); ``keep``: the intermediate products in the result.
     Tie points: :func:`~jaxgeo.stereo.tie_points` (verified; their height range from
-    ``height_range_m`` (m, ellipsoidal), else ``dem`` (a :class:`jaxgeo.io.DEM`), else a coarse
+    ``heights`` (m, ellipsoidal), else ``dem`` (a :class:`jaxgeo.io.DEM`), else a coarse
     matching); ``epipolar_tol_px``: how far from the models' epipolar curves they may lie (the
     models' relative bias across the epipolar lines; the rectified pair's vertical disparity
     is then measured and removed). Points far outside a model's RPC validity cube (by more than
@@ -211,6 +204,10 @@ def stereo_pair(
     from ``orientation`` (the shift covariance of ``(ref, sec)``, px^2,
     :data:`~jaxgeo.stereo.Orientation`), propagated through the intersection."""
     log = log or (lambda _: None)
+    ref, sec = models
+    ref_path, sec_path = paths
+    method, band_rows, epipolar_tol_px = (settings.triangulation, settings.band_rows,
+                                          settings.epipolar_tol_px)  # fmt: skip
     clock = [time.perf_counter()]
 
     def lap(name):
@@ -220,7 +217,7 @@ def stereo_pair(
 
     paths = (ref_path, sec_path)
     ref_size, sec_size = image_size(ref_path), image_size(sec_path)
-    roi = _check_roi(roi, ref_size, ref_path)
+    roi = _check_roi(settings.roi, ref_size, ref_path)
     col, row, w, h = roi
     grid_win = (col - CONTEXT_PX, row - CONTEXT_PX, w + 2 * CONTEXT_PX, h + 2 * CONTEXT_PX)
     data_win = _clip(grid_win, ref_size)
@@ -231,7 +228,7 @@ def stereo_pair(
     log("tie points")
     ties = tie_points(
         ref, sec, ref_path, sec_path, MatchSettings(
-            roi=data_win, height_range_m=height_range_m, epipolar_tol_px=epipolar_tol_px),
+            roi=data_win, height_range_m=settings.heights, epipolar_tol_px=epipolar_tol_px),
         dem=dem, features1=_reference_keypoints(ref_path, data_win),
     )  # fmt: skip
     if len(ties) < MIN_TIE_POINTS:
@@ -248,7 +245,7 @@ def stereo_pair(
     )  # fmt: skip
     lap("ties")
     log(f"{len(ties)} tie points, reference height {h0:.1f} m; rectification")
-    grids = epipolar_grids(ref, sec, grid_win, elevation=h0, epi_step=epi_step)
+    grids = epipolar_grids(ref, sec, grid_win, elevation=h0, epi_step=settings.epi_step)
     # the tie points in the epipolar frame measure the vertical disparity and the disparity
     # range (s2p's pointing correction from its sensor-space SIFT matches): no second matching
     shift, vstats, dx = vertical_disparity(
@@ -272,9 +269,8 @@ def stereo_pair(
     lims = (stretch_limits(img1[::2, ::2]), stretch_limits(img2[::2, ::2]))
     band = rows_e if band_rows is None else max(int(band_rows), 1)
     starts = list(range(0, rows_e, band))
-    dense = BandMatcher(
-        (img1, img2), (data_win[:2], win2[:2]), grids, shift, (x0, x1), lims, (dmin, dmax), sgm
-    )
+    dense = BandMatcher((img1, img2), (data_win[:2], win2[:2]), grids, shift, (x0, x1), lims,
+                        (dmin, dmax), settings.sgm)  # fmt: skip
     matches, kept, n_valid, n_disp = [], [], 0, 0
     points, sigma_h, sigma_d, direction = [], [], [], []
     for k, r0 in enumerate(starts):
@@ -354,25 +350,21 @@ def _triangulate(ref, sec, matches, method):
 def dsm_from_images(
     models: Sequence[AbstractSensorModel],
     paths: Sequence[str | os.PathLike],
-    roi: tuple[int, int, int, int] | None = None,
-    res_m: float = 0.5,
-    epsg: int | None = None,
+    settings: DSMSettings = DEFAULT_DSM,
+    *,
     origin: tuple[float, float] | None = None,
     shape: tuple[int, int] | None = None,
-    method: str = "intersect",
-    keep_dir: str | os.PathLike | None = None,
-    progress: bool = False,
-    register: bool = True,
-    band_rows: int | None = BAND_ROWS,
     dem=None,
-    height_range_m: tuple[float, float] | None = None,
-    max_hole_m: float = MAX_HOLE_M,
     orientation: Orientation = None,
+    progress: bool = False,
 ) -> tuple[DSMGrid, list[dict]]:
-    """DSM of ``roi`` of the first image from the pairs (first, i): pooled points, median per
-    cell (:func:`rasterize`: each point also stands for the cells its footprint covers, the
-    pairs' point spacing; holes up to ``max_hole_m`` across interpolated and flagged in the
-    ``filled`` band). Returns the grid and each pair's stats. ``dem`` / ``height_range_m``: the
+    """DSM of ``settings.roi`` of the first image from the pairs (first, i) in memory (the
+    DSM of a file, whole scenes included: :func:`~jaxgeo.stereo.make_dsm`): pooled points,
+    median per cell (:func:`rasterize`: each point also stands for the cells its footprint
+    covers, the pairs' point spacing; holes up to ``settings.max_hole_m`` across interpolated
+    and flagged in the ``filled`` band) at ``settings.res_m`` in ``settings.epsg`` (default the
+    local UTM zone); ``origin`` (upper-left corner, m) and ``shape`` (rows, cols) default to the
+    points' extent. Returns the grid and each pair's stats. ``dem`` / ``settings.heights``: the
     tie points' height range (:func:`stereo_pair`).
 
     ``register``: with three or more images, remove each pair's height offset relative to the
@@ -388,25 +380,25 @@ def dsm_from_images(
     :func:`~jaxgeo.stereo.orientation_covariances`),
     through the intersection, combined per cell.
 
-    ``keep_dir``: write each pair's intermediate
+    ``settings.keep``: write each pair's intermediate
     products there (``pair_i.npz``: epipolar images, disparity, tie points, points).
-    ``band_rows``: epipolar rows per band of dense matching (:func:`stereo_pair`); ``progress``:
-    a progress bar per pair (tqdm, on stderr)."""
+    ``settings.band_rows``: epipolar rows per band of dense matching (:func:`stereo_pair`);
+    ``progress``: a progress bar per pair (tqdm, on stderr)."""
     if len(models) != len(paths) or len(paths) < 2:
         raise StereoError(
             f"dsm: give at least two images, each with its model ({len(paths)} images, "
             f"{len(models)} models)"
         )
+    res_m, epsg, keep_dir = settings.res_m, settings.epsg, settings.keep
     all_points, all_stats, all_sigmas = [], [], []
     n = len(paths) - 1
     for i in range(1, len(paths)):
         bar = _Progress(f"pair {i}/{n}", progress)
         try:
             pair = stereo_pair(
-                models[0], models[i], paths[0], paths[i], roi, method=method,
-                keep=keep_dir is not None, log=bar.log, band_rows=band_rows, on_band=bar.band,
-                dem=dem, height_range_m=height_range_m,
+                (models[0], models[i]), (paths[0], paths[i]), settings, dem=dem,
                 orientation=pair_orientation(orientation, len(paths), 0, i),
+                keep=keep_dir is not None, log=bar.log, on_band=bar.band,
             )  # fmt: skip
         finally:
             bar.close()
@@ -419,7 +411,7 @@ def dsm_from_images(
             np.savez_compressed(out / f"pair_{i}.npz", points=pair.points, **pair.intermediates)
     if progress:
         print("[dsm] rasterising", file=sys.stderr, flush=True)
-    if register and len(all_points) > 1:
+    if settings.register and len(all_points) > 1:
         offsets = _height_offsets(all_points, res_m, epsg)
         for pts, st, off in zip(all_points, all_stats, offsets, strict=True):
             pts[:, 2] -= off
@@ -428,7 +420,7 @@ def dsm_from_images(
     footprint = max(_spacing(p, epsg) for p in all_points)
     dsm = rasterize(
         np.concatenate(all_points), res_m, epsg=epsg, origin=origin, shape=shape,
-        footprint_m=footprint, max_hole_m=max_hole_m,
+        footprint_m=footprint, max_hole_m=settings.max_hole_m,
         sigmas=tuple(np.concatenate(s) for s in zip(*all_sigmas, strict=True)),
     )  # fmt: skip
     return dsm, all_stats

@@ -14,6 +14,11 @@ cells and that margin, and the tile's own cells are written; the mosaic is a COG
 A tile where a pair fails (no texture, water, clouds: too few tie points) keeps the other pairs;
 a tile where every pair fails is nodata (named in the report), not an error of the scene. With
 three or more images each tile removes its pairs' relative height offsets (as the untiled DSM).
+
+An untiled DSM (a small ROI) is a plan of one tile too (``plan_dsm(..., tiled=False)``): its
+work (:class:`WholeDSMJob`) is the ROI's stereo chain in one piece
+(:func:`~jaxgeo.stereo.dsm_from_images`) on the tile's cells, in this process. Both run through
+:func:`jaxgeo.tiles.make_product` (work folder, tiles, COG, clean-up).
 """
 
 from __future__ import annotations
@@ -34,20 +39,15 @@ from ..tiles import (
     RasterSpec,
     Tile,
     TilePlan,
-    WorkerPool,
     cores,
-    mosaic_cog,
     overview_factors,
     plan_tiles,
-    remove_work,
-    run_tiles,
-    work_folder,
     write_tile,
 )
-from ._dense import DEFAULT_SGM, SGMSettings
-from ._dsm import DSM_BANDS, MAX_HOLE_M, local_utm_epsg, rasterize, to_map
-from ._pipeline import BAND_ROWS, _height_offsets, _spacing, image_size, stereo_pair
-from ._ties import MatchSettings, TieError, tie_points
+from ._dsm import DSM_BANDS, local_utm_epsg, rasterize, to_map
+from ._pipeline import _height_offsets, _spacing, dsm_from_images, image_size, stereo_pair
+from ._settings import DEFAULT_DSM, DSMSettings
+from ._ties import MatchSettings, TieError, footprint_dem_heights, tie_points, validity_heights
 from ._triangulation import StereoError, los_heights
 from ._uncertainty import Orientation, pair_orientation
 
@@ -77,9 +77,9 @@ class DSMJob:
     ``models``/``paths``: the images, the reference first, each model in its raster's pixels;
     ``epsg``, ``res_m``, ``x0``, ``y0``: the DSM's grid (upper-left corner, m); ``heights``:
     the terrain's lowest and highest height (m, ellipsoidal) the windows are projected at;
-    ``tie_heights``: the tie points' height range (``None``: each tile finds it by a coarse
-    matching); ``margin_m`` (points kept around a tile); the options of
-    :func:`~jaxgeo.stereo.dsm_from_images`."""
+    ``margin_m`` (points kept around a tile); ``settings``: the DSM's
+    (:class:`~jaxgeo.stereo.DSMSettings`; its ``heights``: the tie points' height range,
+    ``None``: each tile finds it by a coarse matching)."""
 
     models: tuple[AbstractSensorModel, ...]
     paths: tuple[str, ...]
@@ -88,14 +88,9 @@ class DSMJob:
     x0: float
     y0: float
     heights: tuple[float, float]
-    tie_heights: tuple[float, float] | None
     margin_m: float
     spec: RasterSpec
-    method: str = "intersect"
-    register: bool = True
-    band_rows: int | None = BAND_ROWS
-    max_hole_m: float = MAX_HOLE_M
-    sgm: SGMSettings = DEFAULT_SGM
+    settings: DSMSettings = DEFAULT_DSM
     orientation: tuple | None = None
     """Per pair (reference, i) the ``(4, 4)`` shift covariance (px^2), or ``None``."""
 
@@ -126,9 +121,8 @@ class DSMJob:
                 with warnings.catch_warnings():  # warned once, by the planner
                     warnings.simplefilter("ignore")
                     pair = stereo_pair(
-                        ref, self.models[i], ref_path, self.paths[i], roi, method=self.method,
-                        band_rows=self.band_rows, height_range_m=self.tie_heights,
-                        sgm=self.sgm,
+                        (ref, self.models[i]), (ref_path, self.paths[i]),
+                        dataclasses.replace(self.settings, roi=roi),
                         orientation=None if self.orientation is None else self.orientation[i - 1],
                     )  # fmt: skip
             except (StereoError, TieError) as err:  # nothing to match here: the others may
@@ -146,7 +140,7 @@ class DSMJob:
             raise NoData(reasons or "no point of any pair falls in this tile")
         kept = [kept[k] for k in usable]
         sigmas = [sigmas[k] for k in usable]
-        if self.register and len(kept) > 1:
+        if self.settings.register and len(kept) > 1:
             offsets = _height_offsets(kept, self.res_m, self.epsg)
             for pts, off in zip(kept, offsets, strict=True):
                 pts[:, 2] -= off
@@ -157,7 +151,7 @@ class DSMJob:
         dsm = rasterize(
             np.concatenate(kept), self.res_m, epsg=self.epsg, origin=(x0, y0),
             shape=(tile.rows + 2 * pad, tile.cols + 2 * pad), footprint_m=footprint,
-            max_hole_m=self.max_hole_m,
+            max_hole_m=self.settings.max_hole_m,
             sigmas=tuple(np.concatenate(s) for s in zip(*sigmas, strict=True)),
         )  # fmt: skip
         bands = np.stack([b[pad : pad + tile.rows, pad : pad + tile.cols]
@@ -166,8 +160,8 @@ class DSMJob:
         if valid == 0:
             raise NoData("no cell of this tile got a height")
         write_tile(path, self.spec, tile.row, tile.col, bands)
-        return {"cells": valid, "filled": int((bands[3] == 1).sum()), "window": list(roi),
-                "pairs": pairs}  # fmt: skip
+        return {"valid_px": valid, "filled_px": int((bands[3] == 1).sum()),
+                "window": list(roi), "pairs": pairs}  # fmt: skip
 
 
 def _small(stats: dict) -> dict:
@@ -215,17 +209,33 @@ def scene_heights(models, paths, roi) -> tuple[float, float] | None:
     :data:`HEIGHT_MARGIN_M` or a quarter of the span; ``None`` with fewer than 20 ties. A tile's
     reference window is projected at these heights: the models' whole validity range instead
     (hundreds of metres) widens every window by its parallax (a 1 Mpx tile read 1.7 Mpx)."""
+    return _sampled_heights(models, paths, _sample_windows(roi), los_heights(models[0]))
+
+
+def _sample_windows(roi) -> list[tuple[int, int, int, int]]:
+    """The five windows of :func:`scene_heights` in ``roi`` (the same window more than once
+    where the ROI is smaller than :data:`SAMPLE_WINDOW_PX`)."""
     col, row, w, h = roi
     side = min(SAMPLE_WINDOW_PX, w, h)
-    found = []
+    windows = []
     for fx, fy in ((0.5, 0.5), (0.25, 0.25), (0.75, 0.25), (0.25, 0.75), (0.75, 0.75)):
         c0 = int(min(max(col + fx * w - side / 2, col), col + w - side))
         r0 = int(min(max(row + fy * h - side / 2, row), row + h - side))
+        windows.append((c0, r0, side, side))
+    return windows
+
+
+def _sampled_heights(models, paths, windows, limits) -> tuple[float, float] | None:
+    """The 0.5-99.5 percentiles of the tie points' heights in ``windows`` widened by
+    :data:`HEIGHT_MARGIN_M` or a quarter of the span, within ``limits``; ``None`` with fewer
+    than 20 ties."""
+    found = []
+    for window in windows:
         try:
             with warnings.catch_warnings():
                 warnings.simplefilter("ignore")
                 ties = tie_points(models[0], models[1], paths[0], paths[1],
-                                  MatchSettings(roi=(c0, r0, side, side)))  # fmt: skip
+                                  MatchSettings(roi=window))  # fmt: skip
         except (TieError, StereoError):  # no texture there: the other windows
             continue
         found.append(np.asarray(ties.ground)[:, 2])
@@ -235,17 +245,72 @@ def scene_heights(models, paths, roi) -> tuple[float, float] | None:
         return None
     lo, hi = (float(v) for v in np.percentile(heights, [0.5, 99.5]))
     margin = max(HEIGHT_MARGIN_M, 0.25 * (hi - lo))
-    v_lo, v_hi = los_heights(models[0])
-    lo, hi = max(lo - margin, v_lo), min(hi + margin, v_hi)
+    lo, hi = max(lo - margin, limits[0]), min(hi + margin, limits[1])
     return (lo, hi) if lo < hi else None
 
 
 @dataclasses.dataclass(frozen=True)
-class DSMSetup:
-    """A tiled DSM ready to run: the per-tile ``job`` and the tile ``plan``."""
+class WholeDSMJob:
+    """The work of an untiled DSM, the one tile of its plan (``job(tile, path)``, in this
+    process): :func:`~jaxgeo.stereo.dsm_from_images` over the ROI (``settings.roi``) on the
+    tile's cells, with each pair's stats (``pairs``) and the median ``height_sigma``. ``dem``
+    (the tie points' height range where ``settings.heights`` is not given) and ``progress``
+    (a bar per pair) are not part of the job's identity."""
 
-    job: DSMJob
+    models: tuple[AbstractSensorModel, ...]
+    paths: tuple[str, ...]
+    epsg: int
+    res_m: float
+    x0: float
+    y0: float
+    spec: RasterSpec
+    settings: DSMSettings = DEFAULT_DSM
+    orientation: object = dataclasses.field(default=None, compare=False, repr=False)
+    dem: object = dataclasses.field(default=None, compare=False, repr=False)
+    progress: bool = dataclasses.field(default=False, compare=False, repr=False)
+
+    def __call__(self, tile: Tile, path) -> dict:
+        x0 = self.x0 + tile.col * self.res_m
+        y0 = self.y0 - tile.row * self.res_m
+        dsm, stats = dsm_from_images(
+            self.models, self.paths, self.settings, origin=(x0, y0), shape=(tile.rows, tile.cols),
+            dem=self.dem, orientation=self.orientation, progress=self.progress,
+        )  # fmt: skip
+        bands = np.stack(list(dsm.bands().values()))
+        valid = int(np.isfinite(bands[0]).sum())
+        if valid == 0:
+            raise NoData("no cell got a height")
+        write_tile(path, self.spec, tile.row, tile.col, bands)
+        sigma = bands[4][np.isfinite(bands[4])]
+        median = round(float(np.median(sigma)), 4) if sigma.size else None
+        return {"valid_px": valid, "filled_px": int((bands[3] == 1).sum()),
+                "pairs": [_json(st) for st in stats], "median_height_sigma_m": median}  # fmt: skip
+
+
+def _json(value):
+    """``value`` with numpy numbers and arrays, and tuples, as JSON types."""
+    if isinstance(value, dict):
+        return {str(k): _json(v) for k, v in value.items()}
+    if isinstance(value, (list, tuple)):
+        return [_json(v) for v in value]
+    if isinstance(value, np.ndarray):
+        return _json(value.tolist())
+    if isinstance(value, np.generic):
+        return value.item()
+    return value
+
+
+@dataclasses.dataclass(frozen=True)
+class DSMSetup:
+    """A DSM ready to run: the per-tile ``job`` (:class:`DSMJob`, or :class:`WholeDSMJob`
+    for the one tile of an untiled DSM) and the tile ``plan``."""
+
+    job: DSMJob | WholeDSMJob
     plan: TilePlan
+
+    @property
+    def tiled(self) -> bool:
+        return isinstance(self.job, DSMJob)
 
 
 def _file_id(path) -> dict:
@@ -264,54 +329,73 @@ def _model_digest(models) -> str:
     return h.hexdigest()
 
 
+def dsm_heights(
+    models, paths, settings: DSMSettings, dem=None, tiled: bool = True
+) -> tuple[tuple[float, float], str]:
+    """The terrain's height range (m, ellipsoidal) over ``settings.roi`` and where it comes
+    from: ``settings.heights`` (``"given"``), else the DEM's heights over the footprint +-50 m
+    (``"dem"``), else the tie points' (``"tie points"``: :func:`scene_heights`; for an untiled
+    DSM, ``tiled=False``, within the models' whole validity cube, whose points it keeps, and
+    each window once), else the reference model's validity range."""
+    if settings.heights is not None:
+        return settings.heights, "given"
+    roi = settings.roi or (0, 0, *image_size(paths[0]))
+    if dem is not None:
+        lo, hi = footprint_dem_heights(models[0], dem, roi)
+        return (lo - HEIGHT_MARGIN_M, hi + HEIGHT_MARGIN_M), "dem"
+    if tiled:
+        heights = scene_heights(models, paths, roi)
+    else:
+        windows = list(dict.fromkeys(_sample_windows(roi)))
+        heights = _sampled_heights(models, paths, windows, validity_heights(models[0]))
+    if heights is not None:
+        return heights, "tie points"
+    return (los_heights if tiled else validity_heights)(models[0]), "the model's validity range"
+
+
 def plan_dsm(
     models: Sequence[AbstractSensorModel],
     paths: Sequence[str | os.PathLike],
-    roi: tuple[int, int, int, int] | None = None,
-    res_m: float = 0.5,
-    epsg: int | None = None,
+    settings: DSMSettings = DEFAULT_DSM,
     *,
-    heights: tuple[float, float] | None = None,
-    tie_heights: tuple[float, float] | None = None,
-    tile_px: int = TILE_CELLS,
-    method: str = "intersect",
-    register: bool = True,
-    band_rows: int | None = BAND_ROWS,
-    max_hole_m: float = MAX_HOLE_M,
+    dem=None,
     orientation: Orientation = None,
+    tiled: bool = True,
+    progress: bool = False,
 ) -> DSMSetup:
-    """The tile plan and per-tile job of the DSM of ``roi`` of the first image (whole image by
-    default) from the pairs (first, i).
+    """The tile plan and per-tile job of the DSM of ``settings.roi`` of the first image (whole
+    image by default) from the pairs (first, i).
 
-    ``heights``: the terrain's lowest and highest height (m, ellipsoidal; default: sampled by
-    :func:`scene_heights`, else the reference model's validity range): the grid covers the
-    ROI's footprint between them, and each tile reads the reference window that sees it at
-    both. ``tie_heights``: the tie points' height range (default: each tile's coarse
-    matching). Other arguments: :func:`dsm_from_images`.
+    The terrain's heights (:func:`dsm_heights`: ``settings.heights``, else ``dem``'s +-50 m,
+    else sampled by :func:`scene_heights`, else the reference model's validity range): the
+    grid covers the ROI's footprint at their middle, and each tile reads the reference window
+    that sees it at both; the tie points' height range is ``settings.heights`` or the DEM's
+    (else each tile's coarse matching). ``tiled=False``: a plan of one tile whose work is
+    :func:`~jaxgeo.stereo.dsm_from_images` over the ROI (:class:`WholeDSMJob`, run in this
+    process; ``progress``: a bar per pair), its grid the ROI's footprint between both heights.
+    ``orientation``: :func:`dsm_from_images`.
     """
     if len(models) != len(paths) or len(paths) < 2:
         raise StereoError(f"dsm: give at least two images, each with its model ({len(paths)} "
                           f"images, {len(models)} models)")  # fmt: skip
-    if tile_px < 64:
-        raise ValueError(f"dsm: tile size {tile_px} cells: expected >= 64")
+    tile_px = settings.tile_px or TILE_CELLS
+    res_m = settings.res_m
     ref = models[0]
     w, h = image_size(paths[0])
-    col, row, rw, rh = roi if roi is not None else (0, 0, w, h)
-    source = "given"
-    if heights is None:
-        heights, source = scene_heights(models, paths, (col, row, rw, rh)), "tie points"
-    if heights is None:
-        heights, source = los_heights(ref), "the model's validity range"
-    lo, hi = heights
+    col, row, rw, rh = settings.roi if settings.roi is not None else (0, 0, w, h)
+    (lo, hi), source = dsm_heights(models, paths, settings, dem, tiled)
     t = np.linspace(0.0, 1.0, 17)
     c, r, one = col - 0.5 + t * rw, row - 0.5 + t * rh, np.ones_like(t)
     edge = np.concatenate([np.stack(xy, -1) for xy in ((c, one * (row - 0.5)),
                            (c, one * (row + rh - 0.5)), (one * (col - 0.5), r),
                            (one * (col + rw - 0.5), r))])  # fmt: skip
-    mid = 0.5 * (lo + hi)
-    ground = np.asarray(ref.localize(edge, np.full(len(edge), mid)))
+    # an untiled DSM keeps every point of its ROI: its grid holds the footprint at both heights
+    levels = (0.5 * (lo + hi),) if tiled else (lo, 0.5 * (lo + hi), hi)
+    ground = np.concatenate([np.asarray(ref.localize(edge, np.full(len(edge), z)))
+                             for z in levels])  # fmt: skip
     if not np.all(np.isfinite(ground)):
         raise StereoError(f"dsm: the model of {paths[0]} cannot localise the edges of the ROI")
+    epsg = settings.epsg
     if epsg is None:
         epsg = local_utm_epsg(float(np.median(ground[:, 0])), float(np.median(ground[:, 1])))
     xyh = to_map(ground, epsg)
@@ -319,7 +403,7 @@ def plan_dsm(
     y0 = float(np.ceil(xyh[:, 1].max() / res_m) * res_m)
     cols = int(np.ceil((xyh[:, 0].max() - x0) / res_m))
     rows = int(np.ceil((y0 - xyh[:, 1].min()) / res_m))
-    tile = int(tile_px)
+    tile = int(tile_px) if tiled else max(rows, cols, 1)
     factors = overview_factors(cols, rows)
     if factors and tile % factors[-1]:
         factors = ()
@@ -330,20 +414,26 @@ def plan_dsm(
                       units=tuple(DSM_BANDS[n][0] for n in names),
                       band_tags=tuple((("meaning", DSM_BANDS[n][1]),) for n in names),
                       tags=(("heights", "ellipsoidal (WGS84), m"),))  # fmt: skip
-    per_pair = None
-    if orientation is not None:
-        per_pair = tuple(pair_orientation(orientation, len(paths), 0, i)
-                         for i in range(1, len(paths)))  # fmt: skip
-    job = DSMJob(
-        models=tuple(models), paths=tuple(str(p) for p in paths), epsg=int(epsg),
-        res_m=float(res_m), x0=x0, y0=y0, heights=(float(lo), float(hi)),
-        tie_heights=None if tie_heights is None else tuple(float(v) for v in tie_heights),
-        margin_m=_margin_m(res_m, max_hole_m), spec=spec, method=method, register=register,
-        band_rows=band_rows, max_hole_m=float(max_hole_m), orientation=per_pair,
-    )  # fmt: skip
+    grid = dict(models=tuple(models), paths=tuple(str(p) for p in paths), epsg=int(epsg),
+                res_m=float(res_m), x0=x0, y0=y0, spec=spec)  # fmt: skip
+    if tiled:
+        per_pair = None
+        if orientation is not None:
+            per_pair = tuple(pair_orientation(orientation, len(paths), 0, i)
+                             for i in range(1, len(paths)))  # fmt: skip
+        tie = settings.heights if settings.heights is not None or dem is None else (lo, hi)
+        job = DSMJob(**grid, heights=(float(lo), float(hi)),
+                     margin_m=_margin_m(res_m, settings.max_hole_m),
+                     settings=dataclasses.replace(settings, heights=tie, roi=None),
+                     orientation=per_pair)  # fmt: skip
+    else:
+        job = WholeDSMJob(**grid, settings=dataclasses.replace(settings, epsg=int(epsg)),
+                          orientation=orientation, dem=dem, progress=progress)  # fmt: skip
     digest = _model_digest(models)
-    fields = [f.name for f in dataclasses.fields(job) if f.name not in ("models", "spec")]
+    fields = [f.name for f in dataclasses.fields(job)
+              if f.name not in ("models", "spec", "dem", "progress")]  # fmt: skip
     job_text = repr({f: getattr(job, f) for f in fields}) + digest
+    tie_heights = job.settings.heights if tiled else settings.heights
     job_dict = {
         "images": [_file_id(p) for p in paths],
         "models_sha256": digest,
@@ -356,12 +446,16 @@ def plan_dsm(
         "heights_m": [float(lo), float(hi)],
         "heights_from": source,
         "tie_heights_m": None if tie_heights is None else [float(v) for v in tie_heights],
-        "margin_m": job.margin_m,
-        "method": method,
-        "register": register,
+        "margin_m": job.margin_m if tiled else 0.0,
+        "method": settings.triangulation,
+        "register": settings.register,
         "bands": names,
         "job_sha256": hashlib.sha256(job_text.encode()).hexdigest(),
     }
+    if not tiled:
+        plan = plan_tiles("dsm", cols, rows, tile, 0, job=job_dict,
+                          inputs=lambda t: {"reference_window": [col, row, rw, rh]})  # fmt: skip
+        return DSMSetup(job, plan)
     plan0 = plan_tiles("dsm", cols, rows, tile)
     windows = {t.id: job.window(t) for t in plan0.tiles}
     plan = plan_tiles("dsm", cols, rows, tile, 0, job=job_dict,
@@ -386,95 +480,10 @@ def _wkt(epsg: int) -> str:
     return pyproj.CRS.from_epsg(epsg).to_wkt()
 
 
-@dataclasses.dataclass(frozen=True)
-class TiledDSMReport:
-    """What :func:`tiled_dsm` made: ``path``, its grid (``epsg``, ``res_m``, ``width`` x
-    ``height`` cells), ``filled`` (share of cells with a height), ``interpolated`` (share of
-    cells interpolated), the run (``tiles``, ``empty_tiles``: nodata, ``reused_tiles``,
-    ``workers``, ``scheduler``, ``seconds``: of which ``tiles_s`` running the tiles and
-    ``mosaic_s`` writing the COG) and per tile its pairs' numbers or why it is empty
-    (``tile_stats``)."""
-
-    path: pathlib.Path
-    epsg: int
-    res_m: float
-    width: int
-    height: int
-    filled: float
-    interpolated: float
-    seconds: float
-    tiles: int
-    empty_tiles: int
-    reused_tiles: int
-    workers: int
-    scheduler: str | None
-    tile_stats: dict
-    tiles_s: float = 0.0
-    mosaic_s: float = 0.0
-
-
 def dsm_workers(workers: int | None, tiles: int | None = None) -> int:
     """Worker processes of a tiled DSM: ``workers`` where given, else one per core on 2+ cores
     (a DSM tile is tens of seconds: workers pay off) for several tiles (``tiles``; unknown
-    before the planning, when ``jaxgeo dsm`` starts them: assumed several)."""
+    before the planning, when :func:`make_dsm` starts them: assumed several)."""
     if workers is not None:
         return workers
     return cores() if cores() > 1 and (tiles is None or tiles > 1) else 0
-
-
-def tiled_dsm(
-    setup: DSMSetup,
-    out: str | os.PathLike,
-    *,
-    workers: int | None = None,
-    scheduler: str | None = None,
-    resume: str | os.PathLike | None = None,
-    retries: int = 2,
-    overwrite: bool = False,
-    progress: bool = True,
-    compress: str = "deflate",
-    pool: WorkerPool | None = None,
-) -> TiledDSMReport:
-    """Run the tiles of ``setup`` (:func:`plan_dsm`) and write the DSM as one COG at ``out``
-    (atomic: complete or absent). ``workers``, ``scheduler``, ``retries``: where the tiles run
-    (:func:`jaxgeo.tiles.run_tiles`; by default one worker process per core when there are
-    several tiles: a tile takes tens of seconds, a worker's start a few); ``resume``: a folder
-    for the finished tiles, kept after an interruption and reused by the next run (default: a
-    temporary folder beside ``out``); ``pool``: workers started earlier (:class:`WorkerPool`,
-    e.g. before the planning, left open), used instead of ``workers`` and ``scheduler``.
-    :class:`StereoError` when no tile gets a height."""
-    import time
-
-    from ..io import refuse_existing
-
-    t0 = time.perf_counter()
-    out = refuse_existing(out, overwrite)
-    if not scheduler:
-        workers = dsm_workers(workers, len(setup.plan))
-    folder, done = None, False
-    try:
-        folder = work_folder(out, resume)
-        run = run_tiles(setup.plan, setup.job, folder, workers=workers, scheduler=scheduler,
-                        pool=pool, retries=retries, progress=progress)  # fmt: skip
-        stats = {k: r.stats for k, r in run.results.items()}
-        if all(r.path is None for r in run.results.values()):
-            why = sorted({str(s.get("no_data", "")) for s in stats.values() if s})
-            raise StereoError(f"dsm: no tile of {setup.job.paths[0]} got a height"
-                              + (f" ({'; '.join(why)[:300]})" if why else ""))  # fmt: skip
-        t_mosaic = time.perf_counter()
-        mosaic_cog(run, setup.plan, setup.job.spec, out, overwrite=overwrite, compress=compress)
-        mosaic_s = time.perf_counter() - t_mosaic
-        done = True
-    finally:
-        if folder is not None and (resume is None or done):
-            remove_work(folder, created=resume is None)
-    cells = setup.plan.width * setup.plan.height
-    return TiledDSMReport(
-        path=pathlib.Path(out), epsg=setup.job.epsg, res_m=setup.job.res_m,
-        width=setup.plan.width, height=setup.plan.height,
-        filled=sum(s.get("cells", 0) for s in stats.values() if s) / cells,
-        interpolated=sum(s.get("filled", 0) for s in stats.values() if s) / cells,
-        seconds=time.perf_counter() - t0, tiles=len(setup.plan), empty_tiles=run.empty,
-        reused_tiles=run.reused, workers=run.workers, scheduler=run.scheduler, tile_stats=stats,
-        tiles_s=run.seconds, mosaic_s=mosaic_s,
-    )  # fmt: skip

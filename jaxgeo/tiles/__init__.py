@@ -1,8 +1,11 @@
 """Whole scenes tile by tile: a plan of tiles, a runner over dask.distributed, a COG mosaic.
 
     plan = plan_tiles("ortho", width, height, tile_px=1024, job={...})
-    run = run_tiles(plan, work, folder, workers=None)    # work(tile, path) -> stats | None
-    mosaic_cog(run, plan, spec, "product.tif")
+    product = make_product(plan, work, "product.tif", spec, TileSettings(workers=None))
+    product.total.valid_px                               # work(tile, path) -> stats | None
+
+(:func:`make_product`: :func:`run_tiles` in a work folder, :func:`mosaic_cog`, the folder
+removed; each tile's statistics a :class:`TileStats`).
 
 Generic over what a tile produces: the orthoimage (:mod:`jaxgeo.ortho`) runs on it with its own
 per-tile function (:class:`jaxgeo.ortho.OrthoJob`); other raster products can do the same. By
@@ -23,7 +26,11 @@ from ._plan import TilePlan as TilePlan
 from ._plan import plan_tiles as plan_tiles
 from ._plan import read_plan as read_plan
 from ._plan import write_plan as write_plan
-from ._runner import DEFAULT_RETRIES as DEFAULT_RETRIES
+from ._product import DEFAULT_TILES as DEFAULT_TILES
+from ._product import EmptyProduct as EmptyProduct
+from ._product import ProductRun as ProductRun
+from ._product import TileStats as TileStats
+from ._product import make_product as make_product
 from ._runner import IN_PROCESS_MAX_PX as IN_PROCESS_MAX_PX
 from ._runner import NoData as NoData
 from ._runner import TileError as TileError
@@ -37,4 +44,5 @@ from ._runner import resolve_workers as resolve_workers
 from ._runner import run_one_tile as run_one_tile
 from ._runner import run_tiles as run_tiles
 from ._runner import work_folder as work_folder
+from ._settings import DEFAULT_RETRIES as DEFAULT_RETRIES
 from ._settings import TileSettings as TileSettings

@@ -55,10 +55,8 @@ from collections.abc import Callable
 from ..errors import JaxgeoError
 from ..io import atomic_output, atomic_write_text
 from ._plan import PlanError, Tile, TilePlan, read_plan, write_plan
+from ._settings import DEFAULT_RETRIES, TileSettings
 
-DEFAULT_RETRIES = 2
-"""Retries of a failed tile (and reschedulings of a tile whose worker died) before the run
-stops."""
 IN_PROCESS_MAX_PX = 25_000_000
 """Products up to this many pixels run in this process when ``workers=None``: starting worker
 processes (Python, jax, the first compilation in each) costs seconds, more than a small job takes
@@ -70,6 +68,9 @@ writer already uses both cores, and 26 s on 2 workers (benchmarks/speed/ortho_sc
 WORKER_XLA_FLAGS = "--xla_cpu_multi_thread_eigen=false intra_op_parallelism_threads=1"
 """Each worker process is one core's worth of work: XLA's own thread pools stay single-threaded
 so that ``workers`` processes do not fight over the cores."""
+
+
+_DEFAULT = TileSettings()
 
 
 class NoData(JaxgeoError):
@@ -292,23 +293,22 @@ def run_tiles(
     plan: TilePlan,
     work: Callable,
     folder: str | os.PathLike,
+    settings: TileSettings = _DEFAULT,
     *,
-    workers: int | None = None,
-    scheduler: str | None = None,
     pool: WorkerPool | None = None,
-    retries: int = DEFAULT_RETRIES,
-    progress: bool = True,
     suffix: str = ".tif",
 ) -> TileRun:
     """Run ``work(tile, path)`` on every tile of ``plan`` not yet finished in ``folder``.
 
-    See the module docstring for ``work``, the folder, ``workers`` and ``scheduler``; ``pool``:
-    workers started earlier (:class:`WorkerPool`, left open), used instead of both.
-    ``retries``: retries of a failing tile (or of a tile whose worker died) before a
-    :class:`TileError`; ``progress``: a bar over the tiles on stderr (tqdm).
+    See the module docstring for ``work`` and the folder; ``settings``: where the tiles run
+    (``workers``, ``scheduler``: the module docstring), ``retries`` of a failing tile (or of a
+    tile whose worker died) before a :class:`TileError`, ``progress`` (a bar over the tiles on
+    stderr, tqdm); its ``resume`` and ``plan`` are :func:`jaxgeo.tiles.make_product`'s (the
+    folder here is ``folder``). ``pool``: workers started earlier (:class:`WorkerPool`, left
+    open), used instead of ``workers`` and ``scheduler``.
     """
-    if retries < 0:
-        raise ValueError(f"retries must be >= 0, got {retries}")
+    workers, scheduler, retries = settings.workers, settings.scheduler, settings.retries
+    progress = settings.progress
     t0 = time.perf_counter()
     folder = pathlib.Path(folder)
     done = prepare_folder(plan, folder)
@@ -338,7 +338,7 @@ def run_tiles(
                 pool = own = WorkerPool(n, scheduler, retries)
             client = pool.client()
             n = n or len(client.scheduler_info().get("workers", {}))
-            _on_dask(client, plan, work, todo, folder, suffix, retries, done, bar)
+            _on_dask(client, plan, work, todo, (folder, suffix), retries, done, bar)
             address = pool.address
     finally:
         if bar is not None:
@@ -431,8 +431,9 @@ def _local_cluster(n: int, retries: int):
                             env=env, preload=["jaxgeo.tiles._worker"])  # fmt: skip
 
 
-def _on_dask(client, plan, work, todo, folder, suffix, retries, done, bar) -> None:
-    """Run ``todo`` on the workers of ``client``."""
+def _on_dask(client, plan, work, todo, where, retries, done, bar) -> None:
+    """Run ``todo`` on the workers of ``client``, each result into ``where = (folder,
+    suffix)``."""
     from distributed import as_completed
     from distributed.client import FutureCancelledError
 
@@ -441,6 +442,7 @@ def _on_dask(client, plan, work, todo, folder, suffix, retries, done, bar) -> No
     except ImportError:  # pragma: no cover - older distributed
         from distributed import KilledWorker
 
+    folder, suffix = where
     token = secrets.token_hex(4)
     futures = {}
     try:

@@ -5,7 +5,9 @@ from __future__ import annotations
 import dataclasses
 import os
 
-from ._runner import DEFAULT_RETRIES
+DEFAULT_RETRIES = 2
+"""Retries of a failed tile (and reschedulings of a tile whose worker died) before the run
+stops."""
 
 
 @dataclasses.dataclass(frozen=True)
@@ -20,6 +22,8 @@ class TileSettings:
         retries: retries of a failing tile, or of a tile whose worker died.
         resume: a folder that keeps finished tiles; a later run of the same job reuses them.
         progress: a bar over the tiles on stderr.
+        plan: write the tile plan (JSON) to this file and stop, computing nothing
+            (:func:`jaxgeo.tiles.make_product`).
     """
 
     workers: int | None = None
@@ -27,6 +31,7 @@ class TileSettings:
     retries: int = DEFAULT_RETRIES
     resume: str | os.PathLike | None = None
     progress: bool = True
+    plan: str | os.PathLike | None = None
 
     def __post_init__(self):
         if self.workers is not None and self.workers < 0:

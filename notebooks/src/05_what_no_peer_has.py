@@ -46,6 +46,7 @@ from jaxgeo.lsq import SolverConfig
 from jaxgeo.simulate import stereo_scene, stereo_scene_truth
 from jaxgeo.simulate._stereo_scene_models import localize_on_terrain_exact, project_true
 from jaxgeo.stereo import (
+    DSMSettings,
     dh_stats,
     dsm_from_images,
     epipolar_offsets,
@@ -353,7 +354,7 @@ with tempfile.TemporaryDirectory(prefix="jaxgeo-nb05-") as folder:
     with rasterio.open(folder / "truth_dsm.tif") as f:
         truth, tr, epsg = f.read(1), f.transform, f.crs.to_epsg()
     t = time.perf_counter()
-    made, _ = dsm_from_images([read_rpc(p) for p in paths], paths, res_m=tr.a, epsg=epsg,
+    made, _ = dsm_from_images([read_rpc(p) for p in paths], paths, DSMSettings(res_m=tr.a, epsg=epsg),
                               origin=(tr.c, tr.f), shape=truth.shape)  # fmt: skip
     t_dsm = time.perf_counter() - t
 cal = sigma_calibration(made.height, made.height_sigma, truth)

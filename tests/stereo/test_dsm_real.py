@@ -9,7 +9,7 @@ import rasterio
 
 from jaxgeo.errors import JaxgeoError
 from jaxgeo.io import read_rpc
-from jaxgeo.stereo import StereoError, dsm_from_images, stereo_pair
+from jaxgeo.stereo import DSMSettings, StereoError, dsm_from_images, stereo_pair
 from jaxgeo.stereo._triangulation import check_ties, drop_outside_validity
 
 ROI = (300, 300, 350, 350)  # pixels of img_02, inside s2p's ROI (150, 150, 700, 700)
@@ -46,12 +46,9 @@ def test_pair_dsm_fills_like_s2p(triplet, secondary, offset_m):
     dsm, stats = dsm_from_images(
         [read_rpc(p) for p in paths],
         paths,
-        roi=ROI,
-        res_m=0.5,
-        epsg=32631,
+        DSMSettings(roi=ROI, res_m=0.5, epsg=32631, triangulation="los_midpoint"),
         origin=(transform.c, transform.f),
         shape=ref.shape,
-        method="los_midpoint",
     )  # fmt: skip  (the midpoint: no intersection program to compile; heights within cm)
     cells = _s2p_cells_in_roi(folder, ref, transform, crs)
     assert cells.sum() > 40_000
@@ -82,8 +79,8 @@ def test_model_of_another_image_is_an_error_naming_the_images(triplet):
     ref, sec = folder / "img_02.tif", folder / "img_01.tif"
     with pytest.raises(StereoError, match="the models do not fit the images") as err:
         stereo_pair(
-            read_rpc(ref), read_rpc(folder / "img_03.tif"), ref, sec, (400, 400, 200, 200),
-            method="los_midpoint",
+            (read_rpc(ref), read_rpc(folder / "img_03.tif")), (ref, sec),
+            DSMSettings(roi=(400, 400, 200, 200), triangulation="los_midpoint"),
         )  # fmt: skip
     assert isinstance(err.value, JaxgeoError) and isinstance(err.value, ValueError)
     assert "img_02.tif" in str(err.value) and "img_01.tif" in str(err.value)
@@ -119,4 +116,4 @@ def test_model_of_another_scene_is_an_error_naming_the_images(triplet, shared_da
     ventoux = read_rpc(shared_data / "phr_ventoux__left_image.geom")
     paths = [folder / "img_02.tif", folder / "img_01.tif"]
     with pytest.raises(StereoError, match="img_01.tif does not see the ROI of .*img_02.tif"):
-        dsm_from_images([read_rpc(paths[0]), ventoux], paths, roi=(400, 400, 200, 200))
+        dsm_from_images([read_rpc(paths[0]), ventoux], paths, DSMSettings(roi=(400, 400, 200, 200)))

@@ -19,6 +19,7 @@ from jaxgeo.intersect import intersect
 from jaxgeo.simulate import stereo_scene
 from jaxgeo.simulate._stereo_scene import stereo_scene_truth
 from jaxgeo.stereo import (
+    DSMSettings,
     OrientationError,
     adjustment_covariance,
     cell_sigma,
@@ -175,8 +176,8 @@ def test_height_sigma_is_calibrated_on_an_unseen_seed(scene):
     with rasterio.open(scene / "truth_dsm.tif") as f:
         truth, tr, epsg = f.read(1), f.transform, f.crs.to_epsg()
     dsm, stats = dsm_from_images(
-        [read_rpc(p) for p in paths], paths, res_m=tr.a, epsg=epsg, origin=(tr.c, tr.f),
-        shape=truth.shape,
+        [read_rpc(p) for p in paths], paths, DSMSettings(res_m=tr.a, epsg=epsg),
+        origin=(tr.c, tr.f), shape=truth.shape,
     )  # fmt: skip
     assert np.array_equal(np.isfinite(dsm.height_sigma), np.isfinite(dsm.height))
     cal = sigma_calibration(dsm.height, dsm.height_sigma, truth)

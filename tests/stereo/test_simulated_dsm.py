@@ -1,13 +1,15 @@
 """The stereo chain on a rendered Cartosat-1 pair against the true surface (issue 13, item 5),
 and dense matching in bands of epipolar rows against one pass."""
 
+import dataclasses
+
 import numpy as np
 import pytest
 
 from jaxgeo.models import fit_rpcs
 from jaxgeo.simulate._dsm_truth import height_errors
 from jaxgeo.simulate._render import cartosat1_rendered
-from jaxgeo.stereo import rasterize, stereo_pair
+from jaxgeo.stereo import DSMSettings, rasterize, stereo_pair
 
 SIZE = 320
 
@@ -25,7 +27,7 @@ def pair(tmp_path_factory):
 
 def test_dsm_of_true_models_within_a_gsd_of_the_true_surface(pair):
     rendered, paths, truth = pair
-    products = stereo_pair(*truth, *paths, method="los_midpoint")
+    products = stereo_pair(truth, paths, DSMSettings(triangulation="los_midpoint"))
     dsm = rasterize(products.points, 2.0 * rendered.gsd_m)
     err = height_errors(dsm, rendered.scene.terrain, truth, [(SIZE, SIZE)] * 2, rendered.gsd_m)
     assert err["n_cells"] > 5000 and err["fill"] > 0.9, err
@@ -36,10 +38,11 @@ def test_dsm_of_true_models_within_a_gsd_of_the_true_surface(pair):
 def test_bands_of_epipolar_rows_match_one_pass(pair):
     _, paths, truth = pair
     roi = (60, 60, 200, 200)
-    one = stereo_pair(*truth, *paths, roi, method="los_midpoint", keep=True, band_rows=None)
+    settings = DSMSettings(roi=roi, triangulation="los_midpoint", band_rows=None)
+    one = stereo_pair(truth, paths, settings, keep=True)
     calls = []
     banded = stereo_pair(
-        *truth, *paths, roi, method="los_midpoint", keep=True, band_rows=48,
+        truth, paths, dataclasses.replace(settings, band_rows=48), keep=True,
         on_band=lambda done, total: calls.append((done, total)),
     )  # fmt: skip
     assert banded.stats["n_bands"] == 5 and calls[-1] == (5, 5) and len(calls) == 5

@@ -18,11 +18,19 @@ from rasterio.warp import Resampling, reproject
 from jaxgeo.cli import main
 from jaxgeo.io import open_image
 from jaxgeo.simulate import stereo_scene
-from jaxgeo.stereo import StereoError, dsm_from_images, plan_dsm, tiled_dsm, write_dsm
-from jaxgeo.tiles import NoData, Tile, TileError, WorkerPool, mosaic_cog, run_tiles
+from jaxgeo.stereo import (
+    DSMSettings,
+    StereoError,
+    dsm_from_images,
+    plan_dsm,
+    tiled_dsm,
+    write_dsm,
+)
+from jaxgeo.tiles import NoData, Tile, TileError, TileSettings, WorkerPool, mosaic_cog, run_tiles
 from tests.tiles.test_ortho_tiles import FailOn  # a job failing on one tile
 
 SIZE, SEED, RES, TILE = 400, 3, 0.65, 256
+QUIET = TileSettings(progress=False)
 
 
 @pytest.fixture(scope="module")
@@ -36,13 +44,13 @@ def scene(tmp_path_factory):
 @pytest.fixture(scope="module")
 def setup(scene):
     _, models, paths = scene
-    return plan_dsm(models, paths, res_m=RES, tile_px=TILE)
+    return plan_dsm(models, paths, DSMSettings(res_m=RES, tile_px=TILE))
 
 
 @pytest.fixture(scope="module")
 def tiled(setup, tmp_path_factory):
     out = tmp_path_factory.mktemp("tiled") / "dsm.tif"
-    report = tiled_dsm(setup, out, workers=0, progress=False)
+    report = tiled_dsm(setup, out, TileSettings(workers=0, progress=False))
     return out, report
 
 
@@ -70,7 +78,7 @@ def test_tiled_dsm_equals_the_untiled_one_and_the_truth(scene, setup, tiled, tmp
         )
         assert ds.units[0] == "m" and "meaning" in ds.tags(1)
         assert ds.res == (RES, RES)
-    full, _ = dsm_from_images(models, paths, res_m=RES, epsg=setup.job.epsg)
+    full, _ = dsm_from_images(models, paths, DSMSettings(res_m=RES, epsg=setup.job.epsg))
     write_dsm(full, tmp_path / "full.tif")
     a = _height_on(out, out)
     b = _height_on(out, tmp_path / "full.tif")
@@ -88,7 +96,7 @@ def test_tiled_dsm_equals_the_untiled_one_and_the_truth(scene, setup, tiled, tmp
 def test_tiles_on_two_spawned_workers_equal_those_made_here(setup, tiled, tmp_path):
     out, _ = tiled
     with WorkerPool(2, retries=1, warm=("jaxgeo.stereo",)) as pool:
-        run = run_tiles(setup.plan, setup.job, tmp_path / "work", pool=pool, progress=False)
+        run = run_tiles(setup.plan, setup.job, tmp_path / "work", QUIET, pool=pool)
     assert run.workers == 2
     mosaic_cog(run, setup.plan, setup.job.spec, tmp_path / "dask.tif")
     with rasterio.open(out) as a, rasterio.open(tmp_path / "dask.tif") as b:
@@ -115,9 +123,11 @@ def test_resume_reuses_the_tiles_a_failed_run_finished(setup, tiled, tmp_path):
     work = tmp_path / "work"
     last = setup.plan.tiles[-1].id
     with pytest.raises(TileError, match=last):
-        run_tiles(setup.plan, FailOn(setup.job, last), work, workers=0, retries=0,
-                  progress=False)  # fmt: skip
-    report = tiled_dsm(setup, tmp_path / "dsm.tif", workers=0, resume=work, progress=False)
+        run_tiles(setup.plan, FailOn(setup.job, last), work,
+                  TileSettings(workers=0, retries=0, progress=False))  # fmt: skip
+    report = tiled_dsm(
+        setup, tmp_path / "dsm.tif", TileSettings(workers=0, resume=work, progress=False)
+    )
     assert report.reused_tiles == len(setup.plan) - 1
     assert not work.exists()  # after success the work folder is removed
     with rasterio.open(out) as a, rasterio.open(tmp_path / "dsm.tif") as b:
@@ -140,9 +150,9 @@ def test_a_scene_without_texture_is_an_error_naming_the_image(scene, tmp_path):
         with rasterio.open(target, "w", **profile) as dst:
             dst.write(np.full_like(data, 1000))
         flat.append(target)
-    setup = plan_dsm(models, flat, res_m=RES, tile_px=TILE)
+    setup = plan_dsm(models, flat, DSMSettings(res_m=RES, tile_px=TILE))
     with pytest.raises(StereoError, match="left.tif"):
-        tiled_dsm(setup, tmp_path / "dsm.tif", workers=0, progress=False)
+        tiled_dsm(setup, tmp_path / "dsm.tif", TileSettings(workers=0, progress=False))
     assert not (tmp_path / "dsm.tif").exists()
 
 
@@ -204,3 +214,28 @@ def test_default_workers_are_one_per_core_for_several_tiles(monkeypatch):
     assert dsm_workers(None, tiles=1) == 0 and dsm_workers(0) == 0 and dsm_workers(3, tiles=1) == 3
     monkeypatch.setattr(_tiled, "cores", lambda: 1)
     assert dsm_workers(None) == 0 and dsm_workers(2) == 2
+
+
+def test_an_untiled_dsm_is_a_plan_of_one_tile_with_the_same_cells(scene, tmp_path):
+    """``make_dsm`` of a small scene: one tile made here, on a grid that holds the footprint; its
+    cells those of ``dsm_from_images`` on that grid (the same chain), its report the pairs'."""
+    from jaxgeo.stereo import make_dsm
+
+    _, models, paths = scene
+    out = tmp_path / "dsm.tif"
+    report = make_dsm(paths, out, DSMSettings(res_m=RES), TileSettings(progress=False))
+    assert not report.tiled and report.tiles == 1 and report.workers == 0
+    assert len(report.pairs) == 1 and report.pairs[0]["n_ties"] > 100
+    assert report.names == ("left", "right") and report.as_dict()["pairs"][0]["images"] == [
+        "left",
+        "right",
+    ]
+    with rasterio.open(out) as ds:
+        made, t = ds.read(), ds.transform
+    assert report.plan.job["heights_from"] == "tie points"
+    grid, _ = dsm_from_images(models, paths, DSMSettings(res_m=RES, epsg=report.epsg),
+                              origin=(t.c, t.f), shape=made.shape[1:])  # fmt: skip
+    bands = np.stack(list(grid.bands().values()))
+    np.testing.assert_array_equal(made, bands)
+    assert report.filled == pytest.approx(np.isfinite(bands[0]).mean())
+    assert [p.name for p in tmp_path.iterdir()] == ["dsm.tif"]  # no work folder left

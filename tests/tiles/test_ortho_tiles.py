@@ -19,9 +19,11 @@ import rasterio
 from jaxgeo.cli import main
 from jaxgeo.io import read_dem
 from jaxgeo.ortho import OrthoSettings, plan_ortho
-from jaxgeo.tiles import TileError, WorkerPool, mosaic_cog, run_tiles
+from jaxgeo.tiles import TileError, TileSettings, WorkerPool, mosaic_cog, run_tiles
 from tests.ortho.conftest import ventoux_dem_ellipsoidal  # noqa: F401  (fixture)
 
+HERE = TileSettings(workers=0, progress=False)
+QUIET = TileSettings(progress=False)
 TILE = 256
 
 
@@ -108,7 +110,7 @@ class FailOnce:
 @pytest.fixture(scope="module")
 def in_process(setup, tmp_path_factory):
     tmp = tmp_path_factory.mktemp("in_process")
-    run = run_tiles(setup.plan, setup.job, tmp / "work", workers=0, progress=False)
+    run = run_tiles(setup.plan, setup.job, tmp / "work", HERE)
     assert run.workers == 0 and run.scheduler is None
     return _product(setup, run, tmp / "ortho.tif")
 
@@ -116,7 +118,7 @@ def in_process(setup, tmp_path_factory):
 def test_two_spawned_workers_give_the_in_process_product(setup, pool, in_process, tmp_path):
     assert len(setup.plan) == 9 and in_process.shape[1:] == (setup.plan.height, setup.plan.width)
     assert 0.8 < np.mean(in_process > 0) < 1.0  # the crop's footprint, nodata around it
-    run = run_tiles(setup.plan, Spy(setup.job), tmp_path / "work", pool=pool, progress=False)
+    run = run_tiles(setup.plan, Spy(setup.job), tmp_path / "work", QUIET, pool=pool)
     assert run.workers == 2 and run.scheduler.startswith("tcp://")
     pids = {r.stats["pid"] for r in run.results.values() if r.path is not None}
     assert len(pids) == 2 and os.getpid() not in pids  # both workers, none of it here
@@ -146,7 +148,7 @@ def test_the_costliest_tiles_start_first(setup, pool, tmp_path):
     tiles = tuple(dataclasses.replace(t, inputs={**t.inputs, "cost": k})
                   for k, t in enumerate(setup.plan.tiles))  # fmt: skip
     plan = dataclasses.replace(setup.plan, tiles=tiles)
-    run = run_tiles(plan, Stamp(setup.job), tmp_path / "work", pool=pool, progress=False)
+    run = run_tiles(plan, Stamp(setup.job), tmp_path / "work", QUIET, pool=pool)
     started = sorted(run.results, key=lambda k: run.results[k].stats["started"])
     costs = [plan.tiles[[t.id for t in plan.tiles].index(k)].cost for k in started]
     assert sorted(costs[:2]) == [n - 2, n - 1] and costs[-1] <= 1, costs
@@ -156,7 +158,7 @@ def test_a_worker_killed_mid_run_leaves_a_complete_identical_product(setup, pool
                                                                      tmp_path):  # fmt: skip
     flag = tmp_path / "killed"
     work = KillOnce(setup.job, "r0001c0001", str(flag))
-    run = run_tiles(setup.plan, work, tmp_path / "work", pool=pool, progress=False)
+    run = run_tiles(setup.plan, work, tmp_path / "work", QUIET, pool=pool)
     assert flag.exists()  # a worker did die, running that tile
     assert run.results["r0001c0001"].path is not None
     assert np.array_equal(_product(setup, run, tmp_path / "ortho.tif"), in_process)
@@ -166,8 +168,8 @@ def test_resume_skips_the_tiles_an_interrupted_run_finished(setup, crop, in_proc
                                                             ventoux_dem_ellipsoidal):  # noqa: F811 # fmt: skip
     work = tmp_path / "work"
     with pytest.raises(TileError, match=r"tile r0001c0002 \(rows 256..511, cols 512..\d+\)"):
-        run_tiles(setup.plan, FailOn(setup.job, "r0001c0002"), work, workers=0, retries=0,
-                  progress=False)  # fmt: skip
+        run_tiles(setup.plan, FailOn(setup.job, "r0001c0002"), work,
+                  TileSettings(workers=0, retries=0, progress=False))  # fmt: skip
     finished = len(list((work / "tiles").glob("*.json")))
     assert finished == 5  # the tiles before it, in plan order
     image, model = crop
@@ -209,12 +211,12 @@ def test_a_cluster_by_address_retries_a_failing_tile_then_names_it(setup, pool, 
     # --scheduler: the pool's workers reached through their scheduler's address
     flag = tmp_path / "failed"
     run = run_tiles(setup.plan, FailOnce(setup.job, "r0002c0000", str(flag)), tmp_path / "a",
-                    scheduler=pool.address, retries=1, progress=False)  # fmt: skip
+                    TileSettings(scheduler=pool.address, retries=1, progress=False))  # fmt: skip
     assert flag.exists() and run.scheduler == pool.address
     assert run.workers >= 1  # those up at the start (the nanny may be restarting a killed one)
     assert np.array_equal(_product(setup, run, tmp_path / "ortho.tif"), in_process)
     failed = r"tile r0001c0002 \(rows 256..511, cols 512..\d+\) failed after 2 attempts: OSError"
     with pytest.raises(TileError, match=failed):
         run_tiles(setup.plan, FailOn(setup.job, "r0001c0002"), tmp_path / "b",
-                  scheduler=pool.address, retries=1, progress=False)  # fmt: skip
+                  TileSettings(scheduler=pool.address, retries=1, progress=False))  # fmt: skip
     assert not (tmp_path / "b" / "tiles" / "r0001c0002.json").exists()

@@ -8,7 +8,9 @@ import pathlib
 import numpy as np
 import pytest
 
-from jaxgeo.tiles import NoData, PlanError, TileError, plan_tiles, run_tiles
+from jaxgeo.tiles import NoData, PlanError, TileError, TileSettings, plan_tiles, run_tiles
+
+HERE = TileSettings(workers=0, progress=False)
 
 
 @dataclasses.dataclass(frozen=True)
@@ -42,7 +44,7 @@ def _calls(log: pathlib.Path, tile_id: str) -> int:
 def test_in_process_run_writes_every_tile(tmp_path):
     plan = plan_tiles("demo", 300, 250, 100)
     work = Fill(str(tmp_path / "log"), empty=("r0002c0002",))
-    run = run_tiles(plan, work, tmp_path / "w", workers=0, suffix=".npy", progress=False)
+    run = run_tiles(plan, work, tmp_path / "w", HERE, suffix=".npy")
     assert run.workers == 0 and run.scheduler is None and run.empty == 1 and run.reused == 0
     for t in plan.tiles:
         r = run.results[t.id]
@@ -62,13 +64,13 @@ def test_second_run_reuses_finished_tiles(tmp_path):
     # the first run stops at a tile that keeps failing: the tiles before it are kept
     failed = r"tile r0001c0001 \(rows 100..199, cols 100..199\) failed after 2 attempts: OSError"
     with pytest.raises(TileError, match=failed):
-        run_tiles(plan, Fill(str(log), flaky="r0001c0001", fail=5), tmp_path / "w", workers=0,
-                  retries=1, suffix=".npy", progress=False)  # fmt: skip
+        run_tiles(plan, Fill(str(log), flaky="r0001c0001", fail=5), tmp_path / "w",
+                  dataclasses.replace(HERE, retries=1), suffix=".npy")  # fmt: skip
     assert _calls(log, "r0001c0001") == 2  # one try and one retry
     finished = {p.stem for p in (tmp_path / "w" / "tiles").glob("*.json")}
     assert finished == {"r0000c0000", "r0000c0001", "r0000c0002", "r0001c0000"}
-    run = run_tiles(plan, Fill(str(log), flaky="r0001c0001", fail=3), tmp_path / "w", workers=0,
-                    retries=1, suffix=".npy", progress=False)  # fmt: skip
+    run = run_tiles(plan, Fill(str(log), flaky="r0001c0001", fail=3), tmp_path / "w",
+                    dataclasses.replace(HERE, retries=1), suffix=".npy")  # fmt: skip
     assert run.reused == 4 and run.empty == 0
     assert all(_calls(log, t) == 1 for t in finished)  # not computed again
     assert _calls(log, "r0001c0001") == 4  # failed twice more, then passed
@@ -78,10 +80,10 @@ def test_second_run_reuses_finished_tiles(tmp_path):
 
 def test_a_folder_of_another_plan_is_refused(tmp_path):
     run_tiles(plan_tiles("demo", 30, 30, 10), Fill(str(tmp_path / "log")), tmp_path / "w",
-              workers=0, suffix=".npy", progress=False)  # fmt: skip
+              HERE, suffix=".npy")  # fmt: skip
     with pytest.raises(PlanError, match="holds the tiles of another demo job"):
         run_tiles(plan_tiles("demo", 30, 30, 15), Fill(str(tmp_path / "log")), tmp_path / "w",
-                  workers=0, suffix=".npy", progress=False)  # fmt: skip
+                  HERE, suffix=".npy")  # fmt: skip
 
 
 def test_small_plans_stay_in_process_by_default():
