@@ -284,6 +284,8 @@ def check_out_dir(
         raise PermissionError(f"{out}: cannot write there ({base} is not writable)")
     if not out.exists():
         _probe_folder(out)
+    if (copy_images or write_into) and isinstance(images, Mapping):
+        _refuse_crop_copies(images)
     inputs = list(inputs)
     given = {pathlib.Path(p).resolve() for p in inputs}
     targets = output_paths(out, images, rpc_format, copy_images, write_into)
@@ -295,10 +297,33 @@ def check_out_dir(
         )
     for target in targets:
         path = target.resolve()
-        if path in given:
+        if path in given or any(_same_file(path, p) for p in inputs):  # a hard link too
             raise FileExistsError(f"{path}: refusing to write an adjusted file over an input")
+        if path.is_dir():
+            raise IsADirectoryError(f"{path}: is a folder where an output goes")
         if path.exists() and not overwrite:
             raise FileExistsError(f"{path}: exists (choose another --out or pass --overwrite)")
+
+
+def _same_file(a: pathlib.Path, b: str | os.PathLike) -> bool:
+    try:
+        return a.exists() and pathlib.Path(b).exists() and os.path.samefile(a, b)
+    except OSError:
+        return False
+
+
+def _refuse_crop_copies(images: Mapping[str, str | os.PathLike]) -> None:
+    """A copy of a crop would carry its frame and an RPC already in the crop's pixels."""
+    from ..io import detect_rpc_format, pixel_frame
+
+    for name, path in images.items():
+        if detect_rpc_format(path) == "raster" and pixel_frame(path) != (0.0, 0.0):
+            raise ValueError(
+                f"--copy-images/--write-into: image {name!r} ({path}) is a crop whose "
+                "geotransform puts it in its product's frame; a copy would carry that frame "
+                "and an RPC already in the crop's pixels (read shifted by tools that apply "
+                "the frame): write the RPC files only"
+            )
 
 
 def write_outputs(

@@ -71,15 +71,30 @@ def image_inputs(image: SensorImage) -> tuple[pathlib.Path, ...]:
     return tuple(dict.fromkeys(found))
 
 
-def sensor_image(name: str, source: str | os.PathLike | SensorImage) -> SensorImage:
-    """The :class:`~jaxgeo.io.SensorImage` of ``source``: itself, a raster (with its own model),
-    or a model file alone (any format :func:`jaxgeo.io.read_rpc` reads)."""
+def sensor_image(
+    name: str,
+    source: str | os.PathLike | SensorImage,
+    model: str | os.PathLike | None = None,
+    origin: tuple[float, float] | None = None,
+) -> SensorImage:
+    """The :class:`~jaxgeo.io.SensorImage` of ``source``: itself, a raster (with its own model,
+    or ``model``, a model file, and ``origin``, a crop's model pixel of its first pixel), or a
+    model file alone (any format :func:`jaxgeo.io.read_rpc` reads; ``origin`` applies to it,
+    ``model`` does not). Raises ``FileNotFoundError`` naming the image and file."""
     if isinstance(source, SensorImage):
         return source
     path = pathlib.Path(source)
+    if not path.is_file():
+        what = "is not a file" if path.exists() else "no such file"
+        raise FileNotFoundError(f"image {name!r}: {path}: {what}")
     if detect_rpc_format(path) == "raster":
-        return open_image(path, name=name)
-    return open_image(model=path, name=name)
+        return open_image(path, model=model, origin=origin, name=name)
+    if model is not None:
+        raise ValueError(
+            f"image {name!r} is given as a model file ({path}) and with a model {model}: a "
+            "separate model file applies to a raster; give the image's raster, or no model"
+        )
+    return open_image(model=path, origin=origin, name=name)
 
 
 @dataclasses.dataclass(frozen=True)

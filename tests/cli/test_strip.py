@@ -266,12 +266,12 @@ def test_cli_conventions(strip_dir, tmp_path, capsys, monkeypatch):
     cap = capsys.readouterr()
     assert "jaxgeo strip: adjusting" not in cap.err and json.loads(cap.out)["exit_status"] == 0
 
-    import jaxgeo.strip
+    import jaxgeo.strip._files
 
     def fail(*args, **kwargs):
         raise PermissionError("disk says no")
 
-    monkeypatch.setattr(jaxgeo.strip, "write_strip_outputs", fail)
+    monkeypatch.setattr(jaxgeo.strip._files, "write_strip_outputs", fail)
     assert main(["strip", str(strip_dir), "-o", str(tmp_path / "o2"), "--quiet", *FAST]) == 4
     cap = capsys.readouterr()
     assert "whole strip, level2" in cap.out and "writing -o/--out failed: disk says no" in cap.err
