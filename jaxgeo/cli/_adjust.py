@@ -141,7 +141,7 @@ def open_named_images(args: argparse.Namespace) -> dict:
 
 def run(args: argparse.Namespace) -> int:
     from .. import bundle
-    from ..bundle import JitterSettings, check_out_dir, image_inputs
+    from ..bundle import AdjustSettings, JitterSettings, check_out_dir, image_inputs
     from ..lsq import DEFAULT_SOLVER
     from . import _adjustment_options as shared
     from ._common import dem_inputs, note, print_json
@@ -160,19 +160,19 @@ def run(args: argparse.Namespace) -> int:
     if args.out:  # before any computation
         with shared.out_checked():
             check_out_dir(args.out, sources, inputs, overwrite=args.overwrite, **rpc)
-    dem = shared.tie_dem(args)
-    if dem is not None and args.bias == "jitter":  # even with --quiet: it decides the DSM
+    settings = AdjustSettings(
+        bias_prior_shift_px=args.bias_prior_shift_px, bias_prior_matrix=args.bias_prior_matrix,
+        jitter=jitter, tie_height=shared.tie_dem(args), tie_height_sigma_m=args.tie_height_sigma_m,
+        progress=start.say,
+    )  # fmt: skip
+    if args.dem is not None and args.bias == "jitter":  # even with --quiet: it decides the DSM
         note(f"jaxgeo adjust: note: with --bias jitter the heights of {args.dem} fix the along-"
              "track jitter the ties leave open: the DEM's own errors at the jitter's scale go "
              "into the models (use a DEM more accurate than the corrugation to remove: "
              "docs/getting-started.md, jitter)")  # fmt: skip
     with start.warnings_printed():
-        run = bundle.adjust_files(
-            images, args.observations, args.ground, bias=args.bias, solver=solver,
-            bias_prior_shift_px=args.bias_prior_shift_px,
-            bias_prior_matrix=args.bias_prior_matrix, dem=dem,
-            tie_height_sigma_m=args.tie_height_sigma_m, progress=start.say, jitter=jitter,
-        )  # fmt: skip
+        run = bundle.adjust_files(images, args.observations, args.ground, bias=args.bias,
+                                  solver=solver, settings=settings)  # fmt: skip
     for line in run.notes if args.json else ():  # (the text report holds them)
         start.say(f"note: {line}")
     if not args.json:

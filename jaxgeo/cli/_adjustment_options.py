@@ -8,9 +8,10 @@ same tie heights, so the options are defined once here: the tables (``--observat
 and ``--tie-height-sigma-m``) and the output (``-o/--out``, ``--overwrite``, ``--rpc-format``,
 ``--json``, ``--quiet``). The checks name the options, never a library parameter.
 
-``--dem-offset-m`` is added to the DEM's heights after ``--dem-height``/``--geoid`` made them
-ellipsoidal: a constant vertical shift (a local datum, a known DEM bias); an orthometric DEM
-takes ``--geoid`` (or its declared vertical CRS), not an offset.
+``--dem-offset-m`` is added to the DEM's (ellipsoidal) heights: a constant vertical shift (a
+local datum, a known DEM bias, or a constant geoid undulation over a small area with
+``--dem-height ellipsoidal``). An orthometric DEM takes ``--geoid`` (or its declared vertical
+CRS) instead; both at once are refused (the undulation would be added twice).
 """
 
 from __future__ import annotations
@@ -145,10 +146,17 @@ def solver_config(args: argparse.Namespace, base):
 def tie_dem(args: argparse.Namespace):
     """The :class:`~jaxgeo.io.DEM` of ``--dem`` (``--dem-height``, ``--geoid``, then
     ``--dem-offset-m`` added), ``None`` without one."""
+    from . import CommandError
     from ._common import note, open_dem
 
     dem = open_dem(args)
     if dem is not None and args.dem_offset_m:
+        if dem.height_reference == "orthometric":  # never both: a geoid and an undulation
+            raise CommandError(
+                f"--dem-offset-m {args.dem_offset_m:g}: the heights of {args.dem} are made "
+                "ellipsoidal with a geoid already (--geoid, or its vertical CRS); give "
+                "--dem-height ellipsoidal to add the offset to the file's values instead"
+            )
         dem = dataclasses.replace(dem, offset_m=args.dem_offset_m)
         note(f"{dem.describe()} (--dem-offset-m)", args.quiet)
     return dem

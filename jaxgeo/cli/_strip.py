@@ -112,9 +112,9 @@ def register(sub) -> None:
     parser.set_defaults(func=run)
 
 
-def strip_config(args: argparse.Namespace):
+def strip_config(args: argparse.Namespace, dem=None):
     """The :class:`jaxgeo.strip.StripConfig` and :class:`~jaxgeo.strip.RefitConfig` of the
-    arguments (the tie heights of a DEM are :func:`jaxgeo.strip.adjust_strip_files`'s)."""
+    arguments (tie heights from ``dem``, a :class:`~jaxgeo.io.DEM`, else ``--tie-height``)."""
     from .. import strip as lib
     from ._adjustment_options import solver_config
 
@@ -122,7 +122,7 @@ def strip_config(args: argparse.Namespace):
         per_pair=args.ties_per_pair,
         margin_px=args.tie_margin_px,
         sigma_px=args.tie_sigma_px,
-        height=args.tie_height,
+        height=args.tie_height if dem is None else dem,
         height_sigma_m=args.tie_height_sigma_m,
     )
     level1 = lib.Level1Config(
@@ -157,16 +157,17 @@ def _run(args: argparse.Namespace) -> int:
     if args.tie_height is not None and args.dem is not None:
         raise CommandError("--tie-height and --dem both give the tie heights: give one")
     shared.check_adjustment_options(args)
-    config, refit = strip_config(args)  # checked before any work
+    config, refit = strip_config(args)  # checked before any work (and again with the DEM)
     outputs = (
         library.StripOutputs(args.out, args.rpc_format, args.overwrite, refit) if args.out else None
     )
-    dem = shared.tie_dem(args)
+    if args.dem is not None:
+        config, _ = strip_config(args, shared.tie_dem(args))
     serious = (library.GCPDistributionWarning, library.UniversalCorrectionWarning,
                library.LineOffsetWarning, library.MeasuredTieWarning)  # fmt: skip
     with start.warnings_printed(serious):
         run = library.adjust_strip_files(
-            args.strip, config, ground=args.ground, observations=args.observations, dem=dem,
+            args.strip, config, ground=args.ground, observations=args.observations,
             outputs=outputs, progress=start.say,
         )  # fmt: skip
     if not run.converged:

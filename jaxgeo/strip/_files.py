@@ -15,10 +15,10 @@ from __future__ import annotations
 import dataclasses
 import os
 import pathlib
-import tempfile
 from collections.abc import Callable
 from typing import Any
 
+from ..bundle import probe_folder
 from ..io import DEM
 from ._adjustment import adjust_strip
 from ._config import RefitConfig, StripConfig
@@ -47,18 +47,13 @@ class StripOutputs:
 
     def targets(self, strip: Strip, inputs=()) -> dict[str, pathlib.Path]:
         """Output file name -> path, checked (:func:`~._export.strip_output_paths`: no input,
-        nothing existing without ``overwrite``) and the folder writable (a folder made and
-        removed there: ``os.access`` says yes to root everywhere)."""
+        nothing existing without ``overwrite``) and the folder writable
+        (:func:`jaxgeo.bundle.probe_folder`)."""
         targets = strip_output_paths(strip, self.out, self.rpc_format, self.overwrite, inputs)
-        out = pathlib.Path(self.out)
-        base = out
-        while not base.exists() and base != base.parent:
-            base = base.parent
         try:
-            os.rmdir(tempfile.mkdtemp(prefix=".jaxgeo-probe-", dir=base))
-        except OSError as err:
-            where = f"{out}: cannot be created or written ({base}: {err.strerror})"
-            where = where.replace("{", "{{").replace("}", "}}")
+            probe_folder(pathlib.Path(self.out))
+        except PermissionError as err:
+            where = str(err).replace("{", "{{").replace("}", "}}")
             raise ConfigError(f"{{0}} {where}", Setting("out")) from None
         return targets
 
@@ -115,25 +110,23 @@ def adjust_strip_files(
     *,
     ground: str | os.PathLike | None = None,
     observations: str | os.PathLike | None = None,
-    dem: DEM | None = None,
     outputs: StripOutputs | None = None,
     progress: Callable[[str], None] | None = None,
 ) -> StripFileAdjustment:
     """Read a strip (its folder or ``strip.json``, with ``ground``/``observations`` tables
     other than those beside it; or a :class:`~._delivery.Strip` already read), check
-    ``outputs`` before any computation, and adjust it (:func:`adjust_strip` with ``config``;
-    ``dem``: the tie heights, replacing ``config.ties.height``). ``progress``: called with a
-    line of text before the adjustment. Write the result with
+    ``outputs`` before any computation, and adjust it (:func:`adjust_strip` with ``config``:
+    a DEM of ``config.ties.height`` is among the inputs, never written over). ``progress``:
+    called with a line of text before the adjustment. Write the result with
     :meth:`StripFileAdjustment.write`."""
     config = StripConfig() if config is None else config
     if not isinstance(strip, Strip):
         strip = read_strip(strip, ground, observations)
     inputs = [*(strip.files.all() if strip.files is not None else ())]
+    dem = config.ties.height
     inputs += [dem.path] if isinstance(dem, DEM) else []
     if outputs is not None:  # before any computation
         outputs.targets(strip, inputs)
-    if dem is not None:
-        config = dataclasses.replace(config, ties=dataclasses.replace(config.ties, height=dem))
     if progress is not None:
         progress(f"adjusting {len(strip.names)} sub-scenes: tie points, level-1 bundle "
                  "adjustment and snooping, level-2 correction (the first run of a strip shape "
