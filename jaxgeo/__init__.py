@@ -22,7 +22,7 @@ except importlib.metadata.PackageNotFoundError:  # a source tree on sys.path, no
     __version__ = "unknown (not installed)"
 
 _EXPORTS = {
-    "jaxgeo.bundle": ("AccuracyReport", "AdjustResult", "adjust"),
+    "jaxgeo.bundle": ("AccuracyReport", "AdjustResult", "AdjustSettings", "adjust"),
     "jaxgeo.lsq": ("SolverConfig",),
     "jaxgeo.intersect": ("IntersectResult",),
     "jaxgeo.io": ("read_metadata", "read_rpc", "write_geotiff_rpc", "write_rpb",

@@ -92,7 +92,8 @@ def across_rms(models, xy1, xy2, h_range) -> dict:
 def adjust_case(scene, ties, bias, h_range, **adjust_kw) -> dict:
     """Adjust the pair's RPCs with ``bias`` (a function ``rpc -> AbstractBias``) from the ties;
     the across-epipolar residuals of the ties and of the true points after. ``adjust_kw`` go to
-    :func:`jaxgeo.bundle.adjust` (e.g. ``tie_height``, ``tie_height_sigma_m``)."""
+    :func:`jaxgeo.bundle.adjust` (e.g. ``settings``, a :class:`~jaxgeo.bundle.AdjustSettings`
+    with ``tie_height`` and ``tie_height_sigma_m``)."""
     from jaxgeo.bundle import adjust
     from jaxgeo.models import Biased
 

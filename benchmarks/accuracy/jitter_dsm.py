@@ -225,6 +225,7 @@ def dsm_case(models, directory, truth, h_range, lines, args) -> dict:
 
 def run(directory, args) -> dict:
     """The whole study on the scene in ``directory`` (module docstring)."""
+    from jaxgeo.bundle import AdjustSettings
     from jaxgeo.io import open_image
     from jaxgeo.models import AffineBias, JitterBias
     from jaxgeo.simulate import read_stereo_scene
@@ -257,8 +258,8 @@ def run(directory, args) -> dict:
             case = f"jitter_dem_{name}"
             dem_info[name] = info
             adjusted[case], cases[case] = adjust_case(
-                scene, ties, lambda rpc: JitterBias(span, **kw), h_range, tie_height=dem,
-                tie_height_sigma_m=sigma,
+                scene, ties, lambda rpc: JitterBias(span, **kw), h_range,
+                settings=AdjustSettings(tie_height=dem, tie_height_sigma_m=sigma),
             )  # fmt: skip
     if args.truth_models:
         cases["true_models"] = true_models(scene)

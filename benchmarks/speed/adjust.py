@@ -67,19 +67,20 @@ def run(n_scenes: int, ties: int, repeat: int) -> dict:
     import equinox as eqx
 
     from benchmarks.peers.strip_synth import make_problem
-    from jaxgeo.bundle import adjust, prepare
+    from jaxgeo.bundle import AdjustSettings, adjust, prepare
     from jaxgeo.lsq import describe, solve
 
     problem = make_problem(n_scenes, ties)
     models, obs, ground, initial = to_jaxgeo(problem)
     t0 = time.perf_counter()
-    setup = prepare(models, obs, ground, initial=initial, check_control=False)
+    settings = AdjustSettings(initial=initial)
+    setup = prepare(models, obs, ground, settings=settings, check_control=False)
     t_setup = time.perf_counter() - t0
     solve_jit = eqx.filter_jit(solve)
     timing = best_of(lambda: solve_jit(setup.problem), repeat)  # first call: compilation
     sol, t_first, best = timing.out, timing.first_s, timing.best_s
     t0 = time.perf_counter()
-    res = adjust(models, obs, ground, initial=initial, check=False)
+    res = adjust(models, obs, ground, settings=settings)
     t_adjust = time.perf_counter() - t0
     return {
         "scenes": n_scenes,

@@ -14,8 +14,8 @@ The stages: :func:`~._prepare.prepare` (checks, groups, initial points, priors) 
 
 from __future__ import annotations
 
-from collections.abc import Callable, Mapping, Sequence
-from typing import Any, NamedTuple
+from collections.abc import Mapping, Sequence
+from typing import Any
 
 import equinox as eqx
 import jax
@@ -25,26 +25,14 @@ from ..io import GroundPoints, Observations
 from ..lsq import DEFAULT_SOLVER, SolverConfig
 from ..models import BIAS_KINDS, AbstractBias, AbstractSensorModel, Biased, JitterBias
 from ._prepare import prepare
-from ._prepare.checks import Sources
 from ._result import AdjustResult, make_result
+from ._settings import DEFAULT_JITTER, DEFAULT_SETTINGS, AdjustSettings, JitterSettings
 from ._snooping import snoop
 
 BIAS_CHOICES = ("none", *BIAS_KINDS, "jitter")
 """Names accepted for ``bias``: ``"none"``, the kinds of :data:`jaxgeo.models.BIAS_KINDS`
 (defined there once) and ``"jitter"`` (:class:`~jaxgeo.models.JitterBias`: the affine bias
 plus smooth offsets along the lines, :class:`JitterSettings`)."""
-
-
-class JitterSettings(NamedTuple):
-    """The spline of ``bias="jitter"``: a knot every ``knot_lines`` lines, second differences
-    of its coefficients held at ``smoothness_px`` (px). The defaults follow a jitter of a
-    period of 400 lines or more to < 0.1 px (benchmarks/accuracy/jitter.py)."""
-
-    knot_lines: float = 100.0
-    smoothness_px: float = 1.0
-
-
-DEFAULT_JITTER = JitterSettings()
 
 
 def image_lines(model: Any, domain: Sequence[float] | None = None) -> tuple[float, float]:
@@ -131,17 +119,10 @@ def adjust(
     ground: GroundPoints | None = None,
     *,
     bias: str | type[AbstractBias] | None = None,
-    filters: Any = None,
     prior_sigma: Any = None,
-    initial: Mapping[str, Any] | None = None,
     solver: SolverConfig = DEFAULT_SOLVER,
-    check: bool = False,
-    sources: Sources | None = None,
-    tie_height: Any = None,
-    tie_height_sigma_m: float = 10.0,
+    settings: AdjustSettings = DEFAULT_SETTINGS,
     throw: bool = True,
-    image_domains: Mapping[str, Any] | None = None,
-    progress: Callable[[str], None] | None = None,
 ) -> AdjustResult:
     """Bundle block adjustment.
 
@@ -152,43 +133,32 @@ def adjust(
         ground: GCPs and check points (``jaxgeo.io.read_ground``); points measured in images
             but absent here are tie points.
         bias: wrap every single model in ``Biased(model, bias())`` first (a name of
-            :data:`BIAS_CHOICES` or a bias class); the bias leaves are then adjusted.
-        filters: ``eqx.partition`` filter spec of the adjustable leaves, one for all models or a
-            mapping keyed like ``models``; default each model's ``adjustable_filter()``.
+            :data:`BIAS_CHOICES` or a bias class; a jitter's spline as ``settings.jitter``
+            says); the bias leaves are then adjusted.
         prior_sigma: optional parameter priors (``theta0 +- sigma``): scalar, raveled array or
-            a pytree like the model, one for all or per model key (``inf`` = no prior).
-        initial: optional initial ground points ``{id: (lon, lat, h)}`` (else intersection).
+            a pytree like the model, one for all or per model key (``inf`` = no prior); default
+            the bias priors of ``settings`` (:func:`bias_prior_sigma`), if any.
         solver: method, loss, tolerances, blunder threshold (:class:`jaxgeo.lsq.SolverConfig`).
-        check: also apply the per-image GCP-count rule before solving (the models'
-            ``required_gcps``: 1 shift, 2 shift+drift, 3 affine, 4 non-coplanar for the 3D
-            affine model). Off by default: an image without GCPs of its own is adjusted when tie
-            points connect it to controlled images; what is actually determined is checked on
-            the normal equations (rank, null space), and what GCPs and ties leave open raises
-            :class:`~._errors.SingularNormalEquations` naming the parameters (fix it with
-            bias priors, ``prior_sigma``, see :func:`bias_prior_sigma`).
-
-        sources: the files and lines the tables were read from, named in messages
-            (:class:`~._prepare.checks.Sources`; :func:`adjust_files` fills it).
-        tie_height: heights ``f(lonlat (n, 2)) -> (n,)`` m, e.g. a DEM
-            (:func:`jaxgeo.io.read_dem`): every tie point gets its height at its initial
-            position as an observation of sigma ``tie_height_sigma_m`` (m); this fixes what the
-            ties leave open against the tie heights (e.g. an image's shift along the
-            epipolar direction, the along-track parallax of a pair).
+        settings: the rest (:class:`~._settings.AdjustSettings`): bias priors, the jitter
+            spline, tie heights (e.g. a DEM) and their sigma, the adjustable leaves
+            (``filters``), initial points, the per-image GCP-count rule (``check_control``;
+            off by default: an image without GCPs of its own is adjusted when tie points
+            connect it to controlled images; what is actually determined is checked on the
+            normal equations, and what GCPs and ties leave open raises
+            :class:`~._errors.SingularNormalEquations` naming the parameters: fix it with bias
+            priors), the files named in messages, the images' raster domains, a ``progress``
+            callback.
         throw: raise :class:`~jaxgeo.bundle.SingularNormalEquations` when unknowns are not
             determined and warn :class:`~jaxgeo.bundle.NotConvergedWarning` when the solve
             did not converge (default, as :func:`jaxgeo.lsq.solve`'s ``throw``); ``False``:
             return the result and let ``result.converged``, ``result.result`` and
             ``result.message`` say it (errors as data). Bad input is refused either way.
-        image_domains: image name -> ``(x_min, y_min, x_max, y_max)`` px of the image's raster
-            (:meth:`jaxgeo.io.SensorImage.domain`): its measurements must lie inside it;
-            an image without one is checked against its RPC's image domain.
-        progress: called with a line of text at each stage (solving, each snooping round).
 
     Pre-flight checks (:mod:`~._prepare.checks`) refuse, naming the observation or point (and
-    file and line with ``sources``): a point measured twice in one image, a ground id given
-    twice, a measurement outside its image (its raster's size with ``image_domains``, else its
-    RPC's image domain), a GCP or check point outside the validity cube of the RPC of an image
-    it is measured in, two images with the same RPC.
+    file and line with ``settings.sources``): a point measured twice in one image, a ground id
+    given twice, a measurement outside its image (its raster's size with
+    ``settings.image_domains``, else its RPC's image domain), a GCP or check point outside the
+    validity cube of the RPC of an image it is measured in, two images with the same RPC.
 
     Gross errors: a robust loss, then data snooping (:func:`~._snooping.snoop`), which removes
     at most ``max(1, 20 %)`` of the GCPs and of each image's observations: beyond that the
@@ -199,22 +169,16 @@ def adjust(
     Raises :class:`~._errors.AdjustmentError` (bad input, too few GCPs) before solving, and
     :class:`~._errors.SingularNormalEquations` naming the undetermined parameters or points.
     """
+    s = settings
     if bias is not None:
-        models = with_bias(models, bias, image_domains)
+        models = with_bias(models, bias, s.image_domains, s.jitter)
+    if prior_sigma is None:
+        prior_sigma = bias_prior_sigma(models, s.bias_prior_shift_px, s.bias_prior_matrix)
     setup = prepare(
-        models,
-        observations,
-        ground,
-        filters=filters,
-        prior_sigma=prior_sigma,
-        initial=initial,
-        check_control=check,
-        sources=sources,
-        tie_height=tie_height,
-        tie_height_sigma_m=tie_height_sigma_m,
-        image_domains=image_domains,
-    )
-    sol, rem_i, rem_g, rounds = snoop(setup, solver, progress=progress)
+        models, observations, ground, prior_sigma=prior_sigma, settings=s,
+        check_control=s.check_control,
+    )  # fmt: skip
+    sol, rem_i, rem_g, rounds = snoop(setup, solver, progress=s.progress)
     return make_result(
         setup, sol, observations, ground, solver, (rem_i, rem_g), rounds, throw=throw
     )

@@ -8,6 +8,7 @@ from __future__ import annotations
 
 import contextlib
 import csv
+import dataclasses
 import io
 import json
 import os
@@ -243,9 +244,10 @@ def sidecar_clash(
     return None
 
 
-def _probe_folder(out: pathlib.Path) -> None:
-    """``out`` can be created: a folder is made (and removed) in its nearest existing parent
-    (``os.access`` says yes to root everywhere, even in /proc)."""
+def probe_folder(out: pathlib.Path) -> None:
+    """``out`` can be created (or written, when it exists): a folder is made (and removed) in
+    it or its nearest existing parent (``os.access`` says yes to root everywhere, even in
+    /proc). Raises ``PermissionError`` naming both."""
     import tempfile
 
     base = out
@@ -283,7 +285,9 @@ def check_out_dir(
     if not os.access(base, os.W_OK | os.X_OK):
         raise PermissionError(f"{out}: cannot write there ({base} is not writable)")
     if not out.exists():
-        _probe_folder(out)
+        probe_folder(out)
+    if (copy_images or write_into) and isinstance(images, Mapping):
+        _refuse_crop_copies(images)
     inputs = list(inputs)
     given = {pathlib.Path(p).resolve() for p in inputs}
     targets = output_paths(out, images, rpc_format, copy_images, write_into)
@@ -295,10 +299,49 @@ def check_out_dir(
         )
     for target in targets:
         path = target.resolve()
-        if path in given:
+        if path in given or any(_same_file(path, p) for p in inputs):  # a hard link too
             raise FileExistsError(f"{path}: refusing to write an adjusted file over an input")
+        if path.is_dir():
+            raise IsADirectoryError(f"{path}: is a folder where an output goes")
         if path.exists() and not overwrite:
             raise FileExistsError(f"{path}: exists (choose another --out or pass --overwrite)")
+
+
+def _same_file(a: pathlib.Path, b: str | os.PathLike) -> bool:
+    try:
+        return a.exists() and pathlib.Path(b).exists() and os.path.samefile(a, b)
+    except OSError:
+        return False
+
+
+def _refuse_crop_copies(images: Mapping[str, str | os.PathLike]) -> None:
+    """A copy of a crop would carry its frame and an RPC already in the crop's pixels."""
+    from ..io import detect_rpc_format, pixel_frame
+
+    for name, path in images.items():
+        if detect_rpc_format(path) == "raster" and pixel_frame(path) != (0.0, 0.0):
+            raise ValueError(
+                f"--copy-images/--write-into: image {name!r} ({path}) is a crop whose "
+                "geotransform puts it in its product's frame; a copy would carry that frame "
+                "and an RPC already in the crop's pixels (read shifted by tools that apply "
+                "the frame): write the RPC files only"
+            )
+
+
+@dataclasses.dataclass(frozen=True)
+class RPCOutputs:
+    """How :func:`write_outputs` writes the adjusted RPCs: ``images`` (image name -> the image
+    or RPC file it was read from; ``None``: each RPC is ``NAME_adjusted_RPC.TXT``) places each
+    where GDAL/OTB/shareloc find it for that image (:mod:`jaxgeo.io._rpc_place`:
+    ``<image stem>_RPC.TXT`` / ``.RPB`` / ``.geom`` / ``RPC_<stem>.XML`` by ``rpc_format``,
+    beside a copy of the image with ``copy_images``, or in the tags of a copy of the GeoTIFF
+    with ``write_into``); ``rpc_files=False``: no RPC at all."""
+
+    images: Mapping[str, str | os.PathLike] | None = None
+    rpc_format: str = "txt"
+    copy_images: bool = False
+    write_into: bool = False
+    rpc_files: bool = True
 
 
 def write_outputs(
@@ -308,21 +351,14 @@ def write_outputs(
     report: dict[str, Any],
     inputs: Iterable[str | os.PathLike] = (),
     overwrite: bool = False,
-    rpc_files: bool = True,
-    images: Mapping[str, str | os.PathLike | str] | None = None,
-    rpc_format: str = "txt",
-    copy_images: bool = False,
-    write_into: bool = False,
+    rpcs: RPCOutputs = RPCOutputs(),
 ) -> list[pathlib.Path]:
     """Write the adjustment into ``out_dir``; refuse to touch an input or (unless
-    ``overwrite``) an existing file. Returns the paths written.
-
-    Without ``images`` each adjusted RPC is ``NAME_adjusted_RPC.TXT``. With ``images`` (image
-    name -> the image or RPC file it was read from) each goes where GDAL/OTB/shareloc find it
-    for that image (:mod:`jaxgeo.io._rpc_place`: ``<image stem>_RPC.TXT`` / ``.RPB`` / ``.geom`` /
-    ``RPC_<stem>.XML`` by ``rpc_format``, beside a copy of the image with ``copy_images``, or in
-    the tags of a copy of the GeoTIFF with ``write_into``). An RPC is folded exactly where the
-    bias allows, else refitted; the refit error is in ``report.txt`` and ``report.json``."""
+    ``overwrite``) an existing file. Returns the paths written. The adjusted RPCs go where
+    ``rpcs`` says (:class:`RPCOutputs`); an RPC is folded exactly where the bias allows, else
+    refitted; the refit error is in ``report.txt`` and ``report.json``."""
+    images, rpc_files = rpcs.images, rpcs.rpc_files
+    rpc_format, copy_images, write_into = rpcs.rpc_format, rpcs.copy_images, rpcs.write_into
     out = pathlib.Path(out_dir)
     files: dict[str, str | _Table] = {}
     notes = []

@@ -18,7 +18,7 @@ from __future__ import annotations
 import dataclasses
 import os
 import pathlib
-from collections.abc import Callable, Mapping, Sequence
+from collections.abc import Mapping, Sequence
 from typing import Any
 
 import numpy as np
@@ -34,18 +34,12 @@ from ..io import (
     table_lines,
 )
 from ..lsq import DEFAULT_SOLVER, SolverConfig
-from ._adjustment import (
-    BIAS_CHOICES,
-    DEFAULT_JITTER,
-    JitterSettings,
-    adjust,
-    bias_prior_sigma,
-    with_bias,
-)
-from ._export import write_outputs
+from ._adjustment import BIAS_CHOICES, adjust, bias_prior_sigma, with_bias
+from ._export import RPCOutputs, write_outputs
 from ._prepare.checks import Sources
 from ._report import AccuracyReport, direct_georeferencing, format_reports
 from ._result import AdjustResult
+from ._settings import DEFAULT_SETTINGS, AdjustSettings
 
 RELATIVE_PRIOR_SHIFT_PX = 10.0
 """Prior sigma (px) of the bias shifts when no GCP is given and no prior either: the given
@@ -69,15 +63,30 @@ def image_inputs(image: SensorImage) -> tuple[pathlib.Path, ...]:
     return tuple(dict.fromkeys(found))
 
 
-def sensor_image(name: str, source: str | os.PathLike | SensorImage) -> SensorImage:
-    """The :class:`~jaxgeo.io.SensorImage` of ``source``: itself, a raster (with its own model),
-    or a model file alone (any format :func:`jaxgeo.io.read_rpc` reads)."""
+def sensor_image(
+    name: str,
+    source: str | os.PathLike | SensorImage,
+    model: str | os.PathLike | None = None,
+    origin: tuple[float, float] | None = None,
+) -> SensorImage:
+    """The :class:`~jaxgeo.io.SensorImage` of ``source``: itself, a raster (with its own model,
+    or ``model``, a model file, and ``origin``, a crop's model pixel of its first pixel), or a
+    model file alone (any format :func:`jaxgeo.io.read_rpc` reads; ``origin`` applies to it,
+    ``model`` does not). Raises ``FileNotFoundError`` naming the image and file."""
     if isinstance(source, SensorImage):
         return source
     path = pathlib.Path(source)
+    if not path.is_file():
+        what = "is not a file" if path.exists() else "no such file"
+        raise FileNotFoundError(f"image {name!r}: {path}: {what}")
     if detect_rpc_format(path) == "raster":
-        return open_image(path, name=name)
-    return open_image(model=path, name=name)
+        return open_image(path, model=model, origin=origin, name=name)
+    if model is not None:
+        raise ValueError(
+            f"image {name!r} is given as a model file ({path}) and with a model {model}: a "
+            "separate model file applies to a raster; give the image's raster, or no model"
+        )
+    return open_image(model=path, origin=origin, name=name)
 
 
 @dataclasses.dataclass(frozen=True)
@@ -212,14 +221,14 @@ class FileAdjustment:
     ) -> list[pathlib.Path]:
         """Write the adjusted models, points, residuals and report (never over an input, nor
         over an existing file unless ``overwrite``); returns the paths written. ``rpc_options``:
-        ``rpc_format``, ``copy_images``, ``write_into`` of :func:`~._export.write_outputs`
+        ``rpc_format``, ``copy_images``, ``write_into`` of :class:`~._export.RPCOutputs`
         (``images`` defaults to :meth:`rpc_sources`). An image given as a raster gets an RPC in
         the raster's pixels (its pixel frame folded in): the RPC GDAL needs for that raster."""
         if self.images:
             rpc_options.setdefault("images", self.rpc_sources())
         return write_outputs(
             out_dir, self.result, self.format(), self.summary(), self.inputs, overwrite=overwrite,
-            **rpc_options,
+            rpcs=RPCOutputs(**rpc_options),
         )  # fmt: skip
 
 
@@ -230,23 +239,20 @@ def adjust_files(
     *,
     bias: str = "affine",
     solver: SolverConfig = DEFAULT_SOLVER,
-    bias_prior_shift_px: float | None = None,
-    bias_prior_matrix: float | None = None,
+    settings: AdjustSettings = DEFAULT_SETTINGS,
     direct_roles: Sequence[str] = ("gcp", "check"),
-    dem: Any = None,
-    tie_height_sigma_m: float = 10.0,
-    progress: Callable[[str], None] | None = None,
-    jitter: JitterSettings = DEFAULT_JITTER,
 ) -> FileAdjustment:
     """Read the images (name -> raster, model file or :class:`~jaxgeo.io.SensorImage`, see the
     module docstring), OBS.csv and GROUND.csv, adjust with an image bias per image (a name of
-    :data:`BIAS_CHOICES`; optional priors on it, :func:`bias_prior_sigma`; tie heights from
-    ``dem``, a :class:`~jaxgeo.io.DEM`, with sigma ``tie_height_sigma_m``), and intersect the
-    ``direct_roles`` points with the given models for comparison (tables 3 and 4 of 000_).
-    ``progress``: called with a line of text at each stage; ``jitter``: the spline of
-    ``bias="jitter"`` (over each image's lines)."""
+    :data:`BIAS_CHOICES`) as ``solver`` and ``settings`` say (:class:`AdjustSettings`: bias
+    priors, :func:`bias_prior_sigma`; tie heights from ``settings.tie_height``, e.g. a
+    :class:`~jaxgeo.io.DEM`, with sigma ``tie_height_sigma_m``; the spline of
+    ``bias="jitter"`` over each image's lines; a ``progress`` callback; the files and domains
+    are filled in here), and intersect the ``direct_roles`` points with the given models for
+    comparison (tables 3 and 4 of 000_)."""
     if bias not in BIAS_CHOICES:
         raise ValueError(f"unknown bias {bias!r}; expected one of {', '.join(BIAS_CHOICES)}")
+    progress = settings.progress
     opened = {name: sensor_image(name, source) for name, source in images.items()}
     models = {name: img.model for name, img in opened.items()}
     domains = {name: img.domain() for name, img in opened.items() if img.size is not None}
@@ -259,18 +265,22 @@ def adjust_files(
         table_lines(ground) if ground is not None else (),
     )
     if bias != "none":
-        models = with_bias(models, bias, {n: img.domain() for n, img in opened.items()}, jitter)
+        models = with_bias(
+            models, bias, {n: img.domain() for n, img in opened.items()}, settings.jitter
+        )
     notes = []
     measured = set(obs.point_ids)
     gcps = [] if points is None else [
         p for p, r in zip(points.ids, points.role, strict=True) if r == "gcp" and p in measured
     ]  # fmt: skip
     del measured  # 4 MB for 100 000 ties, not to be held through the solve
-    if not gcps and bias != "none" and bias_prior_shift_px is None and bias_prior_matrix is None:
-        bias_prior_shift_px, bias_prior_matrix = RELATIVE_PRIOR_SHIFT_PX, RELATIVE_PRIOR_MATRIX
+    unheld = settings.bias_prior_shift_px is None and settings.bias_prior_matrix is None
+    if not gcps and bias != "none" and unheld:
+        shift, matrix = RELATIVE_PRIOR_SHIFT_PX, RELATIVE_PRIOR_MATRIX
+        settings = settings.replace(bias_prior_shift_px=shift, bias_prior_matrix=matrix)
         notes.append(
             f"no GCP: a relative orientation; the image biases are held near the given models "
-            f"by priors of {bias_prior_shift_px:g} px (shift) and {bias_prior_matrix:g} px/px "
+            f"by priors of {shift:g} px (shift) and {matrix:g} px/px "
             "(other terms) (--bias-prior-shift-px, --bias-prior-matrix), so the block keeps "
             "the given models' absolute position"
         )
@@ -280,7 +290,8 @@ def adjust_files(
                 f"image {name!r} is a crop at model pixel {img.origin[0]:g}, {img.origin[1]:g} "
                 "of its product: its measurements and adjusted RPC are in the crop's pixels"
             )
-    prior = bias_prior_sigma(models, bias_prior_shift_px, bias_prior_matrix)
+    prior = bias_prior_sigma(models, settings.bias_prior_shift_px, settings.bias_prior_matrix)
+    settings = settings.replace(sources=sources, image_domains=domains)
     # direct georeferencing (the given models, for the report) beside the adjustment, from the
     # moment the runtime has traced the solve (`jaxgeo demo` cold: see the closing notes of
     # issue 29); an error of the adjustment comes first and it then does not run
@@ -291,14 +302,11 @@ def adjust_files(
                      "models (beside the adjustment)")  # fmt: skip
         work = direct_georeferencing
     with beside_solve(work, models, obs, points, roles=tuple(direct_roles)) as direct:
-        result = adjust(
-            models, obs, points, prior_sigma=prior, solver=solver, sources=sources,
-            tie_height=dem, tie_height_sigma_m=tie_height_sigma_m,
-            image_domains=domains, progress=progress,
-        )  # fmt: skip
+        result = adjust(models, obs, points, prior_sigma=prior, solver=solver, settings=settings)
     direct = direct.result()
     inputs = [p for img in opened.values() for p in image_inputs(img)]
     inputs += [observations] + ([ground] if ground is not None else [])
+    dem = settings.tie_height
     inputs += [dem.path] if isinstance(dem, DEM) else []
     return FileAdjustment(
         result, direct, bias, tuple(pathlib.Path(p) for p in inputs), opened, tuple(notes)

@@ -164,7 +164,6 @@ def make_result(
     unknowns)."""
     problem = setup.problem
     converged, message = describe(sol.result)
-    theta = tuple(np.asarray(t) for t in sol.theta)
     s0 = float(sol.s0)
     if bool(sol.result == RESULTS.undetermined):
         masks = undetermined_unknowns(
@@ -204,7 +203,7 @@ def make_result(
             NotConvergedWarning,
             stacklevel=3,
         )
-    out = _result(setup, sol, theta, s0, converged, message, solver, observations, ground, removed)
+    out = _result(setup, sol, (converged, message), solver, observations, ground, removed)
     reasons = snooping_verdict(setup, sol, removed, solver)
     plain = plain_s0(sol, removed)
     poor = ""
@@ -350,7 +349,11 @@ def _final_y(problem, sol):
     return z, u
 
 
-def _result(setup, sol, theta, s0, converged, message, solver, observations, ground, removed):
+def _result(setup, sol, status, solver, observations, ground, removed):
+    """The :class:`AdjustResult` of a solve, ``status`` its ``(converged, message)``."""
+    converged, message = status
+    theta = tuple(np.asarray(t) for t in sol.theta)  # (as make_result's)
+    s0 = float(sol.s0)
     problem = setup.problem
     var = s0**2 if np.isfinite(s0) else 1.0
     q = sol.q_params.to_sparse() if isinstance(sol.q_params, Band) else np.asarray(sol.q_params)

@@ -273,7 +273,7 @@ def tiles_kept(args: argparse.Namespace, command: str) -> None:
 def _by_image(specs: Sequence[str], images: Sequence[str], option: str) -> dict[str, str]:
     """``{image path: value}`` from ``IMG=VALUE`` specs; IMG is the path as given, its file name
     or its stem; a spec without ``IMG=`` is allowed when there is one image. An IMG that names
-    no image is refused with the names accepted (:func:`image_names`)."""
+    no image is refused with the names accepted (:func:`accepted_image_names`)."""
     from . import CommandError
 
     aliases = {}
@@ -290,7 +290,7 @@ def _by_image(specs: Sequence[str], images: Sequence[str], option: str) -> dict[
             expected = "FILE" if option == "--model" else "COL,ROW"
             raise CommandError(
                 f"{option} {spec!r}: expected IMG={expected} with IMG one of the images, by its "
-                f"path, file name or stem: {image_names(images)}"
+                f"path, file name or stem: {accepted_image_names(images)}"
             )
         img = aliases[key]
         if img in out:
@@ -299,7 +299,7 @@ def _by_image(specs: Sequence[str], images: Sequence[str], option: str) -> dict[
     return out
 
 
-def image_names(images: Sequence[str]) -> str:
+def accepted_image_names(images: Sequence[str]) -> str:
     """The names an ``IMG`` may take for each image (its path as given, file name, stem), for a
     message: ``"a/left.tif (left.tif, left); b/right.tif (right.tif, right)"``."""
     out = []

@@ -1,7 +1,8 @@
 """``jaxgeo strip``: two-level full-strip adjustment of the sub-scenes of a strip (003_).
 
     jaxgeo strip STRIP [--ground CSV] [--observations CSV] [--ties-per-pair N]
-                 [--tie-height M | --dem FILE] [--bias affine|shift-drift|shift]
+                 [--tie-height M | --dem FILE [--dem-height H] [--geoid G]]
+                 [--bias affine|shift-drift|shift]
                  [--degree quadratic|affine|shift] [--loss l2|huber|cauchy]
                  [--loss-scale C] [--keep-blunders] [--json] [--quiet]
                  [-o DIR [--rpc-format txt|rpb|geom|dimap]] [--overwrite]
@@ -27,8 +28,10 @@ only); the report lists them (level, point, sub-scene, w). A sub-scene whose lin
 wrong shows at its seams (the vendor RPCs disagree at its formed ties) and is named in a
 warning: its bias would absorb it silently.
 
-The command parses, builds a :class:`jaxgeo.strip.StripConfig`, calls the library and prints;
-the checks and their messages are the library's (settings named by their flags, :data:`FLAGS`).
+The command parses, builds a :class:`jaxgeo.strip.StripConfig`, calls
+:func:`jaxgeo.strip.adjust_strip_files` and prints; the checks and their messages are the
+library's (settings named by their flags, :data:`FLAGS`); the options it shares with ``jaxgeo
+adjust`` are defined once (:mod:`._adjustment_options`).
 """
 
 from __future__ import annotations
@@ -69,33 +72,23 @@ FLAGS = {
 
 
 def register(sub) -> None:
-    from ..lsq import LOSSES
     from ..models import BIAS_KINDS
-    from ..strip import (
-        DEGREES,
-        STRIP_SOLVER,
-        SUFFIX,
-        Level1Config,
-        Level2Config,
-        RefitConfig,
-        TieConfig,
-    )
-    from ._common import add_command, add_json, add_quiet
+    from ..strip import DEGREES, Level1Config, Level2Config, RefitConfig, TieConfig
+    from ._adjustment_options import add_adjustment_options
+    from ._common import add_command
 
-    ties0, level1, refit0 = TieConfig(), Level1Config(), RefitConfig()
-    parser = add_command(
-        sub,
-        "strip",
-        "two-level full-strip adjustment of a Carto-2S-style strip of sub-scenes",
-        __doc__,
-        EXIT_CODES,
-    )
+    ties0, refit0 = TieConfig(), RefitConfig()
+    parser = add_command(sub, "strip", "two-level full-strip adjustment of a Carto-2S-style "
+                         "strip of sub-scenes", __doc__, EXIT_CODES)  # fmt: skip
     parser.add_argument("strip", metavar="STRIP", help="strip folder or its strip.json")
-    parser.add_argument("--ground", metavar="CSV", help="GCPs/check points (default ground.csv)")
-    parser.add_argument(
-        "--observations", metavar="CSV", help="image measurements (default observations.csv)"
+    add_adjustment_options(
+        parser,
+        tables_required=False,
+        bias_choices=tuple(BIAS_KINDS),
+        bias_help=f"image bias adjusted per sub-scene (default {Level1Config().bias}, as in 003_)",
+        tie_height_sigma_m=ties0.height_sigma_m,
     )
-    ties = parser.add_argument_group("level 1: tie points and biases")
+    ties = parser.add_argument_group("level 1: tie points")
     ties.add_argument("--ties-per-pair", type=int, default=ties0.per_pair, metavar="N",
                       help=f"ties formed per adjacent pair (default {ties0.per_pair})")  # fmt: skip
     ties.add_argument("--tie-margin-px", type=float, default=ties0.margin_px, metavar="PX",
@@ -103,152 +96,45 @@ def register(sub) -> None:
                       f"{ties0.margin_px:g})")  # fmt: skip
     ties.add_argument("--tie-sigma-px", type=float, default=ties0.sigma_px, metavar="PX",
                       help=f"a priori tie sigma (px, default {ties0.sigma_px:g})")  # fmt: skip
-    height = ties.add_mutually_exclusive_group()
-    height.add_argument(
-        "--tie-height",
-        type=float,
-        metavar="M",
-        help="one ellipsoidal height (m) for all ties (default: mean GCP/check height)",
-    )
-    height.add_argument(
-        "--dem",
-        metavar="FILE",
-        help="tie heights from a single-band DEM raster (ellipsoidal m, any CRS)",
-    )
-    ties.add_argument(
-        "--dem-offset-m",
-        type=float,
-        default=0.0,
-        metavar="N",
-        help="added to the DEM heights (e.g. the geoid undulation for orthometric DEMs)",
-    )
-    ties.add_argument("--tie-height-sigma-m", type=float, default=ties0.height_sigma_m,
-                      metavar="M", help="sigma of the tie height priors (m, default "
-                      f"{ties0.height_sigma_m:g}; smaller with a good --dem)")  # fmt: skip
-    ties.add_argument(
-        "--bias",
-        choices=tuple(BIAS_KINDS),
-        default=level1.bias,
-        help=f"image bias adjusted per sub-scene (default {level1.bias}, as in 003_)",
-    )
-    ties.add_argument(
-        "--ties-only-level1",
-        action="store_true",
-        help="level 1 sees the ties only (the GCPs enter at level 2); needs the bias priors",
-    )
-    ties.add_argument(
-        "--bias-prior-shift-px",
-        type=float,
-        metavar="S",
-        help="prior sigma (px) of every sub-scene's bias shift",
-    )
-    ties.add_argument(
-        "--bias-prior-matrix",
-        type=float,
-        metavar="X",
-        help="prior sigma (px/px) of the affine matrix (or shift-drift drift) terms",
-    )
-    ties.add_argument(
-        "--method",
-        choices=("lm", "gn"),
-        default="lm",
-        help="level-1 solver: Levenberg-Marquardt (default) or Gauss-Newton",
-    )
-    ties.add_argument(
-        "--max-steps", type=int, default=100, metavar="N", help="level-1 solver steps (100)"
-    )
-    gross = parser.add_argument_group("gross errors (both levels, as jaxgeo adjust)")
-    gross.add_argument(
-        "--loss",
-        choices=LOSSES,
-        default=STRIP_SOLVER.loss,
-        help=f"loss on image measurements and GCP coordinates (default {STRIP_SOLVER.loss}, IRLS)",
-    )
-    gross.add_argument(
-        "--loss-scale",
-        type=float,
-        default=STRIP_SOLVER.loss_scale,
-        metavar="C",
-        help=f"robust loss threshold in a priori sigmas (default {STRIP_SOLVER.loss_scale:g})",
-    )
-    gross.add_argument(
-        "--keep-blunders",
-        action="store_true",
-        help="flag gross errors (w-test) but do not remove them and re-solve",
-    )
-    parser.add_argument(
-        "--degree",
-        choices=DEGREES,
-        default=Level2Config().degree,
-        help="level 2: the universal correction (default quadratic, eq. 12-13 of 003_; auto: "
-        "the degree that best predicts each GCP scene left out)",
-    )
-    add_json(parser)
-    add_quiet(parser)
-    out = parser.add_argument_group("output")
-    out.add_argument("-o", "--out", metavar="DIR",
-                     help="write the updated RPCs and the report into this folder (created if "
-                     "needed; default: print the report only)")  # fmt: skip
-    out.add_argument(
-        "--rpc-format",
-        choices=tuple(SUFFIX),
-        default="txt",
-        help="updated RPC files as NAME_RPC.TXT (default), NAME.RPB, OSSIM NAME.geom or DIMAP v2 "
-        "RPC_NAME.XML",
-    )
-    out.add_argument(
-        "--rpc-grid",
-        type=int,
-        nargs=3,
-        default=refit0.grid,
-        metavar=("NX", "NY", "NH"),
-        help="RPC refit grid: columns, rows, height layers (default %(default)s)",
-    )
-    out.add_argument(
-        "--overwrite",
-        action="store_true",
-        help="replace earlier outputs in -o/--out (an input is never replaced)",
-    )
+    ties.add_argument("--tie-height", type=float, metavar="M",
+                      help="one ellipsoidal height (m) for all ties (default: mean GCP/check "
+                      "height; not with --dem)")  # fmt: skip
+    ties.add_argument("--ties-only-level1", action="store_true",
+                      help="level 1 sees the ties only (the GCPs enter at level 2); needs the "
+                      "bias priors")  # fmt: skip
+    parser.add_argument("--degree", choices=DEGREES, default=Level2Config().degree,
+                        help="level 2: the universal correction (default quadratic, eq. "
+                        "12-13 of 003_; auto: the degree that best predicts each GCP scene "
+                        "left out)")  # fmt: skip
+    parser.add_argument("--rpc-grid", type=int, nargs=3, default=refit0.grid,
+                        metavar=("NX", "NY", "NH"), help="RPC refit grid of -o/--out: columns, "
+                        "rows, height layers (default %(default)s)")  # fmt: skip
     parser.set_defaults(func=run)
 
 
-def strip_config(args: argparse.Namespace, tie_height=None):
+def strip_config(args: argparse.Namespace, dem=None):
     """The :class:`jaxgeo.strip.StripConfig` and :class:`~jaxgeo.strip.RefitConfig` of the
-    arguments (``tie_height``: a DEM, else ``--tie-height``)."""
-    import dataclasses
+    arguments (tie heights from ``dem``, a :class:`~jaxgeo.io.DEM`, else ``--tie-height``)."""
+    from .. import strip as lib
+    from ._adjustment_options import solver_config
 
-    from ..strip import (
-        STRIP_SOLVER,
-        Level1Config,
-        Level2Config,
-        RefitConfig,
-        StripConfig,
-        TieConfig,
-    )
-
-    ties = TieConfig(
+    ties = lib.TieConfig(
         per_pair=args.ties_per_pair,
         margin_px=args.tie_margin_px,
         sigma_px=args.tie_sigma_px,
-        height=args.tie_height if tie_height is None else tie_height,
+        height=args.tie_height if dem is None else dem,
         height_sigma_m=args.tie_height_sigma_m,
     )
-    level1 = Level1Config(
+    level1 = lib.Level1Config(
         bias=args.bias,
         use_gcps=not args.ties_only_level1,
         bias_prior_shift_px=args.bias_prior_shift_px,
         bias_prior_matrix=args.bias_prior_matrix,
     )
-    solver = dataclasses.replace(
-        STRIP_SOLVER,
-        method=args.method,
-        max_steps=args.max_steps,
-        loss=args.loss,
-        loss_scale=args.loss_scale,
-        remove_blunders=not args.keep_blunders,
-    )
-    strip = StripConfig(ties=ties, level1=level1, level2=Level2Config(args.degree), solver=solver)
-    return strip, RefitConfig(grid=tuple(args.rpc_grid))
+    solver = solver_config(args, lib.STRIP_SOLVER)
+    level2 = lib.Level2Config(args.degree)
+    config = lib.StripConfig(ties=ties, level1=level1, level2=level2, solver=solver)
+    return config, lib.RefitConfig(grid=tuple(args.rpc_grid))
 
 
 def run(args: argparse.Namespace) -> int:
@@ -261,123 +147,47 @@ def run(args: argparse.Namespace) -> int:
         raise CommandError(err.render(FLAGS)) from None
 
 
-def _guard(args, strip, targets) -> None:
-    """Before any computation: the outputs are no input (whatever ``--overwrite``), and the
-    folder they go into is writable."""
-    import os
-    import pathlib
-    import tempfile
-
-    from . import CommandError
-    from ._common import guard_outputs
-
-    inputs = [*(strip.files.all() if strip.files is not None else ()),
-              *([args.dem] if args.dem else [])]  # fmt: skip
-    out = pathlib.Path(args.out)
-    if out.is_dir():
-        try:
-            guard_outputs(targets.values(), inputs, args.overwrite)
-        except CommandError as err:
-            raise CommandError(f"-o/--out: {err}") from None
-        return
-    base = out
-    while not base.exists() and base != base.parent:
-        base = base.parent
-    try:  # a folder made and removed: os.access says yes to root everywhere
-        os.rmdir(tempfile.mkdtemp(prefix=".jaxgeo-probe-", dir=base))
-    except OSError as err:
-        raise CommandError(f"-o/--out: {out}: cannot be created ({base}: {err.strerror})") from None
-
-
 def _run(args: argparse.Namespace) -> int:
-    import sys
-    import warnings
-
-    from ..bundle import NotConvergedWarning, PoorFitWarning
-    from ..io import read_dem
-    from ..strip import (
-        REFIT_WARN_PX,
-        GCPDistributionWarning,
-        LineOffsetWarning,
-        MeasuredTieWarning,
-        UniversalCorrectionWarning,
-        adjust_strip,
-        format_strip_result,
-        read_strip,
-        strip_output_paths,
-        strip_summary,
-        worst_refit,
-        write_strip_outputs,
-    )
+    from .. import strip as library
     from . import CommandError
-    from ._common import (
-        EXIT_NOT_CONVERGED,
-        EXIT_OK,
-        EXIT_POOR_FIT,
-        EXIT_WRITE,
-        note,
-        ours,
-        print_json,
+    from . import _adjustment_options as shared
+    from ._common import print_json
+
+    start = shared.Start("strip", args)
+    if args.tie_height is not None and args.dem is not None:
+        raise CommandError("--tie-height and --dem both give the tie heights: give one")
+    shared.check_adjustment_options(args)
+    config, refit = strip_config(args)  # checked before any work (and again with the DEM)
+    outputs = (
+        library.StripOutputs(args.out, args.rpc_format, args.overwrite, refit) if args.out else None
     )
-
-    def say(line: str) -> None:
-        note(f"jaxgeo strip: {line}", args.quiet)
-
-    if args.dem_offset_m and not args.dem:
-        raise CommandError("--dem-offset-m applies to --dem heights only")
-    config, refit = strip_config(args)  # checked before any work
-    strip = read_strip(args.strip, args.ground, args.observations)
-    targets = None
-    if args.out:
-        targets = strip_output_paths(strip, args.out, args.rpc_format, args.overwrite,
-                                      [args.dem] if args.dem else [])  # fmt: skip
-        _guard(args, strip, targets)
-    if args.dem:
-        dem = read_dem(args.dem, offset_m=args.dem_offset_m)
-        if dem.vertical_crs and not args.dem_offset_m:
-            say(f"note: {args.dem} declares vertical CRS {dem.vertical_crs!r}; heights are used "
-                "as ellipsoidal")  # fmt: skip
-        config, _ = strip_config(args, tie_height=dem)
-    say(f"adjusting {len(strip.names)} sub-scenes: tie points, level-1 bundle adjustment and "
-        "snooping, level-2 correction (the first run of a strip shape compiles, up to a "
-        "minute)")  # fmt: skip
-    poor = False
-    caught = []
-    try:
-        with warnings.catch_warnings(record=True) as caught:
-            warnings.simplefilter("always")
-            result = adjust_strip(strip, config)
-    finally:  # the GCP distribution warning matters most when the adjustment fails
-        for w in ours(caught):
-            warns = (GCPDistributionWarning, UniversalCorrectionWarning, LineOffsetWarning,
-                     NotConvergedWarning, PoorFitWarning, MeasuredTieWarning)  # fmt: skip
-            kind = "warning" if issubclass(w.category, warns) else "note"
-            poor |= issubclass(w.category, PoorFitWarning)
-            print(f"jaxgeo strip: {kind}: {w.message}", file=sys.stderr)
-    converged = bool(result.report.strip["converged"])
-    if not converged:
-        print("jaxgeo strip: warning: the level-1 bundle adjustment did not converge",
-              file=sys.stderr)  # fmt: skip
-    # the misfit first: a solve it drove off does not converge either
-    code = EXIT_POOR_FIT if poor else EXIT_OK if converged else EXIT_NOT_CONVERGED
+    if args.dem is not None:
+        config, _ = strip_config(args, shared.tie_dem(args))
+    serious = (library.GCPDistributionWarning, library.UniversalCorrectionWarning,
+               library.LineOffsetWarning, library.MeasuredTieWarning)  # fmt: skip
+    with start.warnings_printed(serious):
+        run = library.adjust_strip_files(
+            args.strip, config, ground=args.ground, observations=args.observations,
+            outputs=outputs, progress=start.say,
+        )  # fmt: skip
+    if not run.converged:
+        start.warn("the level-1 bundle adjustment did not converge")
+    code = start.exit_code(run.converged, bool(run.poor_fit))
     if not args.json:
-        print(format_strip_result(result), flush=True)  # the report first
-    if targets is None:
+        print(run.format(), flush=True)  # the report first
+    if outputs is None:
         if args.json:
-            print_json({**strip_summary(result), "exit_status": code})
+            print_json({**run.summary(), "exit_status": code})
         return code
-    say(f"refitting {len(strip.names)} RPCs and writing {args.out}")
+    start.say(f"refitting {len(run.result.strip.names)} RPCs and writing {args.out}")
     try:
-        data = write_strip_outputs(result, targets, refit, args.rpc_format, args.overwrite)
+        data = run.write()
     except (OSError, ValueError) as err:
-        if args.json:
-            print_json({**strip_summary(result), "exit_status": EXIT_WRITE})
-        note(f"jaxgeo strip: error: writing -o/--out failed: {err}")
-        return EXIT_WRITE
-    worst, px = worst_refit(data)
-    if px > REFIT_WARN_PX:
-        print(f"jaxgeo strip: warning: the refitted RPC of {worst} differs from its adjusted "
-              f"model by up to {px:.3g} px on the check grid", file=sys.stderr)  # fmt: skip
+        return start.write_failed(err, run.summary())
+    worst, px = library.worst_refit(data)
+    if px > library.REFIT_WARN_PX:
+        start.warn(f"the refitted RPC of {worst} differs from its adjusted model by up to "
+                   f"{px:.3g} px on the check grid")  # fmt: skip
     if args.json:
         print_json({**data, "exit_status": code})
     else:

@@ -21,6 +21,8 @@ public here):
 - ``_report``: per sub-scene and per pair figures;
 - ``_result``: ``StripResult`` and the refitted RPCs;
 - ``_adjustment``: ``adjust_strip`` (tables in, result out), ``adjust_individually``;
+- ``_files``: ``adjust_strip_files`` (files in, a ``StripFileAdjustment`` out, written with its
+  ``write``; what ``jaxgeo strip`` runs), ``StripOutputs``;
 - ``_batch``: Monte-Carlo batches and timing of the compiled call.
 """
 
@@ -56,6 +58,9 @@ from ._export import strip_output_paths as strip_output_paths
 from ._export import strip_summary as strip_summary
 from ._export import worst_refit as worst_refit
 from ._export import write_strip_outputs as write_strip_outputs
+from ._files import StripFileAdjustment as StripFileAdjustment
+from ._files import StripOutputs as StripOutputs
+from ._files import adjust_strip_files as adjust_strip_files
 from ._level2 import Level2Data as Level2Data
 from ._report import GrossErrors as GrossErrors
 from ._report import StripReport as StripReport

@@ -9,6 +9,7 @@ import pytest
 from jaxgeo import Biased, ShiftBias
 from jaxgeo.bundle import (
     AdjustmentError,
+    AdjustSettings,
     NotConvergedWarning,
     SingularNormalEquations,
     TooFewControlPoints,
@@ -18,6 +19,8 @@ from jaxgeo.io import GroundPoints, Observations
 from jaxgeo.lsq import RESULTS, SolverConfig
 from jaxgeo.models import Affine3D
 from tests.bundle.conftest import make_block
+
+CHECK, NO_CHECK = AdjustSettings(check_control=True), AdjustSettings(check_control=False)
 
 
 @pytest.fixture(scope="module")
@@ -44,11 +47,11 @@ def test_too_few_gcps_for_the_bias(small):
     # the per-image count rule is opt-in (check=True): by default ties may control an image,
     # and what stays open is reported as undetermined (next assertion)
     with pytest.raises(TooFewControlPoints, match=r"image 'left': the AffineBias .* at least 3"):
-        adjust(small.models, small.obs, _gcps(small, 2), bias="affine", check=True)
+        adjust(small.models, small.obs, _gcps(small, 2), bias="affine", settings=CHECK)
     with pytest.raises(TooFewControlPoints, match=r"ShiftDriftBias .* at least 2 .* got 1"):
-        adjust(small.models, small.obs, _gcps(small, 1), bias="shift-drift", check=True)
+        adjust(small.models, small.obs, _gcps(small, 1), bias="shift-drift", settings=CHECK)
     with pytest.raises(TooFewControlPoints, match=r"ShiftBias .* at least 1 .* got 0"):
-        adjust(small.models, small.obs, _gcps(small, 0), bias="shift", check=True)
+        adjust(small.models, small.obs, _gcps(small, 0), bias="shift", settings=CHECK)
     with pytest.raises(SingularNormalEquations, match=r"bias\.shift_px"):
         adjust(small.models, small.obs, _gcps(small, 0), bias="shift")
 
@@ -63,9 +66,9 @@ def test_3d_affine_needs_four_non_coplanar_gcps(small):
         models[name] = Affine3D.fit(g, xy, space="utm")
     ground = dataclasses.replace(small.ground, lonlath=flat)
     with pytest.raises(TooFewControlPoints, match=r"\(near-\)coplanar"):
-        adjust(models, small.obs, ground, check=True)
+        adjust(models, small.obs, ground, settings=CHECK)
     with pytest.raises(TooFewControlPoints, match=r"3D affine .* at least 4 .* got 3"):
-        adjust(models, small.obs, _gcps(small, 3), check=True)
+        adjust(models, small.obs, _gcps(small, 3), settings=CHECK)
 
 
 def test_unknown_image_point_seen_once_and_nans(small):
@@ -97,7 +100,7 @@ def test_singular_normal_equations_name_the_parameters(small):
     # no ground control at all: a common shift of both images is not determined
     no_control = GroundPoints((), np.zeros((0, 3)), (), np.zeros((0, 3)))
     with pytest.raises(SingularNormalEquations, match=r"left\.bias\.shift_px") as err:
-        adjust(small.models, small.obs, no_control, bias="shift", check=False)
+        adjust(small.models, small.obs, no_control, bias="shift", settings=NO_CHECK)
     assert set(err.value.parameters) >= {"left.bias.shift_px[0]", "right.bias.shift_px[0]"}
 
 
@@ -150,5 +153,5 @@ def test_undetermined_unknowns_found_in_the_least_squares_equations(small, monke
     no_control = GroundPoints((), np.zeros((0, 3)), (), np.zeros((0, 3)))
     solver = SolverConfig(loss="cauchy")
     with pytest.raises(SingularNormalEquations):
-        adjust(small.models, small.obs, no_control, bias="shift", solver=solver, check=False)
+        adjust(small.models, small.obs, no_control, bias="shift", solver=solver, settings=NO_CHECK)
     assert asked == ["l2"]  # asked although the inflations were finite, and without Cauchy

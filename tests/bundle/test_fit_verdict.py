@@ -12,6 +12,7 @@ import pytest
 
 from jaxgeo.bundle import (
     AdjustmentError,
+    AdjustSettings,
     PoorFitWarning,
     adjust,
     over_limits,
@@ -117,7 +118,7 @@ def test_measurements_checked_against_the_raster(demo):
     i = int(np.flatnonzero(beyond)[0])  # the first one is named
     named = rf"point {obs.point_ids[i]!r} \(\w+\) at x, y = .* lies \d+ px outside image 'fore' "
     with pytest.raises(AdjustmentError, match=named + r".*its raster, 6000 x 6000 px"):
-        prepare(models, obs, ground, image_domains=box)
+        prepare(models, obs, ground, settings=AdjustSettings(image_domains=box))
     # without the raster, the RPC's image domain (0..11999 px) accepts them
     prepare(models, obs, ground)
     xy = obs.xy.copy()

@@ -6,7 +6,7 @@ import jax
 import numpy as np
 import pytest
 
-from jaxgeo.bundle import AdjustmentError, adjust
+from jaxgeo.bundle import AdjustmentError, AdjustSettings, adjust
 from jaxgeo.io import GroundPoints, Observations, read_metadata
 from jaxgeo.lsq import SolverConfig
 from jaxgeo.models import KeplerSequence
@@ -44,7 +44,8 @@ def test_shared_orbit_model_is_adjusted_as_one_block(kepler):
     # plain least squares: the step count below is the LM's (the default robust loss adds its
     # reweighting passes on top, ~2-5x the steps on clean data)
     l2 = SolverConfig(loss="l2")
-    res = adjust({("fore", "aft"): start}, obs, ground, filters=spec, solver=l2)
+    res = adjust({("fore", "aft"): start}, obs, ground, settings=AdjustSettings(filters=spec),
+                 solver=l2)  # fmt: skip
     assert res.converged and res.num_steps <= 10
     assert res.param_names[0] == "(fore, aft).attitude[0][0]" and len(res.params) == 6
     true = np.concatenate([np.asarray(a) for a in truth.attitude])

@@ -10,7 +10,13 @@ tie points (parallax), so it stays open unless a prior (or a GCP in the image) f
 import numpy as np
 import pytest
 
-from jaxgeo.bundle import SingularNormalEquations, TooFewControlPoints, adjust, with_bias
+from jaxgeo.bundle import (
+    AdjustSettings,
+    SingularNormalEquations,
+    TooFewControlPoints,
+    adjust,
+    with_bias,
+)
 from jaxgeo.bundle._adjustment import bias_prior_sigma
 from jaxgeo.io import Observations
 
@@ -32,7 +38,8 @@ def _without_right_gcps(block, keep=()):
 def test_what_ties_leave_open_is_named(block):
     obs = _without_right_gcps(block)
     with pytest.raises(TooFewControlPoints):  # the old per-image count rule, on request
-        adjust(block.models, obs, block.ground, bias="shift", check=True)
+        adjust(block.models, obs, block.ground, bias="shift",
+               settings=AdjustSettings(check_control=True))  # fmt: skip
     with pytest.raises(SingularNormalEquations) as err:
         adjust(block.models, obs, block.ground, bias="shift")
     named = err.value.parameters
@@ -48,8 +55,10 @@ def test_tie_heights_from_a_dem_fix_it(block):
     gcp_h = block.ground.lonlath[:, 2]
     r = adjust(  # the check points are tie points here
         block.models, obs, block.ground.select("gcp"), bias="shift",
-        tie_height=lambda lonlat: np.full(len(lonlat), float(np.mean(gcp_h))),
-        tie_height_sigma_m=300.0,
+        settings=AdjustSettings(
+            tie_height=lambda lonlat: np.full(len(lonlat), float(np.mean(gcp_h))),
+            tie_height_sigma_m=300.0,
+        ),
     )  # fmt: skip
     assert r.converged and np.all(np.isfinite(r.param_sigma))
     assert not r.gcp_flagged or all(p in block.ground.select("gcp").ids for p in r.gcp_flagged)

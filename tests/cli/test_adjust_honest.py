@@ -166,6 +166,16 @@ def test_rasters_crops_and_origins(scene, tmp_path, capsys):
     rc, out, err = _adjust(capsys, *plain, *common)
     assert rc == 0, err
     assert json.loads(out)["checkpoints"]["rms_m"] == data["checkpoints"]["rms_m"]
+    # IMG of --model and --image-origin: the image's name, its file name or its stem
+    named = ["--image", f"fore={tmp_path / 'fore_plain.tif'}",
+             "--image", f"aft={tmp_path / 'aft_plain.tif'}",
+             "--model", f"fore_plain.tif={scene / 'fore.txt'}",
+             "--model", f"aft_plain={scene / 'aft.txt'}",
+             "--image-origin", "fore_plain.tif=200,250",
+             "--image-origin", "aft=200,250"]  # fmt: skip
+    rc, out, err = _adjust(capsys, *named, *common)
+    assert rc == 0, err
+    assert json.loads(out)["checkpoints"]["rms_m"] == data["checkpoints"]["rms_m"]
     # a GCP measured beyond the raster (x 6100 in a 6000 px wide crop; inside the RPC's image
     # domain, which accepted it before): exit 2 naming the point, the image and its size
     obs = _shifted_obs(scene, tmp_path / "obs.csv", origin, move=(0, 6100.0))

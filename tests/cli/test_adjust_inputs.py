@@ -136,3 +136,26 @@ def test_an_adjustment_refused_beside_direct_georeferencing_is_named(scene, caps
     err = capsys.readouterr().err
     assert "error: singular normal equations: not determined: parameter(s) fore.bias" in err, err
     assert "Traceback" not in err and not out.exists()
+
+
+BAD_OPTIONS = [
+    (("--loss-scale", "-1"), "--loss-scale must be a positive number"),
+    (("--loss-scale", "nan"), "--loss-scale must be a positive number"),
+    (("--max-steps", "0"), "--max-steps must be at least 1"),
+    (("--tie-height-sigma-m", "0"), "--tie-height-sigma-m must be a positive number"),
+    (("--bias-prior-shift-px", "-2"), "--bias-prior-shift-px must be a positive number"),
+    (("--jitter-knot-lines", "0"), "--jitter-knot-lines must be a positive number"),
+    (("--geoid", "egm96"), "--geoid applies to a DEM"),
+    (("--dem-height", "orthometric"), "--dem-height applies to a DEM"),
+    (("--dem-offset-m", "3"), "--dem-offset-m applies to --dem heights only"),
+    (("--model", "nope=x.RPB"), "IMG one of the images"),
+]
+
+
+@pytest.mark.parametrize(("extra", "words"), BAD_OPTIONS, ids=[b[0][0] for b in BAD_OPTIONS])
+def test_bad_options_named_by_their_flag(scene, capsys, extra, words):
+    """Errors name the options (jaxgeo adjust and jaxgeo strip share them), never a library
+    parameter (loss_scale, max_steps)."""
+    assert main(_args(scene, *extra)) == 2
+    err = capsys.readouterr().err
+    assert words in err and "loss_scale" not in err and "max_steps" not in err, err

@@ -208,6 +208,21 @@ def test_dem_tie_heights(strip_dir, adjusted, tmp_path, capsys):
     data = json.loads(capsys.readouterr().out)
     assert data["report"]["strip"]["check_rms_m"]["level2"]["plan"] < 1.0
     assert data["options"]["tie_height_sigma_m"] == 50.0
+    # the DEM vocabulary of every command (--dem-height, --geoid), --dem-offset-m added after
+    argv = ["strip", str(strip_dir), "--dem", str(dem), "--dem-height", "ellipsoidal",
+            "--dem-offset-m", "2", "--tie-height-sigma-m", "50", "--json", "--quiet"]  # fmt: skip
+    assert main(argv) == 0
+    assert (
+        json.loads(capsys.readouterr().out)["report"]["strip"]["check_rms_m"]["level2"]["plan"]
+        < 1.0
+    )
+    for extra, words in ((["--geoid", "egm96"], "--geoid applies to a DEM"),
+                         (["--tie-height", "100", "--dem", str(dem)], "--tie-height and --dem"),
+                         (["--loss-scale", "-1"], "--loss-scale must be a positive number"),
+                         (["--max-steps", "0"], "--max-steps must be at least 1")):  # fmt: skip
+        assert main(["strip", str(strip_dir), *extra]) == 2
+        err = capsys.readouterr().err
+        assert words in err and "loss_scale" not in err and "max_steps" not in err, err
     mid = 0.5 * (lo[1] + hi[1])  # covers the first half of the strip only
     short = _dem(tmp_path / "short.tif", (lo[0], hi[0]), (mid, hi[1]), h)
     assert main(["strip", str(strip_dir), "--dem", str(short)]) == 2
@@ -266,12 +281,12 @@ def test_cli_conventions(strip_dir, tmp_path, capsys, monkeypatch):
     cap = capsys.readouterr()
     assert "jaxgeo strip: adjusting" not in cap.err and json.loads(cap.out)["exit_status"] == 0
 
-    import jaxgeo.strip
+    import jaxgeo.strip._files
 
     def fail(*args, **kwargs):
         raise PermissionError("disk says no")
 
-    monkeypatch.setattr(jaxgeo.strip, "write_strip_outputs", fail)
+    monkeypatch.setattr(jaxgeo.strip._files, "write_strip_outputs", fail)
     assert main(["strip", str(strip_dir), "-o", str(tmp_path / "o2"), "--quiet", *FAST]) == 4
     cap = capsys.readouterr()
     assert "whole strip, level2" in cap.out and "writing -o/--out failed: disk says no" in cap.err

@@ -19,6 +19,7 @@ from ...geodesy import metres_per_unit
 from ...io import GroundPoints, Observations
 from ...lsq import GroundObs, ImageObs, ModelGroup, Problem, make_structure
 from .._errors import AdjustmentError
+from .._settings import DEFAULT_SETTINGS, AdjustSettings
 from .checks import (
     Sources,
     check_distinct,
@@ -88,23 +89,22 @@ def prepare(
     observations: Observations,
     ground: GroundPoints | None = None,
     *,
-    filters: Any = None,
     prior_sigma: Any = None,
-    initial: Mapping[str, Any] | None = None,
+    settings: AdjustSettings = DEFAULT_SETTINGS,
     check_control: bool = True,
-    sources: Sources | None = None,
-    tie_height: Callable[[np.ndarray], np.ndarray] | None = None,
-    tie_height_sigma_m: float = 10.0,
-    image_domains: Mapping[str, Any] | None = None,
 ) -> Prepared:
     """Check the input and build the array problem (arguments as :func:`jaxgeo.adjust`;
-    ``check_control``: check every image's GCP count against its adjustable parameters;
-    ``sources``: the files and lines of the tables, named in messages; ``tie_height``: heights
-    ``f(lonlat (n, 2)) -> (n,)`` (m), e.g. a :class:`~jaxgeo.io.DEM`, given to every tie
-    point as a height observation of sigma ``tie_height_sigma_m``; ``image_domains``: image
+    ``check_control``: check every image's GCP count against its adjustable parameters). From
+    ``settings`` (:class:`~jaxgeo.bundle.AdjustSettings`): ``filters``, ``initial`` points,
+    ``sources`` (the files and lines of the tables, named in messages), ``tie_height``
+    (heights ``f(lonlat (n, 2)) -> (n,)`` m, e.g. a :class:`~jaxgeo.io.DEM`, given to every tie
+    point as a height observation of sigma ``tie_height_sigma_m``) and ``image_domains`` (image
     name -> ``(x_min, y_min, x_max, y_max)`` px of its raster, bounding its measurements, e.g.
     :meth:`jaxgeo.io.SensorImage.domain`; images without one are bounded by their RPC's image
-    domain)."""
+    domain); its bias priors and jitter are :func:`jaxgeo.adjust`'s."""
+    filters, sources, image_domains = settings.filters, settings.sources, settings.image_domains
+    tie_height, tie_height_sigma_m = settings.tie_height, settings.tie_height_sigma_m
+    initial = settings.initial
     src = sources if sources is not None else Sources()
     image_of = check_models(models)
     ground = (
@@ -162,9 +162,9 @@ def prepare(
     }
     check_distinct(image_models)
     check_domains(image_models, obs, ground, lonlath, src, image_domains)
-    origin = initial_points(
-        point_ids, role, initial, lonlath, gindex, obs, xy, sig_px, image_models
-    )
+    start = {p: lonlath[gindex[p]] for p, r in zip(point_ids, role, strict=True) if r == "gcp"}
+    start.update(initial)  # the user's values first
+    origin = initial_points(point_ids, start, obs, xy, sig_px, image_models)
 
     # --- arrays ---------------------------------------------------------------------------
     obs_img = np.array([image_index[img] for img in obs.images], dtype=np.int64).reshape(-1, 3)

@@ -20,23 +20,20 @@ from .checks import listing
 
 def initial_points(
     point_ids: Sequence[str],
-    role: Sequence[str],
-    initial: Mapping[str, Any],
-    lonlath: np.ndarray,
-    gindex: Mapping[str, int],
+    start: Mapping[str, Any],
     obs: Observations,
     xy: np.ndarray,
     sig_px: np.ndarray,
     image_models: Mapping[str, Any],
 ) -> np.ndarray:
     """``(n_points, 3)`` initial ``(lon_deg, lat_deg, h_m)`` of every point, in ``point_ids``
-    order (see the module docstring); raises naming the points that cannot be intersected."""
+    order: ``start[id]`` where given (the user's initial values, else the GCP coordinates),
+    else intersected (see the module docstring); raises naming the points that cannot be
+    intersected."""
     origin = np.full((len(point_ids), 3), np.nan)
-    for j, (pid, r) in enumerate(zip(point_ids, role, strict=True)):
-        if pid in initial:
-            origin[j] = np.asarray(initial[pid], dtype=float)
-        elif r == "gcp":
-            origin[j] = lonlath[gindex[pid]]
+    for j, pid in enumerate(point_ids):
+        if pid in start:
+            origin[j] = np.asarray(start[pid], dtype=float)
     todo = [j for j in range(len(point_ids)) if not np.all(np.isfinite(origin[j]))]
     intersect_points(todo, point_ids, obs, xy, sig_px, image_models, origin)
     return origin
