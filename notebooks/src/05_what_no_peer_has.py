@@ -43,7 +43,7 @@ import jaxgeo
 from jaxgeo.bundle import JitterSettings, adjust, with_bias
 from jaxgeo.io import Observations, read_rpc
 from jaxgeo.lsq import SolverConfig
-from jaxgeo.simulate import stereo_scene, stereo_scene_truth
+from jaxgeo.simulate import StereoSceneSettings, stereo_scene, stereo_scene_truth
 from jaxgeo.simulate._stereo_scene_models import localize_on_terrain_exact, project_true
 from jaxgeo.stereo import (
     dh_stats,
@@ -83,8 +83,8 @@ key_numbers = {"quick": QUICK}
 # %%
 SIZE, PERIOD, SEED, NOISE_PX = 800, 400.0, 7319, 0.1
 N_SIDE = 30 if QUICK else 42  # tie grid (before the points seen by one image only are dropped)
-scene = stereo_scene_truth(SIZE, SEED, jitter_px=1.5, jitter_period_lines=PERIOD,
-                           exact_rpc=True)  # fmt: skip
+scene = stereo_scene_truth(SIZE, SEED, StereoSceneSettings(
+    jitter_px=1.5, jitter_period_lines=PERIOD, exact_rpc=True))  # fmt: skip
 g = np.linspace(10, SIZE - 11, N_SIDE)
 xy_left = np.stack(np.meshgrid(g, g), -1).reshape(-1, 2)
 ground = localize_on_terrain_exact(scene.truth["left"], scene.terrain, xy_left)
@@ -347,7 +347,7 @@ SIGMA_SIZE, SIGMA_SEED = (300 if QUICK else 600), 12
 t = time.perf_counter()
 with tempfile.TemporaryDirectory(prefix="jaxgeo-nb05-") as folder:
     folder = pathlib.Path(folder)
-    stereo_scene(folder, SIGMA_SIZE, SIGMA_SEED, exact_rpc=True)
+    stereo_scene(folder, SIGMA_SIZE, SIGMA_SEED, StereoSceneSettings(exact_rpc=True))
     t_scene = time.perf_counter() - t
     paths = [folder / "left.tif", folder / "right.tif"]
     with rasterio.open(folder / "truth_dsm.tif") as f:
