@@ -177,16 +177,15 @@ def main() -> None:
 
     import jaxgeo
     from jaxgeo.io import atomic_write_text
-    from jaxgeo.simulate import stereo_scene
+    from jaxgeo.simulate import StereoSceneSettings, stereo_scene
 
     t0 = time.perf_counter()
     directory = args.scene
     if directory is None:
         directory = tempfile.mkdtemp(prefix="jaxgeo_jitter_")
-        stereo_scene(
-            directory, args.size, args.seed, jitter_px=args.jitter_px,
-            jitter_period_lines=args.jitter_period_lines, exact_rpc=args.exact_rpc,
-        )  # fmt: skip
+        stereo_scene(directory, args.size, args.seed, StereoSceneSettings(
+            jitter_px=args.jitter_px, jitter_period_lines=args.jitter_period_lines,
+            exact_rpc=args.exact_rpc))  # fmt: skip
     t_sim = time.perf_counter() - t0
     params = json.loads(pathlib.Path(directory, "truth.json").read_text())["params"]
     out = {"benchmark": "jitter", "jaxgeo": jaxgeo.__version__, "scene": params,

@@ -43,13 +43,14 @@ def main() -> None:
     jax.config.update("jax_enable_x64", True)
     import jaxgeo.strip._adjustment as strip_adjustment
     from jaxgeo.io import Observations
-    from jaxgeo.simulate import carto2s_strip
+    from jaxgeo.simulate import Carto2SStripSettings, carto2s_strip
     from jaxgeo.simulate._gross import flag_scores
     from jaxgeo.strip import STRIP_SOLVER, Strip, StripConfig, TieConfig, adjust_strip
     from jaxgeo.strip._level1 import level1_input
 
     warnings.simplefilter("ignore")
-    sim = carto2s_strip(args.scenes, seed=args.seed, gcp_every=args.gcp_every)
+    sim = carto2s_strip(args.scenes, seed=args.seed,
+                        settings=Carto2SStripSettings(gcp_every=args.gcp_every))  # fmt: skip
     strip = Strip.from_simulation(sim)
     solvers = {
         "least_squares": dataclasses.replace(STRIP_SOLVER, loss="l2", remove_blunders=False),

@@ -167,11 +167,11 @@ def projection_gap_px(problem: dict, a: tuple, b: tuple) -> float:
 
 def simulate(n_scenes: int, seed: int, **options):
     """A simulated Carto-2S strip (``jaxgeo.simulate.carto2s_strip`` with ``options``)."""
-    from jaxgeo.simulate import carto2s_strip
+    from jaxgeo.simulate import Carto2SStripSettings, carto2s_strip
     from jaxgeo.strip import Strip
 
     t0 = time.perf_counter()
-    strip = Strip.from_simulation(carto2s_strip(n_scenes, seed=seed, **options))
+    strip = Strip.from_simulation(carto2s_strip(n_scenes, seed, Carto2SStripSettings(**options)))
     _log(f"simulated {n_scenes} sub-scenes in {time.perf_counter() - t0:.1f} s")
     return strip
 

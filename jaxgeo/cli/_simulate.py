@@ -1,14 +1,17 @@
 """``jaxgeo simulate``: write a simulated scene (vendor RPCs, truth, images) to a folder.
 
-    jaxgeo simulate cartosat1 --seed S --out DIR [--site hobart|warsaw] [--overwrite]
-    jaxgeo simulate carto2s-strip --scenes N --seed S --out DIR [--gcp-every K] [--overwrite]
+    jaxgeo simulate cartosat1 --seed S --out DIR [--site hobart|warsaw] [--gcps N] [--noise-px A]
+    jaxgeo simulate carto2s-strip --scenes N --seed S --out DIR [--gcp-every K] [--noise-px A]
     jaxgeo simulate stereo-scene --size N --seed S [--jitter-px A] [--jitter-period-lines P]
-                                 [--exact-rpc] [--relief-m M] --out DIR [--overwrite] [--quiet]
+                                 [--exact-rpc] [--relief-m M] --out DIR
+    (each also [--overwrite] [--quiet] [--json])
 
 Existing files in DIR are never replaced unless ``--overwrite`` is given (checked before any
 work; nothing is written then). ``cartosat1`` and ``carto2s-strip`` write files ready for
 ``jaxgeo adjust`` (RPC text files, ``ground.csv``, ``observations.csv``) with the truth in
-``truth.json``.
+``truth.json``. Parse -> a settings object (:class:`jaxgeo.simulate.Cartosat1Settings`,
+``Carto2SStripSettings``, ``StereoSceneSettings``) -> one call (``write_cartosat1_stereo``,
+``write_carto2s_strip``, ``stereo_scene``) -> print (``--json``: one JSON object).
 
 stereo-scene renders a Pleiades-like pushbroom stereo pair of N x N px (GSD 0.67 m,
 base/height 0.45) through its true physical models over a textured synthetic terrain,
@@ -33,149 +36,136 @@ import argparse
 
 from ._common import add_command, add_json, add_out, add_quiet
 
+OPTIONS = {
+    "seed": "--seed", "n_gcps": "--gcps", "site": "--site", "image_noise_px": "--noise-px",
+    "n_scenes": "--scenes", "gcp_every": "--gcp-every", "size": "--size",
+    "jitter_px": "--jitter-px", "jitter_period_lines": "--jitter-period-lines",
+    "exact_rpc": "--exact-rpc", "relief_m": "--relief-m",
+}  # fmt: skip
+"""The option of each setting the command sets (errors name the option, not the field)."""
+CARTOSAT1 = ("Write a simulated Cartosat-1 fore/aft pair (000_, 002_) into DIR: fore.txt, "
+             "aft.txt (vendor RPCs), ground.csv, observations.csv, truth.json.")  # fmt: skip
+STRIP = ("Write a simulated Carto-2S strip of N sub-scenes (003_) into DIR: scene_000.txt ... "
+         "(vendor RPCs), ground.csv, observations.csv, strip.json, truth.json.")  # fmt: skip
+
 
 def register(sub) -> None:
     line = "write a simulated Cartosat-1 pair, Carto-2S strip or rendered stereo scene"
     parser = add_command(sub, "simulate", line, __doc__)
     kinds = parser.add_subparsers(dest="kind", required=True, metavar="KIND")
 
-    def common(p: argparse.ArgumentParser, noise: bool = True) -> None:
+    def kind(name: str, help: str, doc: str, noise: bool = True) -> argparse.ArgumentParser:
+        p = add_command(kinds, name, help, doc)
         p.add_argument("--seed", type=int, default=0, help="random seed (default 0)")
         add_out(p, "DIR", "output folder (created if missing)")
         if noise:
-            p.add_argument("--noise-px", type=float, default=0.3, help="image noise std (px)")
+            p.add_argument("--noise-px", type=float, default=0.3,
+                           help="image noise std (px, default 0.3)")  # fmt: skip
+        add_quiet(p)
+        add_json(p)
         p.set_defaults(func=run)
+        return p
 
-    p = kinds.add_parser("cartosat1", help="Cartosat-1 fore/aft stereo pair (fore.txt, aft.txt)")
-    common(p)
-    p.add_argument(
-        "--site",
-        choices=("hobart", "warsaw"),
-        default="hobart",
-        help="hobart: 69 points in one quarter, 0..1260 m; warsaw: 36 spread, flat",
-    )
+    p = kind("cartosat1", "Cartosat-1 fore/aft stereo pair (fore.txt, aft.txt)", CARTOSAT1)
+    p.add_argument("--site", choices=("hobart", "warsaw"), default="hobart",
+                   help="hobart: 69 points in one quarter, 0..1260 m; warsaw: 36 spread, "
+                   "flat")  # fmt: skip
     p.add_argument("--gcps", type=int, default=9, help="number of GCPs (rest: check points)")
 
-    p = kinds.add_parser("carto2s-strip", help="Carto-2S strip of sub-scenes (scene_000.txt ...)")
-    common(p)
+    p = kind("carto2s-strip", "Carto-2S strip of sub-scenes (scene_000.txt ...)", STRIP)
     p.add_argument("--scenes", type=int, default=80, help="number of sub-scenes (default 80)")
     p.add_argument("--gcp-every", type=int, default=4, help="GCPs in every K-th scene (default 4)")
 
-    p = kinds.add_parser(
-        "stereo-scene",
-        help="rendered Pleiades-like stereo pair with RPCs and truth (left.tif, right.tif, "
-        "truth_dsm.tif, truth.json)",
-        description=__doc__.split("\n\n")[3],
-        formatter_class=argparse.RawDescriptionHelpFormatter,
-    )
-    common(p, noise=False)
+    p = kind("stereo-scene", "rendered Pleiades-like stereo pair with RPCs and truth (left.tif, "
+             "right.tif, truth_dsm.tif, truth.json)", __doc__.split("\n\n")[3],
+             noise=False)  # fmt: skip
     p.add_argument("--size", type=int, required=True, metavar="N", help="image size, N x N px")
-    p.add_argument(
-        "--jitter-px",
-        type=float,
-        default=0.0,
-        metavar="A",
-        help="amplitude (px) of a sinusoidal attitude jitter of the true models, across track "
-        "(along track a quarter of it); the delivered RPCs are fitted without it (default 0)",
-    )
-    p.add_argument(
-        "--jitter-period-lines",
-        type=float,
-        default=1000.0,
-        metavar="P",
-        help="period of the jitter in image lines (default 1000)",
-    )
-    p.add_argument(
-        "--exact-rpc",
-        action="store_true",
-        help="deliver RPCs fitted to the exact (jitter-free) true models, not to a copy with "
-        "a few pixels of pointing error",
-    )
-    p.add_argument(
-        "--relief-m",
-        type=float,
-        metavar="M",
-        help="terrain relief in metres (default: a tenth of the footprint, 30..300 m)",
-    )
-    add_quiet(p)
-    add_json(p)
+    p.add_argument("--jitter-px", type=float, default=0.0, metavar="A",
+                   help="amplitude (px) of a sinusoidal attitude jitter of the true models, "
+                   "across track (along track a quarter of it); the delivered RPCs are fitted "
+                   "without it (default 0)")  # fmt: skip
+    p.add_argument("--jitter-period-lines", type=float, default=1000.0, metavar="P",
+                   help="period of the jitter in image lines (default 1000)")  # fmt: skip
+    p.add_argument("--exact-rpc", action="store_true",
+                   help="deliver RPCs fitted to the exact (jitter-free) true models, not to a "
+                   "copy with a few pixels of pointing error")  # fmt: skip
+    p.add_argument("--relief-m", type=float, metavar="M",
+                   help="terrain relief in metres (default: a tenth of the footprint, "
+                   "30..300 m)")  # fmt: skip
 
 
 def run(args: argparse.Namespace) -> int:
     import pathlib
+    import time
 
-    from ..simulate import (
-        carto2s_strip,
-        cartosat1_stereo,
-        check_writable,
-        stereo_output_files,
-        strip_output_files,
-    )
+    from ..simulate import SimulationError
     from . import CommandError
+    from ._common import note, print_json
 
     out = pathlib.Path(args.out)
     if out.exists() and not out.is_dir():
         raise CommandError(f"--out {out}: exists and is not a directory")
-    if args.kind == "stereo-scene":
-        return _stereo_scene(args, out)
-    if args.kind == "cartosat1":
-        if args.gcps < 0:
-            raise CommandError(f"--gcps must be >= 0, got {args.gcps}")
-        check_writable(stereo_output_files(out), args.overwrite)  # before any work
-        scene = cartosat1_stereo(
-            args.seed, site=args.site, n_gcps=args.gcps, image_noise_px=args.noise_px
-        )
+    start = time.perf_counter()
+    try:
+        summary, lines = _simulate(args, out, note)
+    except SimulationError as err:
+        raise CommandError(err.render(OPTIONS)) from None
+    summary["total_s"] = round(time.perf_counter() - start, 2)
+    if args.json:
+        print_json(summary)
     else:
-        if args.scenes < 1:
-            raise CommandError(f"--scenes must be >= 1, got {args.scenes}")
-        if args.gcp_every < 1:
-            raise CommandError(f"--gcp-every must be >= 1, got {args.gcp_every}")
-        check_writable(strip_output_files(out, args.scenes), args.overwrite)
-        scene = carto2s_strip(
-            args.scenes, args.seed, gcp_every=args.gcp_every, image_noise_px=args.noise_px
-        )
-    paths = scene.save(out, overwrite=args.overwrite)
-    acc = scene.accuracy()
-    print(f"wrote {len(paths)} files to {out}")
-    if args.kind == "cartosat1":
-        img = ", ".join(f"{n} {v['rms']:.1f} px" for n, v in acc["image_px"].items())
-        inter = acc["intersection_m"]
-        print(f"vendor RPC direct georeferencing: {img}; forward intersection "
-              f"{inter['rms_plan']:.1f} m planimetry, {inter['rms_h']:.1f} m height")  # fmt: skip
-    else:
-        print(f"vendor RPC direct georeferencing: {acc['rms_min']:.1f} .. {acc['rms_max']:.1f} px "
-              f"RMS per sub-scene")  # fmt: skip
+        if args.kind == "stereo-scene":
+            print(f"wrote {', '.join(summary['files'])} to {out} in {summary['total_s']:.1f} s")
+        else:
+            print(f"wrote {len(summary['files'])} files to {out}")
+        print("\n".join(lines))
     return 0
 
 
-def _stereo_scene(args: argparse.Namespace, out) -> int:
-    import time
+def _simulate(args: argparse.Namespace, out, note) -> tuple[dict, list[str]]:
+    """Build the settings, make the one library call: ``(the JSON summary, the human lines)``."""
+    from .. import simulate as sim
 
-    from ..simulate import (
-        check_writable,
-        stereo_scene_files,
-        stereo_scene_truth,
-        write_stereo_scene,
-    )
-    from ._common import note, print_json
-
-    check_writable(stereo_scene_files(out), args.overwrite)  # before any work
-    start = time.perf_counter()
+    head = {"kind": args.kind, "out": str(out), "seed": args.seed}
+    if args.kind == "cartosat1":
+        settings = sim.Cartosat1Settings(site=args.site, n_gcps=args.gcps,
+                                         image_noise_px=args.noise_px)  # fmt: skip
+        note(f"simulating a Cartosat-1 pair over {args.site} (seed {args.seed})", args.quiet)
+        scene = sim.write_cartosat1_stereo(out, args.seed, settings, overwrite=args.overwrite)
+        acc, files = scene.accuracy(), scene.files(out)
+        img = ", ".join(f"{n} {v['rms']:.1f} px" for n, v in acc["image_px"].items())
+        inter = acc["intersection_m"]
+        summary = {**head, "files": [p.name for p in files], "site": args.site,
+                   "points": len(scene.ground), "gcps": args.gcps,
+                   "vendor_accuracy": acc}  # fmt: skip
+        return summary, [f"vendor RPC direct georeferencing: {img}; forward intersection "
+                         f"{inter['rms_plan']:.1f} m planimetry, "
+                         f"{inter['rms_h']:.1f} m height"]  # fmt: skip
+    if args.kind == "carto2s-strip":
+        settings = sim.Carto2SStripSettings(gcp_every=args.gcp_every,
+                                            image_noise_px=args.noise_px)  # fmt: skip
+        note(f"simulating a Carto-2S strip of {args.scenes} sub-scenes (seed {args.seed})",
+             args.quiet)  # fmt: skip
+        strip = sim.write_carto2s_strip(out, args.scenes, args.seed, settings,
+                                        overwrite=args.overwrite)  # fmt: skip
+        acc = strip.accuracy()
+        summary = {**head, "files": [p.name for p in strip.files(out)], "scenes": args.scenes,
+                   "points": len(strip.ground), "observations": len(strip.observations),
+                   "vendor_rms_px": {"min": acc["rms_min"], "max": acc["rms_max"]}}  # fmt: skip
+        return summary, [f"vendor RPC direct georeferencing: {acc['rms_min']:.1f} .. "
+                         f"{acc['rms_max']:.1f} px RMS per sub-scene"]  # fmt: skip
+    settings = sim.StereoSceneSettings(jitter_px=args.jitter_px, exact_rpc=args.exact_rpc,
+                                       jitter_period_lines=args.jitter_period_lines,
+                                       relief_m=args.relief_m)  # fmt: skip
     note(f"simulating a {args.size} x {args.size} px stereo scene (seed {args.seed})", args.quiet)
-    scene = stereo_scene_truth(
-        args.size, args.seed, jitter_px=args.jitter_px,
-        jitter_period_lines=args.jitter_period_lines, exact_rpc=args.exact_rpc,
-        relief_m=args.relief_m,
-    )  # fmt: skip
-    models_s = time.perf_counter() - start
-    paths = write_stereo_scene(scene, out, overwrite=args.overwrite, progress=not args.quiet)
-    total_s = time.perf_counter() - start
-    info = scene.info
+    scene = sim.stereo_scene(out, args.size, args.seed, settings, overwrite=args.overwrite,
+                             progress=not args.quiet)  # fmt: skip
+    info, dsm = scene.info, scene.dsm
     fit = {n: info["rpc_fit"][n]["check_max_px"] for n in info["rpc_fit"]}
     vs = {n: info["rpc_vs_truth"][n] for n in info["rpc_vs_truth"]}
     summary = {
-        "out": str(out),
-        "files": [p.name for p in paths],
+        **head,
+        "files": [p.name for p in sim.stereo_scene_files(out)],
         "size": args.size,
         "gsd_m": info["gsd_m"],
         "base_to_height": info["base_to_height"],
@@ -184,22 +174,16 @@ def _stereo_scene(args: argparse.Namespace, out) -> int:
         "rpc_fit_check_max_px": fit,
         "rpc_vs_truth_rms_px": {n: v["nojitter_px"]["rms"] for n, v in vs.items()},
         "rpc_vs_jittered_truth_rms_px": {n: v["jittered_px"]["rms"] for n, v in vs.items()},
-        "dsm_shape": [scene.dsm.rows, scene.dsm.cols],
-        "dsm_res_m": scene.dsm.res_m,
-        "models_s": round(models_s, 2),
-        "total_s": round(total_s, 2),
+        "dsm_shape": [dsm.rows, dsm.cols],
+        "dsm_res_m": dsm.res_m,
+        "models_s": round(info["seconds"]["models"], 2),
     }
-    if args.json:
-        print_json(summary)
-        return 0
-    print(f"wrote {', '.join(summary['files'])} to {out} in {total_s:.1f} s")
-    print(f"GSD {info['gsd_m']:.3f} m, base/height {info['base_to_height']:.2f}, relief "
-          f"{info['params']['relief_m']:.0f} m, truth DSM {scene.dsm.rows} x {scene.dsm.cols} "
-          f"cells of {scene.dsm.res_m} m (EPSG:{scene.dsm.epsg})")  # fmt: skip
     what = "the exact models" if args.exact_rpc else "the vendor's models (pointing error)"
-    print(f"RPCs fitted without the jitter to {what}:")
-    for n in fit:
-        print(f"  {n}: fit error {fit[n]:.1e} px max (check grid); RPC minus the jitter-free "
+    lines = [f"GSD {info['gsd_m']:.3f} m, base/height {info['base_to_height']:.2f}, relief "
+             f"{info['params']['relief_m']:.0f} m, truth DSM {dsm.rows} x {dsm.cols} cells of "
+             f"{dsm.res_m} m (EPSG:{dsm.epsg})",
+             f"RPCs fitted without the jitter to {what}:"]  # fmt: skip
+    lines += [f"  {n}: fit error {fit[n]:.1e} px max (check grid); RPC minus the jitter-free "
               f"true model {vs[n]['nojitter_px']['rms']:.2g} px RMS, minus the jittered one "
-              f"{vs[n]['jittered_px']['rms']:.2g} px RMS (truth points)")  # fmt: skip
-    return 0
+              f"{vs[n]['jittered_px']['rms']:.2g} px RMS (truth points)" for n in fit]  # fmt: skip
+    return summary, lines

@@ -38,7 +38,12 @@ import numpy as np
 from ..io import GroundPoints, Observations, write_ground, write_observations
 from ..models import RPC, EphemerisModel, RPCFitReport, fit_rpcs, gmst_rad
 from . import _scene as sc
-from ._orbit import CircularOrbit, ephemeris_from_orbit, sun_synchronous_inclination_deg
+from ._orbit import (
+    CircularOrbit,
+    EphemerisSettings,
+    ephemeris_from_orbit,
+    sun_synchronous_inclination_deg,
+)
 from ._terrain import Terrain
 
 STRIP_ERRORS = sc.VendorErrors(
@@ -211,106 +216,151 @@ class StripScene:
         return paths
 
 
-def carto2s_strip(
-    n_scenes: int = 80,
-    seed: int = 0,
-    *,
-    centre_lon_deg: float = 74.5,
-    centre_lat_deg: float = 27.0,
-    h_range_m: tuple[float, float] = (100.0, 1500.0),
-    altitude_m: float = 505e3,
-    focal_length_m: float = 5.6,
-    pixel_size_m: float = 7e-6,
-    line_time_s: float | None = None,
-    n_cols: int = 24000,
-    scene_rows: int = 48000,
-    overlap_rows: int = 1500,
-    gcp_every: int = 4,
-    gcps_per_scene: int = 4,
-    checks_per_scene: int = 2,
-    image_noise_px: float = 0.3,
-    image_sigma_px: float = 0.5,
-    ground_noise_m: float = 0.1,
-    ground_sigma_m: float = 0.3,
-    vendor_errors: sc.VendorErrors = STRIP_ERRORS,
-    epoch_utc: str = "2017-10-12T05:30:00Z",
-    position_order: int = 5,
-    attitude_order: int = 9,
-    attitude_wobble_rad: float = 5e-6,
-    rpc_grid: tuple[int, int, int] = (21, 21, 7),
-    rpc_scenes: tuple[int, ...] | None = None,
-) -> StripScene:
-    """Simulate a Carto-2S strip of ``n_scenes`` sub-scenes (see the module docstring).
+@dataclasses.dataclass(frozen=True)
+class Carto2SStripSettings:
+    """The options of :func:`carto2s_strip` (a Carto-2S strip; module docstring).
 
-    ``line_time_s`` defaults to square ground pixels at nadir; with the defaults a sub-scene is
-    ~30 km x 15 km (48 000 x 24 000 px of 0.63 m). Sub-scenes ``0, gcp_every, 2 gcp_every, ...``
-    and the last carry ``gcps_per_scene`` GCPs; every scene carries ``checks_per_scene`` check
-    points. ``rpc_scenes`` fits vendor RPCs for those sub-scenes only (a quick look at a long
-    strip; such a strip cannot be saved). Returns a :class:`StripScene`.
+    The site (``centre_lon_deg``, ``centre_lat_deg``, terrain heights ``h_range_m``); the
+    mission (``altitude_m``, ``focal_length_m``, ``pixel_size_m``, ``line_time_s``: default
+    square ground pixels at nadir), the sub-scenes (``n_cols`` x ``scene_rows`` px, adjacent ones
+    overlapping by ``overlap_rows`` lines: with the defaults ~30 km x 15 km of 0.63 m pixels);
+    the points: sub-scenes ``0, gcp_every, 2 gcp_every, ...`` and the last carry
+    ``gcps_per_scene`` GCPs, every one ``checks_per_scene`` check points; measurement noise and
+    a-priori sigmas (``image_*_px``, ``ground_*_m``); the vendor's errors
+    (:class:`VendorErrors`), the pass's ``epoch_utc``, the truth's polynomial orders and
+    attitude wobble, the vendor's RPC fit grid (columns, rows, heights). ``rpc_scenes`` fits
+    vendor RPCs for those sub-scenes only (a quick look at a long strip; such a strip cannot be
+    saved). Checked when made: a bad value raises :class:`SimulationError` naming the field.
     """
+
+    centre_lon_deg: float = 74.5
+    centre_lat_deg: float = 27.0
+    h_range_m: tuple[float, float] = (100.0, 1500.0)
+    altitude_m: float = 505e3
+    focal_length_m: float = 5.6
+    pixel_size_m: float = 7e-6
+    line_time_s: float | None = None
+    n_cols: int = 24000
+    scene_rows: int = 48000
+    overlap_rows: int = 1500
+    gcp_every: int = 4
+    gcps_per_scene: int = 4
+    checks_per_scene: int = 2
+    image_noise_px: float = 0.3
+    image_sigma_px: float = 0.5
+    ground_noise_m: float = 0.1
+    ground_sigma_m: float = 0.3
+    vendor_errors: sc.VendorErrors = STRIP_ERRORS
+    epoch_utc: str = "2017-10-12T05:30:00Z"
+    position_order: int = 5
+    attitude_order: int = 9
+    attitude_wobble_rad: float = 5e-6
+    rpc_grid: tuple[int, int, int] = (21, 21, 7)
+    rpc_scenes: tuple[int, ...] | None = None
+
+    def __post_init__(self):
+        sc.check_finite(self, "centre_lon_deg", "centre_lat_deg")
+        sc.check_range(self, "h_range_m")
+        sc.check_positive(self, "altitude_m", "focal_length_m", "pixel_size_m",
+                          "image_sigma_px", "ground_sigma_m")  # fmt: skip
+        if self.line_time_s is not None:
+            sc.check_positive(self, "line_time_s")
+        for name, low in (("n_cols", 2), ("scene_rows", 2), ("overlap_rows", 0),
+                          ("gcp_every", 1), ("gcps_per_scene", 0), ("checks_per_scene", 0),
+                          ("position_order", 0), ("attitude_order", 0)):  # fmt: skip
+            sc.check_int(self, name, low)
+        sc.require(self.overlap_rows < self.scene_rows, "overlap_rows",
+                 f"be in [0, scene_rows = {self.scene_rows})", self.overlap_rows)  # fmt: skip
+        sc.check_non_negative(self, "image_noise_px", "ground_noise_m", "attitude_wobble_rad")
+        sc.require(isinstance(self.vendor_errors, sc.VendorErrors), "vendor_errors",
+                 "be a VendorErrors", self.vendor_errors)  # fmt: skip
+        sc.check_epoch(self, "epoch_utc")
+        sc.check_rpc_grid(self)
+        if self.rpc_scenes is not None:
+            ok = all(sc.is_int(k) and k >= 0 for k in self.rpc_scenes)
+            sc.require(ok, "rpc_scenes", "be sub-scene indices (integers >= 0)", self.rpc_scenes)
+
+
+def carto2s_strip(
+    n_scenes: int = 80, seed: int = 0, settings: Carto2SStripSettings | None = None
+) -> StripScene:
+    """Simulate a Carto-2S strip of ``n_scenes`` sub-scenes (see the module docstring) with
+    ``settings`` (:class:`Carto2SStripSettings`), deterministic in ``seed``. Returns a
+    :class:`StripScene`."""
+    sc.check_int_value(n_scenes, "n_scenes", 1)
+    sc.check_int_value(seed, "seed", 0)
     n_scenes = int(n_scenes)
-    if n_scenes < 1:
-        raise ValueError(f"n_scenes must be at least 1, got {n_scenes}")
-    if not 0 <= overlap_rows < scene_rows:
-        raise ValueError(f"overlap_rows must be in [0, scene_rows), got {overlap_rows}")
-    if gcp_every < 1:
-        raise ValueError(f"gcp_every must be at least 1, got {gcp_every}")
-    params = {k: v for k, v in locals().items() if k != "vendor_errors"}
-    params["vendor_errors"] = vendor_errors.to_dict()
+    s = Carto2SStripSettings() if settings is None else settings
+    params = {"n_scenes": n_scenes, "seed": seed}
+    params |= {f.name: getattr(s, f.name) for f in dataclasses.fields(s)}
+    params.pop("vendor_errors")  # (last in truth.json)
+    params["vendor_errors"] = s.vendor_errors.to_dict()
+    fitted = range(n_scenes) if s.rpc_scenes is None else sorted({int(k) for k in s.rpc_scenes})
+    if any(not 0 <= k < n_scenes for k in fitted):
+        raise sc.SimulationError(
+            f"{{}} must lie in [0, n_scenes = {n_scenes}), got {s.rpc_scenes}", "rpc_scenes"
+        )
     rng = np.random.default_rng(seed)
 
-    theta0 = gmst_rad(epoch_utc)
+    theta0 = gmst_rad(s.epoch_utc)
     orbit = CircularOrbit.over(
-        centre_lon_deg,
-        centre_lat_deg,
-        altitude_m,
-        sun_synchronous_inclination_deg(altitude_m),
+        s.centre_lon_deg,
+        s.centre_lat_deg,
+        s.altitude_m,
+        sun_synchronous_inclination_deg(s.altitude_m),
         theta0,
     )
+    line_time_s = s.line_time_s
     if line_time_s is None:
-        gsd = altitude_m * pixel_size_m / focal_length_m
-        line_time_s = gsd / (orbit.mean_motion_rad_s * (orbit.radius_m - altitude_m))
+        gsd = s.altitude_m * s.pixel_size_m / s.focal_length_m
+        line_time_s = gsd / (orbit.mean_motion_rad_s * (orbit.radius_m - s.altitude_m))
     params["line_time_s"] = line_time_s
-    step = scene_rows - overlap_rows
+    step = s.scene_rows - s.overlap_rows
     first_rows = np.arange(n_scenes) * step
-    strip_rows = int(first_rows[-1] + scene_rows)
+    strip_rows = int(first_rows[-1] + s.scene_rows)
     t_start = -0.5 * (strip_rows - 1) * line_time_s
     t_end = -t_start
-    h_mid = 0.5 * (h_range_m[0] + h_range_m[1])
-    n_att = min(attitude_order, 3) + 1
-    wobble = rng.normal(0.0, attitude_wobble_rad, (3, n_att)) / np.arange(1, n_att + 1)
-    strip = ephemeris_from_orbit(
-        orbit, (t_start - 2.0, t_end + 2.0), sidereal_angle_rad=theta0,
-        first_line_time_s=t_start, line_time_s=line_time_s, n_rows=strip_rows, n_cols=n_cols,
-        focal_length_m=focal_length_m, pixel_size_m=pixel_size_m, position_order=position_order,
-        attitude_order=attitude_order, attitude_offsets_rad=wobble, h_ref_m=h_mid,
+    h_mid = 0.5 * (s.h_range_m[0] + s.h_range_m[1])
+    n_att = min(s.attitude_order, 3) + 1
+    wobble = rng.normal(0.0, s.attitude_wobble_rad, (3, n_att)) / np.arange(1, n_att + 1)
+    camera = EphemerisSettings(
+        sidereal_angle_rad=theta0, line_time_s=line_time_s, n_rows=strip_rows, n_cols=s.n_cols,
+        focal_length_m=s.focal_length_m, pixel_size_m=s.pixel_size_m,
+        position_order=s.position_order, attitude_order=s.attitude_order, h_ref_m=h_mid,
     )  # fmt: skip
+    strip = ephemeris_from_orbit(
+        orbit,
+        (t_start - 2.0, t_end + 2.0),
+        camera,
+        first_line_time_s=t_start,
+        attitude_offsets_rad=wobble,
+    )
     strip = sc.quantize_model(strip)
     names = scene_names(n_scenes)
 
     # --- terrain over the strip and the surveyed points, scene by scene
     corners = np.array(
-        [[0, 0], [n_cols - 1, 0], [0, strip_rows - 1], [n_cols - 1, strip_rows - 1]], float
+        [[0, 0], [s.n_cols - 1, 0], [0, strip_rows - 1], [s.n_cols - 1, strip_rows - 1]], float
     )
     foot = sc.localize(strip, corners, h_mid)
-    terrain = Terrain.random(rng, foot[:, :2], h_range_m, fit_relief=False)
-    has_gcps = [(k % gcp_every == 0) or (k == n_scenes - 1) for k in range(n_scenes)]
+    terrain = Terrain.random(rng, foot[:, :2], s.h_range_m, fit_relief=False)
+    has_gcps = [(k % s.gcp_every == 0) or (k == n_scenes - 1) for k in range(n_scenes)]
     ids, roles, cand = [], [], []
     margin = 100.0
     for k, name in enumerate(names):
-        n_gcp = gcps_per_scene if has_gcps[k] else 0
-        n = n_gcp + checks_per_scene
+        n_gcp = s.gcps_per_scene if has_gcps[k] else 0
+        n = n_gcp + s.checks_per_scene
         u = rng.uniform(0.0, 1.0, (n, 2))
-        col = margin + u[:, 0] * (n_cols - 1 - 2 * margin)
-        row = first_rows[k] + margin + u[:, 1] * (scene_rows - 1 - 2 * margin)
+        col = margin + u[:, 0] * (s.n_cols - 1 - 2 * margin)
+        row = first_rows[k] + margin + u[:, 1] * (s.scene_rows - 1 - 2 * margin)
         cand.append(np.stack([col, row], -1))
         ids += [f"{name}_{'G' if i < n_gcp else 'C'}{i + 1:02d}" for i in range(n)]
         roles += ["gcp" if i < n_gcp else "check" for i in range(n)]
     ground_true = sc.points_on_terrain(strip, np.concatenate(cand), terrain)
     n_pts = len(ids)
-    surveyed = sc.ground_noise(rng, ground_true, ground_noise_m)
+    surveyed = sc.ground_noise(rng, ground_true, s.ground_noise_m)
     ground = GroundPoints(
-        tuple(ids), surveyed, tuple(roles), np.full((n_pts, 3), float(ground_sigma_m))
+        tuple(ids), surveyed, tuple(roles), np.full((n_pts, 3), float(s.ground_sigma_m))
     )
 
     # --- measurements: every sub-scene whose lines contain the point, projected through that
@@ -321,42 +371,57 @@ def carto2s_strip(
     home = np.concatenate(cand)[:, 1] // step  # the sub-scene each point was made in
     home = np.minimum(home.astype(int), n_scenes - 1)
     cut_first_s = sc.round_sig(strip.row_time(jnp.asarray(first_rows[home], float)))  # truth_model
-    xy_home = _project_from_lines(sc.quantize_model(strip), cut_first_s, scene_rows, ground_true)
+    xy_home = _project_from_lines(sc.quantize_model(strip), cut_first_s, s.scene_rows, ground_true)
     strip_xy = xy_home + np.stack([np.zeros(n_pts), first_rows[home]], -1)
     obs_pid, obs_img, obs_xy = [], [], []
     for i in range(n_pts):
         col, row = strip_xy[i]
-        for k in np.flatnonzero((first_rows <= row) & (row <= first_rows + scene_rows - 1)):
-            if 0.0 <= col <= n_cols - 1:
+        for k in np.flatnonzero((first_rows <= row) & (row <= first_rows + s.scene_rows - 1)):
+            if 0.0 <= col <= s.n_cols - 1:
                 obs_pid.append(ids[i])
                 obs_img.append(names[k])
                 obs_xy.append((col, row - first_rows[k]))
     true_xy = sc.quantize_image(np.asarray(obs_xy, float).reshape(-1, 2))
-    noisy_xy = sc.quantize_image(true_xy + rng.normal(0.0, image_noise_px, true_xy.shape))
+    noisy_xy = sc.quantize_image(true_xy + rng.normal(0.0, s.image_noise_px, true_xy.shape))
     m = len(obs_pid)
     image_true = Observations(tuple(obs_pid), tuple(obs_img), true_xy, np.zeros(m))
     observations = Observations(
-        tuple(obs_pid), tuple(obs_img), noisy_xy, np.full(m, float(image_sigma_px))
+        tuple(obs_pid), tuple(obs_img), noisy_xy, np.full(m, float(s.image_sigma_px))
     )
 
     # --- vendor: common pass errors + per-scene pointing errors, one RPC per sub-scene
-    d_att, d_pos = sc.draw_common_errors(rng, vendor_errors, strip)
+    d_att, d_pos = sc.draw_common_errors(rng, s.vendor_errors, strip)
     vendor_strip = sc.quantize_model(sc.perturb(strip, d_att, d_pos, np.zeros(3)))
-    scene_err = sc.round_sig(sc.draw_mount_errors(rng, vendor_errors, strip, n_scenes))
+    scene_err = sc.round_sig(sc.draw_mount_errors(rng, s.vendor_errors, strip, n_scenes))
     partial = StripScene(
-        names, first_rows, int(scene_rows), int(n_cols), strip, vendor_strip, scene_err, {}, {},
-        ground, ground_true, observations, image_true, terrain, sc.rounded(params, 12),
+        names, first_rows, int(s.scene_rows), int(s.n_cols), strip, vendor_strip, scene_err, {},
+        {}, ground, ground_true, observations, image_true, terrain, sc.rounded(params, 12),
     )  # fmt: skip
-    pad = 0.1 * (h_range_m[1] - h_range_m[0]) + 50.0
-    fitted = range(n_scenes) if rpc_scenes is None else sorted({int(k) for k in rpc_scenes})
-    if any(not 0 <= k < n_scenes for k in fitted):
-        raise ValueError(f"rpc_scenes must lie in [0, {n_scenes}), got {rpc_scenes}")
+    pad = 0.1 * (s.h_range_m[1] - s.h_range_m[0]) + 50.0
     names_fitted = [names[k] for k in fitted]
     fits = fit_rpcs(
         [partial.vendor_model(k) for k in fitted],
-        h_range=(h_range_m[0] - pad, h_range_m[1] + pad),
-        grid=rpc_grid,
+        h_range=(s.h_range_m[0] - pad, s.h_range_m[1] + pad),
+        grid=s.rpc_grid,
     )
     vendor = {n: sc.quantize_model(rpc) for n, (rpc, _) in zip(names_fitted, fits, strict=True)}
     reports = {n: rep for n, (_, rep) in zip(names_fitted, fits, strict=True)}
     return dataclasses.replace(partial, vendor=vendor, fit_reports=reports)
+
+
+def write_carto2s_strip(
+    directory: str | os.PathLike,
+    n_scenes: int = 80,
+    seed: int = 0,
+    settings: Carto2SStripSettings | None = None,
+    *,
+    overwrite: bool = False,
+) -> StripScene:
+    """Simulate a strip (:func:`carto2s_strip`) and write it into ``directory``
+    (:meth:`StripScene.save`: files ready for ``jaxgeo adjust`` and ``jaxgeo strip``); existing
+    files are refused before any work unless ``overwrite``. Returns the strip."""
+    sc.check_int_value(n_scenes, "n_scenes", 1)
+    sc.check_writable(strip_output_files(directory, n_scenes), overwrite)
+    strip = carto2s_strip(n_scenes, seed, settings)
+    strip.save(directory, overwrite=overwrite)
+    return strip

@@ -12,7 +12,7 @@ import importlib.resources
 import os
 import pathlib
 
-from ._cartosat1 import StereoScene, cartosat1_stereo
+from ._cartosat1 import Cartosat1Settings, StereoScene, cartosat1_stereo
 
 DEMO_SEED = 2006
 DEMO_NAME = "cartosat1_demo"
@@ -25,7 +25,7 @@ def demo_dir() -> pathlib.Path:
 
 def demo_scene() -> StereoScene:
     """The demo scene, simulated afresh (identical to the packaged files)."""
-    return cartosat1_stereo(DEMO_SEED, site="hobart")
+    return cartosat1_stereo(DEMO_SEED, Cartosat1Settings(site="hobart"))
 
 
 def write_demo(directory: str | os.PathLike, overwrite: bool = False) -> list[pathlib.Path]:

@@ -3,7 +3,8 @@
 Host-side (numpy) construction of :class:`~jaxgeo.models.EphemerisModel` s from physical mission
 parameters: a circular (sun-synchronous) orbit placed over a site (:class:`CircularOrbit`), its
 yaw-steering attitude (:func:`ground_track_attitude`) and the polynomial fit of both
-(:func:`ephemeris_from_orbit`). Positions m, velocities m/s, times s, angles rad unless ``_deg``.
+(:func:`ephemeris_from_orbit`, with :class:`EphemerisSettings`). Positions m, velocities m/s,
+times s, angles rad unless ``_deg``.
 """
 
 from __future__ import annotations
@@ -18,6 +19,7 @@ from jaxtyping import ArrayLike
 from .. import geodesy
 from ..models import EphemerisModel
 from ..rotations import angles_from_matrix, orbit_frame
+from ._scene import check_finite, check_int, check_positive
 
 J2 = 1.08262668e-3
 """Earth's second zonal harmonic (sun-synchronous inclination)."""
@@ -121,55 +123,80 @@ def fit_polynomial(tau: np.ndarray, values: np.ndarray, order: int) -> np.ndarra
     return coeffs.T
 
 
+@dataclasses.dataclass(frozen=True)
+class EphemerisSettings:
+    """What an :class:`~jaxgeo.models.EphemerisModel` made from an orbit
+    (:func:`ephemeris_from_orbit`) needs besides the orbit and the image's own timing: the
+    sidereal angle at ``t = 0`` (rad), the camera (``focal_length_m``, ``pixel_size_m``), the
+    image (``line_time_s``, ``n_rows`` x ``n_cols`` px), the polynomial orders of position,
+    velocity (default: the position's) and attitude fitted to ``n_samples`` states over the time
+    span, and the model's reference height ``h_ref_m``."""
+
+    sidereal_angle_rad: float
+    line_time_s: float
+    n_rows: int
+    n_cols: int
+    focal_length_m: float
+    pixel_size_m: float
+    position_order: int = 3
+    velocity_order: int | None = None
+    attitude_order: int = 5
+    h_ref_m: float = 0.0
+    n_samples: int = 201
+
+    def __post_init__(self):
+        check_finite(self, "sidereal_angle_rad", "h_ref_m")
+        check_positive(self, "line_time_s", "focal_length_m", "pixel_size_m")
+        for name, low in (("n_rows", 1), ("n_cols", 1), ("position_order", 0),
+                          ("attitude_order", 0)):  # fmt: skip
+            check_int(self, name, low)
+        if self.velocity_order is not None:
+            check_int(self, "velocity_order", 0)
+        orders = (self.position_order, self.velocity_order or 0, self.attitude_order)
+        check_int(self, "n_samples", max(orders) + 1)
+
+
 def ephemeris_from_orbit(
     orbit: CircularOrbit,
     t_span_s: tuple[float, float],
+    settings: EphemerisSettings,
     *,
-    sidereal_angle_rad: float,
     first_line_time_s: float,
-    line_time_s: float,
-    n_rows: int,
-    n_cols: int,
-    focal_length_m: float,
-    pixel_size_m: float,
     view_angles_deg: tuple[float, float, float] = (0.0, 0.0, 0.0),
-    position_order: int = 3,
-    velocity_order: int | None = None,
-    attitude_order: int = 5,
     attitude_offsets_rad: ArrayLike | None = None,
-    h_ref_m: float = 0.0,
-    n_samples: int = 201,
 ) -> EphemerisModel:
-    """A model from physical mission parameters: the polynomials are fitted to the circular
-    orbit and its yaw-steering attitude over ``t_span_s``; ``attitude_offsets_rad`` ``(3, k)``
-    adds polynomial pointing deviations (of ``tau``) to the steering law."""
+    """A model from physical mission parameters (``settings``, and the image's
+    ``first_line_time_s`` and camera ``view_angles_deg``): the polynomials are fitted to the
+    circular orbit and its yaw-steering attitude over ``t_span_s``; ``attitude_offsets_rad``
+    ``(3, k)`` adds polynomial pointing deviations (of ``tau``) to the steering law."""
+    s = settings
     t0, t1 = (float(v) for v in t_span_s)
     if not t1 > t0:
         raise ValueError(f"empty time span {t_span_s}")
     t_ref, t_scale = 0.5 * (t0 + t1), 0.5 * (t1 - t0)
-    t = np.linspace(t0, t1, n_samples)
+    t = np.linspace(t0, t1, s.n_samples)
     tau = (t - t_ref) / t_scale
     pos, vel = orbit.state(t)
-    att = fit_polynomial(tau, ground_track_attitude(pos, vel), attitude_order)
+    att = fit_polynomial(tau, ground_track_attitude(pos, vel), s.attitude_order)
     if attitude_offsets_rad is not None:
         off = np.asarray(attitude_offsets_rad, float)
         att[:, : off.shape[1]] += off[:, : att.shape[1]]
     f = lambda v: jnp.asarray(v, dtype=float)  # noqa: E731
     return EphemerisModel(
-        position_coeffs=f(fit_polynomial(tau, pos, position_order)),
-        velocity_coeffs=f(fit_polynomial(tau, vel, velocity_order or position_order)),
+        position_coeffs=f(fit_polynomial(tau, pos, s.position_order)),
+        velocity_coeffs=f(fit_polynomial(tau, vel, s.velocity_order or s.position_order)),
         attitude_coeffs=f(att),
         view_angles_rad=f(np.radians(view_angles_deg)),
         t_ref_s=f(t_ref),
         t_scale_s=f(t_scale),
         first_line_time_s=f(first_line_time_s),
-        line_time_s=f(line_time_s),
-        sidereal_angle_rad=f(sidereal_angle_rad),
-        focal_length_m=f(focal_length_m),
-        pixel_size_m=f(pixel_size_m),
-        principal_col_px=f(0.5 * (n_cols - 1)),
+        line_time_s=f(s.line_time_s),
+        sidereal_angle_rad=f(s.sidereal_angle_rad),
+        focal_length_m=f(s.focal_length_m),
+        pixel_size_m=f(s.pixel_size_m),
+        principal_col_px=f(0.5 * (s.n_cols - 1)),
         ccd_offset_m=f(0.0),
-        h_ref_m=f(h_ref_m),
-        n_rows=int(n_rows),
-        n_cols=int(n_cols),
+        h_ref_m=f(s.h_ref_m),
+        n_rows=int(s.n_rows),
+        n_cols=int(s.n_cols),
     )

@@ -33,6 +33,7 @@ from jaxtyping import Array, ArrayLike, Float
 
 from .. import geodesy
 from ..models import AbstractSensorModel
+from ._scene import check_int, check_non_negative
 from ._terrain import Terrain
 
 CHUNK = 1 << 14
@@ -274,6 +275,34 @@ def localize_on_terrain(
 # --- images ---------------------------------------------------------------------------------
 
 
+@dataclasses.dataclass(frozen=True)
+class RenderSettings:
+    """How an image is formed: ``supersample**2`` samples per pixel, a Gaussian PSF of
+    ``psf_sigma_px``, ``value = gain * albedo + offset`` plus Gaussian noise of ``noise``
+    (albedo units), quantised to ``0..levels`` (12 bits by default); line-of-sight nodes every
+    ``node_step_px`` px. Checked when made (a bad value names the field)."""
+
+    supersample: int = 2
+    psf_sigma_px: float = 0.4
+    noise: float = 0.004
+    offset: float = 0.02
+    levels: int = 4095
+    node_step_px: int = 8
+
+    def __post_init__(self):
+        check_int(self, "supersample", 1)
+        check_non_negative(self, "psf_sigma_px", "noise")
+        check_int(self, "levels", 1)
+        check_int(self, "node_step_px", 1)
+
+    def to_dict(self) -> dict:
+        return dataclasses.asdict(self)
+
+
+PAIR_RENDER = RenderSettings(offset=0.0, levels=1023)
+"""How :func:`cartosat1_rendered` forms its images (10 bits, no offset)."""
+
+
 @eqx.filter_jit
 def _sample(texture, lonlat):
     return texture.sample(lonlat)
@@ -285,31 +314,30 @@ def render(
     texture: GroundTexture,
     shape: tuple[int, int],
     rng: np.random.Generator,
-    supersample: int = 2,
-    psf_sigma_px: float = 0.4,
-    noise: float = 0.004,
+    settings: RenderSettings = PAIR_RENDER,
     gain: float = 1.0,
-    levels: int = 1023,
 ) -> np.ndarray:
-    """The image ``(rows, cols)`` of ``model`` (uint16, 0..``levels``): mean albedo of
+    """The image ``(rows, cols)`` of ``model`` (uint16, 0..``settings.levels``): mean albedo of
     ``supersample**2`` samples per pixel, Gaussian PSF ``psf_sigma_px``, times ``gain``, plus
-    Gaussian noise (albedo units), quantised. Pixel ``(x, y)`` covers ``[x - 0.5, x + 0.5)``."""
+    the offset and Gaussian noise (albedo units), quantised (:class:`RenderSettings`). Pixel
+    ``(x, y)`` covers ``[x - 0.5, x + 0.5)``."""
     import cv2
 
     rows, cols = shape
-    s = int(supersample)
+    psf_sigma_px, levels = settings.psf_sigma_px, settings.levels
+    s = int(settings.supersample)
     off = (np.arange(s) + 0.5) / s - 0.5
     xs = (np.arange(cols)[:, None] + off[None, :]).ravel()
     ys = (np.arange(rows)[:, None] + off[None, :]).ravel()
     xy = np.stack(np.meshgrid(xs, ys), -1).reshape(-1, 2)
-    ground = localize_on_terrain(model, terrain, xy)
+    ground = localize_on_terrain(model, terrain, xy, float(settings.node_step_px))
     if not np.all(np.isfinite(ground)):
         raise ValueError("render: some pixels do not meet the terrain")
     values = np.asarray(_sample(texture, jnp.asarray(ground[:, :2])))
     img = values.reshape(rows, s, cols, s).mean(axis=(1, 3)).astype(np.float32)
     if psf_sigma_px > 0:
         img = cv2.GaussianBlur(img, (0, 0), psf_sigma_px, borderType=cv2.BORDER_REFLECT)
-    img = gain * img + rng.normal(0.0, noise, img.shape)
+    img = gain * img + settings.offset + rng.normal(0.0, settings.noise, img.shape)
     return np.clip(np.rint(img * levels), 0, levels).astype(np.uint16)
 
 
@@ -370,15 +398,18 @@ def cartosat1_rendered(
 ) -> RenderedPair:
     """A Cartosat-1 fore/aft pair (:func:`~jaxgeo.simulate.cartosat1_stereo`, Cartosat-1 optics
     and orbit, ``size`` x ``size`` pixels, 36 points on a grid) rendered from a textured terrain
-    through the true models. Fore and aft differ by sensor noise and a 3 % gain."""
-    from ._cartosat1 import cartosat1_stereo
+    through the true models (``scene_options``: more fields of
+    :class:`~jaxgeo.simulate.Cartosat1Settings`). Fore and aft differ by sensor noise and a 3 %
+    gain."""
+    from ._cartosat1 import Cartosat1Settings, cartosat1_stereo
 
     options = dict(site="hobart", n_points=36, layout="grid", centre_columns=True)
     options |= scene_options
-    scene = cartosat1_stereo(
-        seed, n_rows=size, n_cols=size, h_range_m=h_range_m,
+    settings = Cartosat1Settings(
+        n_rows=size, n_cols=size, h_range_m=h_range_m,
         terrain_wavelengths_m=terrain_wavelengths_m, **options,
     )  # fmt: skip
+    scene = cartosat1_stereo(seed, settings)
     rng = np.random.default_rng([seed, 1])
     corners = np.array([[0, 0], [size - 1, 0], [0, size - 1], [size - 1, size - 1]], float)
     h_mid = 0.5 * (h_range_m[0] + h_range_m[1])
@@ -394,7 +425,7 @@ def cartosat1_rendered(
             texture,
             (size, size),
             rng,
-            supersample,
+            dataclasses.replace(PAIR_RENDER, supersample=supersample),
             gain=(1.0, 0.97)[i],
         )  # fmt: skip
         for i, name in enumerate(scene.names)

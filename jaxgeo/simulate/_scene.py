@@ -21,6 +21,7 @@ import numpy as np
 
 from .. import geodesy
 from ..bundle import enu_errors  # noqa: F401  (re-used by the scenes' reports)
+from ..errors import JaxgeoError
 from ..intersect import intersect
 from ..io import atomic_write_text
 from ..models import RPC, EphemerisModel, localize_points, project_points
@@ -31,6 +32,117 @@ SIG_DIGITS = 12
 LONLAT_DECIMALS = 10
 HEIGHT_DECIMALS = 6
 IMAGE_DECIMALS = 6
+
+
+class SimulationError(JaxgeoError, ValueError):
+    """A simulation option jaxgeo refuses. ``setting`` names the option at fault (the field of
+    the settings object, or the argument): ``str(err)`` says it so, and a front end says it in
+    its own words with :meth:`render` (the ``jaxgeo simulate`` command: its flag)."""
+
+    def __init__(self, template: str, setting: str | None = None):
+        self.template = template
+        self.setting = setting
+        super().__init__(self.render())
+
+    def render(self, names: dict[str, str] | None = None) -> str:
+        """The message, the setting named by ``names[setting]`` (default: its own name)."""
+        if self.setting is None:
+            return self.template
+        return self.template.format((names or {}).get(self.setting, self.setting))
+
+    def __reduce__(self):
+        return (type(self), (self.template, self.setting))
+
+
+def require(ok, setting: str, requirement: str, value) -> None:
+    """Raise a :class:`SimulationError` ``"<setting> must <requirement>, got <value>"`` unless
+    ``ok``."""
+    if not ok:
+        raise SimulationError(f"{{}} must {requirement}, got {value!r}", setting)
+
+
+def is_int(v) -> bool:
+    return isinstance(v, int | np.integer) and not isinstance(v, bool)
+
+
+def is_real(v) -> bool:
+    return isinstance(v, int | float | np.integer | np.floating) and not isinstance(v, bool)
+
+
+def check_finite(settings, *names: str) -> None:
+    """Each field ``names`` of ``settings`` a finite number."""
+    for n in names:
+        v = getattr(settings, n)
+        require(is_real(v) and math.isfinite(v), n, "be a finite number", v)
+
+
+def check_positive(settings, *names: str) -> None:
+    """Each field ``names`` of ``settings`` a finite number > 0."""
+    for n in names:
+        v = getattr(settings, n)
+        require(is_real(v) and math.isfinite(v) and v > 0, n, "be a finite number > 0", v)
+
+
+def check_non_negative(settings, *names: str) -> None:
+    """Each field ``names`` of ``settings`` a finite number >= 0."""
+    for n in names:
+        v = getattr(settings, n)
+        require(is_real(v) and math.isfinite(v) and v >= 0, n, "be a finite number >= 0", v)
+
+
+def check_int(settings, name: str, low: int) -> None:
+    """Field ``name`` of ``settings`` an integer >= ``low``."""
+    check_int_value(getattr(settings, name), name, low)
+
+
+def check_int_value(v, name: str, low: int) -> None:
+    """``v`` (the setting or argument ``name``) an integer >= ``low``."""
+    require(is_int(v), name, "be an integer", v)
+    require(v >= low, name, f"be >= {low}", v)
+
+
+def check_range(settings, name: str, positive: bool = False) -> None:
+    """Field ``name`` of ``settings`` a pair of finite numbers ``(low, high)``, ``low <= high``
+    (``0 < low`` if ``positive``)."""
+    v = getattr(settings, name)
+    ok = (
+        isinstance(v, tuple | list)
+        and len(v) == 2
+        and all(is_real(x) and math.isfinite(x) for x in v)
+        and v[0] <= v[1]
+        and (not positive or v[0] > 0)
+    )
+    what = "0 < " if positive else ""
+    require(ok, name, f"be a pair of finite numbers ({what}low <= high)", v)
+
+
+def check_numbers(settings, name: str, n: int) -> None:
+    """Field ``name`` of ``settings`` ``n`` finite numbers."""
+    v = getattr(settings, name)
+    ok = (
+        isinstance(v, tuple | list)
+        and len(v) == n
+        and all(is_real(x) and math.isfinite(x) for x in v)
+    )
+    require(ok, name, f"be {n} finite numbers", v)
+
+
+def check_epoch(settings, name: str) -> None:
+    """Field ``name`` of ``settings`` an ISO 8601 UTC instant (``2006-10-01T00:40:00Z``)."""
+    import datetime
+
+    v = getattr(settings, name)
+    try:
+        datetime.datetime.fromisoformat(v.replace("Z", "+00:00"))
+    except (AttributeError, TypeError, ValueError):
+        require(False, name, "be an ISO 8601 UTC time such as 2006-10-01T00:40:00Z", v)
+
+
+def check_rpc_grid(settings, name: str = "rpc_grid") -> None:
+    """Field ``name``: the RPC fit grid, three integers (columns, rows, heights) >= 2."""
+    v = getattr(settings, name)
+    ok = isinstance(v, tuple | list) and len(v) == 3 and all(is_int(x) and x >= 2 for x in v)
+    require(ok, name, "be three integers >= 2 (columns, rows, heights)", v)
 
 
 @dataclasses.dataclass(frozen=True)

@@ -53,11 +53,11 @@ import warnings
 
 import numpy as np
 
-from ..errors import JaxgeoError
 from ..geodesy import utm_epsg, utm_zone
 from ..io import atomic_output, to_rasterio_rpc
 from ..models import RPC, AbstractSensorModel, EphemerisModel
 from . import _scene as sc
+from ._scene import SimulationError
 from ._stereo_scene_models import (
     JITTER_ALONG_RATIO,
     NAMES,
@@ -71,6 +71,7 @@ from ._stereo_scene_models import (
     vendor_rpcs,
 )
 from ._stereo_scene_render import (
+    RenderedImage,
     RenderSettings,
     image_profile,
     render_window,
@@ -88,10 +89,6 @@ GDAL_CACHE_MB = 64
 """GDAL's block cache while writing (MB)."""
 N_POINTS_SIDE = 15
 """The truth points: a 15 x 15 grid over the left image, kept where the right image sees them."""
-
-
-class SimulationError(JaxgeoError, ValueError):
-    """A simulation option jaxgeo refuses (the message names it)."""
 
 
 def stereo_scene_files(directory: str | os.PathLike) -> list[pathlib.Path]:
@@ -176,24 +173,45 @@ class StereoSceneTruth:
         }
 
 
-def _check_options(size, seed, jitter_px, jitter_period_lines, relief_m):
-    if not (isinstance(size, int | np.integer) and size >= 64):
-        raise SimulationError(f"stereo scene: --size must be an integer >= 64, got {size}")
-    if not (isinstance(seed, int | np.integer) and seed >= 0):
-        raise SimulationError(f"stereo scene: --seed must be an integer >= 0, got {seed}")
-    if not (math.isfinite(jitter_px) and jitter_px >= 0):
-        raise SimulationError(f"stereo scene: --jitter-px must be >= 0, got {jitter_px}")
-    if not (math.isfinite(jitter_period_lines) and jitter_period_lines >= 10):
-        raise SimulationError(
-            f"stereo scene: --jitter-period-lines must be >= 10, got {jitter_period_lines}"
-        )
-    if 2 * math.pi * jitter_px / jitter_period_lines > 0.5:
-        raise SimulationError(
-            f"stereo scene: a jitter of {jitter_px} px over {jitter_period_lines} lines folds the "
-            "image over itself (2 pi A / P must stay below 0.5)"
-        )
-    if relief_m is not None and not (math.isfinite(relief_m) and 0 < relief_m <= 2000):
-        raise SimulationError(f"stereo scene: --relief-m must be in (0, 2000], got {relief_m}")
+@dataclasses.dataclass(frozen=True)
+class StereoSceneSettings:
+    """The options of a simulated stereo scene (:func:`stereo_scene`,
+    :func:`stereo_scene_truth`; module docstring). ``jitter_px``: across-track amplitude of the
+    true models' attitude jitter (px; along track a quarter of it), ``jitter_period_lines``
+    its period (image lines); ``exact_rpc``: deliver RPCs fitted to the exact jitter-free
+    models instead of a perturbed copy; ``relief_m``: terrain relief (default
+    :func:`default_relief_m`); ``render``: how the images are formed
+    (:class:`RenderSettings`). Checked when made: a bad value raises :class:`SimulationError`
+    naming the field."""
+
+    jitter_px: float = 0.0
+    jitter_period_lines: float = 1000.0
+    exact_rpc: bool = False
+    relief_m: float | None = None
+    render: RenderSettings = RenderSettings()
+
+    def __post_init__(self):
+        a, p = self.jitter_px, self.jitter_period_lines
+        sc.require(sc.is_real(a) and math.isfinite(a) and a >= 0, "jitter_px", "be >= 0", a)
+        ok = sc.is_real(p) and math.isfinite(p) and p >= 10
+        sc.require(ok, "jitter_period_lines", "be >= 10", p)
+        if 2 * math.pi * a / p > 0.5:
+            raise SimulationError(
+                f"a jitter of {a} px ({{}}) over {p} lines folds the image over itself "
+                "(2 pi A / P must stay below 0.5)", "jitter_px"
+            )  # fmt: skip
+        r = self.relief_m
+        ok = r is None or (sc.is_real(r) and math.isfinite(r) and 0 < r <= 2000)
+        sc.require(ok, "relief_m", "be in (0, 2000]", r)
+        sc.require(isinstance(self.exact_rpc, bool), "exact_rpc", "be True or False",
+                 self.exact_rpc)  # fmt: skip
+        sc.require(isinstance(self.render, RenderSettings), "render", "be a RenderSettings",
+                 self.render)  # fmt: skip
+
+
+def _check_size_seed(size, seed) -> None:
+    sc.require(sc.is_int(size) and size >= 64, "size", "be an integer >= 64", size)
+    sc.require(sc.is_int(seed) and seed >= 0, "seed", "be an integer >= 0", seed)
 
 
 def _footprint(model, terrain: Terrain, size: int, per_side: int = 64) -> np.ndarray:
@@ -210,22 +228,15 @@ def _footprint(model, terrain: Terrain, size: int, per_side: int = 64) -> np.nda
 
 
 def stereo_scene_truth(
-    size: int,
-    seed: int = 0,
-    *,
-    jitter_px: float = 0.0,
-    jitter_period_lines: float = 1000.0,
-    exact_rpc: bool = False,
-    relief_m: float | None = None,
-    render: RenderSettings | None = None,
+    size: int, seed: int = 0, settings: StereoSceneSettings | None = None
 ) -> StereoSceneTruth:
     """The models, terrain, texture, RPCs and truth points of a ``size`` x ``size`` px scene
-    (module docstring), without rendering (seconds). ``jitter_px``: across-track amplitude of
-    the true models' attitude jitter (px; along track a quarter of it), ``jitter_period_lines``
-    its period; ``exact_rpc``: deliver RPCs fitted to the exact jitter-free models instead of
-    a perturbed copy; ``relief_m``: terrain relief (default :func:`default_relief_m`)."""
-    _check_options(size, seed, float(jitter_px), float(jitter_period_lines), relief_m)
-    render = RenderSettings() if render is None else render
+    (module docstring) with ``settings`` (:class:`StereoSceneSettings`), deterministic in
+    ``seed``, without rendering (seconds)."""
+    _check_size_seed(size, seed)
+    s = StereoSceneSettings() if settings is None else settings
+    jitter_px, jitter_period_lines = float(s.jitter_px), float(s.jitter_period_lines)
+    exact_rpc, relief_m, render = s.exact_rpc, s.relief_m, s.render
     size, seed = int(size), int(seed)
     relief = default_relief_m(size) if relief_m is None else float(relief_m)
     params = dict(size=size, seed=seed, jitter_px=float(jitter_px),
@@ -379,10 +390,10 @@ def write_stereo_scene(
             profile = image_profile(size, size, to_rasterio_rpc(scene.rpcs[name]))
             with rasterio.open(tmp, "w", **profile) as dst:
                 model = scene.truth[name]
-                write(dst, img_blocks, lambda w, m=model, i=i, n=name: render_window(
-                    m, scene.terrain, scene.texture, w, seed=seed, image_index=i,
-                    gain=GAINS[n], settings=scene.render, name=f"{n}.tif",
-                    block_rows=block_rows, block_cols=block_cols), name)  # fmt: skip
+                image = RenderedImage(seed, i, GAINS[name], f"{name}.tif")
+                write(dst, img_blocks, lambda w, m=model, im=image: render_window(
+                    m, scene.terrain, scene.texture, w, im, settings=scene.render,
+                    largest_px=(block_rows, block_cols)), name)  # fmt: skip
         tmp = stack.enter_context(
             atomic_output(paths[2], overwrite, suffix=".tmp.tif", leftovers=[".aux.xml"])
         )
@@ -403,22 +414,25 @@ def stereo_scene(
     directory: str | os.PathLike,
     size: int,
     seed: int = 0,
+    settings: StereoSceneSettings | None = None,
     *,
-    jitter_px: float = 0.0,
-    jitter_period_lines: float = 1000.0,
-    exact_rpc: bool = False,
-    relief_m: float | None = None,
     overwrite: bool = False,
     progress: bool = False,
 ) -> StereoSceneTruth:
     """Simulate a stereo scene and write it into ``directory`` (module docstring;
-    :func:`stereo_scene_truth` for the options, :func:`write_stereo_scene` for the files).
-    Existing files are refused before any work unless ``overwrite``."""
+    :func:`stereo_scene_truth` for the scene, :func:`write_stereo_scene` for the files).
+    Existing files are refused before any work unless ``overwrite``. The time taken is in
+    the returned truth's ``info["seconds"]`` (``models``: the scene without its images;
+    ``total``; not written)."""
+    import time
+
+    start = time.perf_counter()
+    _check_size_seed(size, seed)
     sc.check_writable(stereo_scene_files(directory), overwrite)
-    scene = stereo_scene_truth(size, seed, jitter_px=jitter_px,
-                               jitter_period_lines=jitter_period_lines, exact_rpc=exact_rpc,
-                               relief_m=relief_m)  # fmt: skip
+    scene = stereo_scene_truth(size, seed, settings)
+    models_s = time.perf_counter() - start
     write_stereo_scene(scene, directory, overwrite=overwrite, progress=progress)
+    scene.info["seconds"] = {"models": models_s, "total": time.perf_counter() - start}
     return scene
 
 

@@ -28,6 +28,7 @@ bias, as delivered RPCs have), or to the exact ones (``exact=True``).
 
 from __future__ import annotations
 
+import dataclasses
 import math
 
 import equinox as eqx
@@ -39,7 +40,12 @@ from .. import geodesy
 from ..models import RPC, AbstractSensorModel, EphemerisModel, RPCFitReport, fit_rpcs, gmst_rad
 from ..models import nothing as _nothing
 from . import _scene as sc
-from ._orbit import CircularOrbit, ephemeris_from_orbit, sun_synchronous_inclination_deg
+from ._orbit import (
+    CircularOrbit,
+    EphemerisSettings,
+    ephemeris_from_orbit,
+    sun_synchronous_inclination_deg,
+)
 from ._render import _intersect_chunk, terrain_bracket
 from ._terrain import Terrain
 
@@ -124,24 +130,42 @@ def _centre_time(model: EphemerisModel, ground: np.ndarray) -> float:
     return float(model.first_line_time_s) + row * float(model.line_time_s)
 
 
+@dataclasses.dataclass(frozen=True)
+class PleiadesSettings:
+    """The platform of :func:`pleiades_pair` (module docstring): along-track view angle of the
+    two images (``+-view_angle_deg``), orbit ``altitude_m``, camera (``focal_length_m``,
+    ``pixel_size_m``), the pass's ``epoch_utc`` and the size of the attitude wobble."""
+
+    view_angle_deg: float = 11.3
+    altitude_m: float = 694e3
+    focal_length_m: float = 12.905
+    pixel_size_m: float = 12e-6
+    epoch_utc: str = "2021-06-15T10:30:00Z"
+    attitude_wobble_rad: float = 2e-6
+
+    def __post_init__(self):
+        sc.check_finite(self, "view_angle_deg")
+        sc.check_positive(self, "altitude_m", "focal_length_m", "pixel_size_m")
+        sc.check_non_negative(self, "attitude_wobble_rad")
+        sc.check_epoch(self, "epoch_utc")
+
+
 def pleiades_pair(
     rng: np.random.Generator,
     size: int,
     centre_lon_deg: float,
     centre_lat_deg: float,
     h_mid_m: float,
-    *,
-    view_angle_deg: float = 11.3,
-    altitude_m: float = 694e3,
-    focal_length_m: float = 12.905,
-    pixel_size_m: float = 12e-6,
-    epoch_utc: str = "2021-06-15T10:30:00Z",
-    attitude_wobble_rad: float = 2e-6,
+    settings: PleiadesSettings = PleiadesSettings(),
 ) -> dict[str, EphemerisModel]:
     """The jitter-free true models ``{"left", "right"}`` of a ``size`` x ``size`` px pair
-    centred on the site (module docstring); one draw from ``rng`` (the attitude wobble)."""
+    centred on the site (module docstring) seen by the platform ``settings``; one draw from
+    ``rng`` (the attitude wobble)."""
+    s = settings
+    view_angle_deg, altitude_m = s.view_angle_deg, s.altitude_m
+    focal_length_m, pixel_size_m = s.focal_length_m, s.pixel_size_m
     lon, lat = float(centre_lon_deg), float(centre_lat_deg)
-    theta0 = gmst_rad(epoch_utc)
+    theta0 = gmst_rad(s.epoch_utc)
     orbit = CircularOrbit.over(
         lon, lat, altitude_m, sun_synchronous_inclination_deg(altitude_m), theta0
     )
@@ -150,20 +174,22 @@ def pleiades_pair(
     angles = (view_angle_deg, -view_angle_deg)
     slant = altitude_m / math.cos(math.radians(view_angle_deg))
     line_time = slant * pixel_size_m / focal_length_m / v_ground  # square pixels, refined below
-    common = dict(
-        sidereal_angle_rad=theta0, n_rows=size, n_cols=size, focal_length_m=focal_length_m,
-        pixel_size_m=pixel_size_m, position_order=3, attitude_order=5, h_ref_m=h_mid_m,
+    camera = EphemerisSettings(
+        sidereal_angle_rad=theta0, line_time_s=line_time, n_rows=size, n_cols=size,
+        focal_length_m=focal_length_m, pixel_size_m=pixel_size_m, position_order=3,
+        attitude_order=5, h_ref_m=h_mid_m,
     )  # fmt: skip
     centre = np.array([(size - 1) / 2.0] * 2)
     for _ in range(2):  # line time for square ground pixels, then the scan times of the site
         duration = (size - 1) * line_time
+        camera = dataclasses.replace(camera, line_time_s=line_time)
         times, provisional = [], []
         for angle in angles:
             t = -altitude_m * math.tan(math.radians(angle)) / v_ground
             for _ in range(2):
                 model = ephemeris_from_orbit(
-                    orbit, (t - 60, t + 60), first_line_time_s=t - duration / 2,
-                    line_time_s=line_time, view_angles_deg=(angle, 0.0, 0.0), **common,
+                    orbit, (t - 60, t + 60), camera, first_line_time_s=t - duration / 2,
+                    view_angles_deg=(angle, 0.0, 0.0),
                 )  # fmt: skip
                 t = _centre_time(model, target)
             times.append(t)
@@ -173,13 +199,14 @@ def pleiades_pair(
         e = np.asarray(_ecef(g))
         line_time *= np.linalg.norm(e[1] - e[0]) / np.linalg.norm(e[2] - e[0])
     duration = (size - 1) * line_time
+    camera = dataclasses.replace(camera, line_time_s=line_time)
     span = (min(times) - 10.0, max(times) + 10.0)
-    wobble = rng.normal(0.0, attitude_wobble_rad, (3, 3)) / np.arange(1, 4)
+    wobble = rng.normal(0.0, s.attitude_wobble_rad, (3, 3)) / np.arange(1, 4)
     out = {}
     for name, angle, t in zip(NAMES, angles, times, strict=True):
         model = ephemeris_from_orbit(
-            orbit, span, first_line_time_s=t - duration / 2, line_time_s=line_time,
-            view_angles_deg=(angle, 0.0, 0.0), attitude_offsets_rad=wobble, **common,
+            orbit, span, camera, first_line_time_s=t - duration / 2,
+            view_angles_deg=(angle, 0.0, 0.0), attitude_offsets_rad=wobble,
         )  # fmt: skip
         col = float(np.asarray(sc.project(model, target))[0])
         shift = 0.5 * (size - 1) - col  # the columns are linear in the principal column

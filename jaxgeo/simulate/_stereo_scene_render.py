@@ -38,7 +38,7 @@ import jax.numpy as jnp
 import numpy as np
 
 from ..models import AbstractSensorModel, localize_points
-from ._render import terrain_bracket
+from ._render import RenderSettings, terrain_bracket
 from ._stereo_scene_models import JitteredModel, intersect_lines, smooth_part
 from ._terrain import Terrain
 
@@ -54,21 +54,15 @@ within a few cm (nodes every 8 px on smooth terrain). Other pixels get the full 
 
 
 @dataclasses.dataclass(frozen=True)
-class RenderSettings:
-    """How an image is formed: ``supersample**2`` samples per pixel, a Gaussian PSF of
-    ``psf_sigma_px``, ``value = gain * albedo + offset`` plus Gaussian noise of ``noise``
-    (albedo units), quantised to ``0..levels`` (12 bits by default); line-of-sight nodes every
-    ``node_step_px`` px."""
+class RenderedImage:
+    """The image of a scene a window belongs to: ``seed`` (the scene's) and ``index`` (of the
+    image in the scene) seed its noise, ``gain`` scales its albedo, ``name`` names it in
+    errors."""
 
-    supersample: int = 2
-    psf_sigma_px: float = 0.4
-    noise: float = 0.004
-    offset: float = 0.02
-    levels: int = 4095
-    node_step_px: int = 8
-
-    def to_dict(self) -> dict:
-        return dataclasses.asdict(self)
+    seed: int
+    index: int
+    gain: float = 1.0
+    name: str = "image"
 
 
 def scene_windows(
@@ -243,29 +237,29 @@ def render_window(
     terrain: Terrain,
     texture,
     window: tuple[int, int, int, int],
+    image: RenderedImage,
     *,
-    seed: int,
-    image_index: int,
-    gain: float = 1.0,
-    settings: RenderSettings = RenderSettings(),
-    name: str = "image",
-    block_rows: int = TILE,
-    block_cols: int = 4 * TILE,
+    settings: RenderSettings | None = None,
+    largest_px: tuple[int, int] = (TILE, 4 * TILE),
 ) -> np.ndarray:
     """Pixels ``[r0, r1) x [c0, c1)`` of the image of ``model`` (uint16 ``(r1 - r0, c1 - c0)``;
-    module docstring). ``texture`` has ``sample(lonlat)``; the noise is seeded by ``seed`` and
-    ``image_index`` (tiles of :data:`TILE`). ``name`` names the image in errors;
-    ``block_rows`` x ``block_cols``: the largest window of the run (sets the one compiled
-    shape of the node grid)."""
+    module docstring). ``texture`` has ``sample(lonlat)``; the noise is seeded by ``image``'s
+    seed and index (tiles of :data:`TILE`), which also gives the gain and the name in errors;
+    ``largest_px``: rows x columns of the largest window of the run (sets the one compiled
+    shape of the node grid); ``settings``: how the image is formed (default
+    :class:`RenderSettings`)."""
     import cv2
 
+    settings = RenderSettings() if settings is None else settings
+    block_rows, block_cols = (int(v) for v in largest_px)
     r0, r1, c0, c1 = (int(v) for v in window)
     s = int(settings.supersample)
     step = int(settings.node_step_px)
     halo = _psf_radius(settings.psf_sigma_px) + 1  # + 1: the neighbours of the sub-samples
     ra, rb, ca, cb = r0 - halo, r1 + halo, c0 - halo, c1 + halo
     centres = window_ground(model, terrain, (ra, rb, ca, cb), step,
-                            (block_rows + 2 * halo, block_cols + 2 * halo), name)  # fmt: skip
+                            (block_rows + 2 * halo, block_cols + 2 * halo),
+                            image.name)  # fmt: skip
     samples = _subsamples(centres, s)
     values = _chunked(_sample, samples.reshape(-1, 2), texture)
     img = values.reshape(rb - ra - 2, s, cb - ca - 2, s).mean(axis=(1, 3)).astype(np.float32)
@@ -274,8 +268,8 @@ def render_window(
         k = 2 * inner + 1
         img = cv2.GaussianBlur(img, (k, k), settings.psf_sigma_px, borderType=cv2.BORDER_REFLECT)
         img = img[inner:-inner, inner:-inner]
-    img = gain * img.astype(float) + settings.offset
-    img = img + _noise(seed, image_index, r0, r1, c0, c1, settings.noise)
+    img = image.gain * img.astype(float) + settings.offset
+    img = img + _noise(image.seed, image.index, r0, r1, c0, c1, settings.noise)
     return np.clip(np.rint(img * settings.levels), 0, settings.levels).astype(np.uint16)
 
 

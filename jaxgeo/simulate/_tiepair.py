@@ -32,6 +32,7 @@ from ..io import (
     write_observations,
 )
 from ..models import AffineBias, Biased, localize_points, project_points
+from . import _scene as sc
 from ._demo import demo_dir
 
 NAMES = ("fore", "aft")
@@ -91,22 +92,42 @@ def terrain_height(lon, lat, centre, h0: float = 630.0, amplitude: float = 400.0
     return h0 + amplitude * np.sin(dx / 4e3) * np.cos(dy / 5.5e3) + 0.2 * amplitude * dx / 2e4
 
 
+@dataclasses.dataclass(frozen=True)
+class TiePairSettings:
+    """The options of :func:`tie_pair`: ``n_gcps`` GCPs measured in ``fore`` only,
+    ``gross_fraction`` of the tie measurements off by ``gross_px`` (min, max) in a random
+    direction, image noise ``noise_px`` and a-priori ``sigma_px``, GCP survey noise
+    ``gcp_noise_m`` and a-priori ``gcp_sigma_m``, points kept ``margin_px`` inside both
+    images. Checked when made (a bad value names the field)."""
+
+    n_gcps: int = 12
+    gross_fraction: float = 0.01
+    gross_px: tuple[float, float] = (8.0, 60.0)
+    noise_px: float = 0.3
+    sigma_px: float = 0.5
+    gcp_noise_m: float = 0.1
+    gcp_sigma_m: float = 0.3
+    margin_px: float = 300.0
+
+    def __post_init__(self):
+        sc.check_int(self, "n_gcps", 0)
+        f = self.gross_fraction
+        sc.require(sc.is_real(f) and 0 <= f <= 1, "gross_fraction", "be in [0, 1]", f)
+        sc.check_range(self, "gross_px", positive=True)
+        sc.check_non_negative(self, "noise_px", "gcp_noise_m", "margin_px")
+        sc.check_positive(self, "sigma_px", "gcp_sigma_m")
+
+
 def tie_pair(
-    n_ties: int = 100_000,
-    seed: int = 0,
-    *,
-    n_gcps: int = 12,
-    gross_fraction: float = 0.01,
-    gross_px: tuple[float, float] = (8.0, 60.0),
-    noise_px: float = 0.3,
-    sigma_px: float = 0.5,
-    gcp_noise_m: float = 0.1,
-    gcp_sigma_m: float = 0.3,
-    margin_px: float = 300.0,
+    n_ties: int = 100_000, seed: int = 0, settings: TiePairSettings | None = None
 ) -> TiePair:
-    """Simulate the pair (see the module docstring): ``n_ties`` tie points in both images,
-    ``gross_fraction`` of their measurements off by ``gross_px`` (min, max) in a random
-    direction, ``n_gcps`` GCPs measured in ``fore`` only."""
+    """Simulate the pair (see the module docstring) with ``settings`` (:class:`TiePairSettings`):
+    ``n_ties`` tie points in both images, a fraction of their measurements with gross errors,
+    GCPs measured in ``fore`` only. Deterministic in ``seed``."""
+    s = TiePairSettings() if settings is None else settings
+    n_gcps, gross_fraction, gross_px = s.n_gcps, s.gross_fraction, s.gross_px
+    noise_px, sigma_px, margin_px = s.noise_px, s.sigma_px, s.margin_px
+    gcp_noise_m, gcp_sigma_m = s.gcp_noise_m, s.gcp_sigma_m
     rng = np.random.default_rng(seed)
     files = {n: demo_dir() / f"{n}.txt" for n in NAMES}
     rpcs = {n: read_rpc(p) for n, p in files.items()}

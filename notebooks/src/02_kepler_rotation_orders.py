@@ -35,13 +35,13 @@ import jaxgeo
 from jaxgeo.bundle import direct_georeferencing, prepare, with_bias
 from jaxgeo.lsq import RESULTS, SolverConfig, solve
 from jaxgeo.models import KeplerSequence, SceneMetadata
-from jaxgeo.simulate import cartosat1_stereo
+from jaxgeo.simulate import Cartosat1Settings, cartosat1_stereo
 
 # quick mode (the tests): fewer GCP counts and layouts in the sweeps, see above
 QUICK = os.environ.get("JAXGEO_NOTEBOOK_QUICK") == "1"
 QUICK_NOTE = ("(quick mode: a few layouts, not the full sweep)",) if QUICK else ()
 T0, C0 = time.perf_counter(), time.process_time()
-scene = cartosat1_stereo(1, site="warsaw")
+scene = cartosat1_stereo(1, Cartosat1Settings(site="warsaw"))
 obs, ground = scene.observations, scene.ground
 all_gcp = ground.with_roles({p: "gcp" for p in ground.ids})
 N = len(ground.ids)

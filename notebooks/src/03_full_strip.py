@@ -27,7 +27,7 @@ import matplotlib.pyplot as plt
 import numpy as np
 
 import jaxgeo
-from jaxgeo.simulate import carto2s_strip
+from jaxgeo.simulate import Carto2SStripSettings, carto2s_strip
 from jaxgeo.strip import (
     GCPDistributionWarning,
     Level1Config,
@@ -42,7 +42,7 @@ from jaxgeo.strip import (
 
 N_SCENES = 44
 T0, C0 = time.perf_counter(), time.process_time()
-sim = carto2s_strip(N_SCENES, seed=0, gcp_every=1)
+sim = carto2s_strip(N_SCENES, seed=0, settings=Carto2SStripSettings(gcp_every=1))
 full = Strip.from_simulation(sim)
 print(f"{N_SCENES} sub-scenes simulated in {time.perf_counter() - T0:.0f} s; GCPs in "
       f"{len(full.gcp_scenes())} of them")  # fmt: skip

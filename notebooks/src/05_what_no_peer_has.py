@@ -41,19 +41,12 @@ from matplotlib.colors import LogNorm
 
 import jaxgeo
 from jaxgeo.bundle import JitterSettings, adjust, with_bias
+from jaxgeo.coreg import dh_stats, nuth_kaab, shift_heights
 from jaxgeo.io import Observations, read_rpc
 from jaxgeo.lsq import SolverConfig
-from jaxgeo.simulate import stereo_scene, stereo_scene_truth
+from jaxgeo.simulate import StereoSceneSettings, stereo_scene, stereo_scene_truth
 from jaxgeo.simulate._stereo_scene_models import localize_on_terrain_exact, project_true
-from jaxgeo.stereo import (
-    DSMSettings,
-    dh_stats,
-    dsm_from_images,
-    epipolar_offsets,
-    nuth_kaab,
-    shift_heights,
-    sigma_calibration,
-)
+from jaxgeo.stereo import DSMSettings, dsm_from_images, epipolar_offsets, sigma_calibration
 
 # quick mode (the tests): fewer tie points, a coarser DSM grid, see above
 QUICK = os.environ.get("JAXGEO_NOTEBOOK_QUICK") == "1"
@@ -84,8 +77,8 @@ key_numbers = {"quick": QUICK}
 # %%
 SIZE, PERIOD, SEED, NOISE_PX = 800, 400.0, 7319, 0.1
 N_SIDE = 30 if QUICK else 42  # tie grid (before the points seen by one image only are dropped)
-scene = stereo_scene_truth(SIZE, SEED, jitter_px=1.5, jitter_period_lines=PERIOD,
-                           exact_rpc=True)  # fmt: skip
+scene = stereo_scene_truth(SIZE, SEED, StereoSceneSettings(
+    jitter_px=1.5, jitter_period_lines=PERIOD, exact_rpc=True))  # fmt: skip
 g = np.linspace(10, SIZE - 11, N_SIDE)
 xy_left = np.stack(np.meshgrid(g, g), -1).reshape(-1, 2)
 ground = localize_on_terrain_exact(scene.truth["left"], scene.terrain, xy_left)
@@ -348,7 +341,7 @@ SIGMA_SIZE, SIGMA_SEED = (300 if QUICK else 600), 12
 t = time.perf_counter()
 with tempfile.TemporaryDirectory(prefix="jaxgeo-nb05-") as folder:
     folder = pathlib.Path(folder)
-    stereo_scene(folder, SIGMA_SIZE, SIGMA_SEED, exact_rpc=True)
+    stereo_scene(folder, SIGMA_SIZE, SIGMA_SEED, StereoSceneSettings(exact_rpc=True))
     t_scene = time.perf_counter() - t
     paths = [folder / "left.tif", folder / "right.tif"]
     with rasterio.open(folder / "truth_dsm.tif") as f:

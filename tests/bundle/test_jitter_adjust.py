@@ -15,7 +15,7 @@ from benchmarks.accuracy.jitter import bias_priors, tie_observations
 from jaxgeo.bundle import adjust
 from jaxgeo.lsq import SolverConfig
 from jaxgeo.models import AffineBias, Biased, JitterBias
-from jaxgeo.simulate import stereo_scene_truth
+from jaxgeo.simulate import StereoSceneSettings, stereo_scene_truth
 from jaxgeo.simulate._stereo_scene_models import localize_on_terrain_exact, project_true
 from jaxgeo.stereo import epipolar_offsets
 
@@ -32,8 +32,8 @@ class Ties:
 
 @pytest.fixture(scope="module")
 def pair():
-    scene = stereo_scene_truth(SIZE, SEED, jitter_px=1.5, jitter_period_lines=PERIOD,
-                               exact_rpc=True)  # fmt: skip
+    scene = stereo_scene_truth(SIZE, SEED, StereoSceneSettings(
+        jitter_px=1.5, jitter_period_lines=PERIOD, exact_rpc=True))  # fmt: skip
     g = np.linspace(10, SIZE - 11, 45)
     xy1 = np.stack(np.meshgrid(g, g), -1).reshape(-1, 2)
     ground = localize_on_terrain_exact(scene.truth["left"], scene.terrain, xy1)

@@ -72,9 +72,10 @@ def test_bias_none_reports_all_check_points(scene, capsys):
 @pytest.fixture(scope="module")
 def other_pass():
     """The fore RPC of another pass over the site (a 12 degree view instead of 26)."""
-    from jaxgeo.simulate import cartosat1_stereo
+    from jaxgeo.simulate import Cartosat1Settings, cartosat1_stereo
 
-    return cartosat1_stereo(7, site="hobart", view_angles_deg=(12.0, -5.0), rpc_grid=(11, 11, 5))
+    return cartosat1_stereo(7, Cartosat1Settings(site="hobart", view_angles_deg=(12.0, -5.0),
+                                                 rpc_grid=(11, 11, 5)))  # fmt: skip
 
 
 def test_model_of_another_image_exit_3(scene, tmp_path, other_pass, capsys):

@@ -16,7 +16,7 @@ import pytest
 
 from jaxgeo.cli import main
 from jaxgeo.io import format_rpc_txt, read_rpc
-from jaxgeo.simulate import stereo_scene_truth
+from jaxgeo.simulate import StereoSceneSettings, stereo_scene_truth
 from jaxgeo.simulate._stereo_scene_models import localize_on_terrain_exact, project_true
 from jaxgeo.stereo import epipolar_offsets
 
@@ -43,8 +43,8 @@ def _across_rms(rpcs, xy1, xy2, h_range) -> float:
 @pytest.fixture(scope="module")
 def adjusted(tmp_path_factory):
     folder = tmp_path_factory.mktemp("jitter")
-    scene = stereo_scene_truth(SIZE, SEED, jitter_px=1.5, jitter_period_lines=PERIOD,
-                               exact_rpc=True)  # fmt: skip
+    scene = stereo_scene_truth(SIZE, SEED, StereoSceneSettings(
+        jitter_px=1.5, jitter_period_lines=PERIOD, exact_rpc=True))  # fmt: skip
     xy1, xy2, h_range = _ties(scene)
     rng = np.random.default_rng(SEED)
     lines = ["id,image,x,y,sigma_px"]

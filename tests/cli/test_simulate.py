@@ -24,7 +24,13 @@ def test_cartosat1_writes_and_refuses_to_overwrite(tmp_path, capsys):
 def test_carto2s_strip(tmp_path, capsys):
     out = tmp_path / "strip"
     argv = ["simulate", "carto2s-strip", "--scenes", "2", "--seed", "1", "--out", str(out)]
-    assert main([*argv, "--gcp-every", "1"]) == 0
+    assert main([*argv, "--gcp-every", "1", "--quiet", "--json"]) == 0
+    captured = capsys.readouterr()
+    assert captured.err == ""  # --quiet: no progress
+    summary = json.loads(captured.out)  # --json: one object, what was written where
+    assert summary["out"] == str(out) and summary["scenes"] == 2
+    assert sorted(summary["files"]) == sorted(p.name for p in out.iterdir())
+    assert 0 < summary["vendor_rms_px"]["min"] <= summary["vendor_rms_px"]["max"] < 100
     names = sorted(p.name for p in out.iterdir())
     assert names == ["ground.csv", "observations.csv", "scene_000.txt", "scene_001.txt",
                      "strip.json", "truth.json"]  # fmt: skip
@@ -37,6 +43,17 @@ def test_carto2s_strip(tmp_path, capsys):
 def test_bad_arguments(tmp_path, capsys):
     assert main(["simulate", "carto2s-strip", "--scenes", "0", "--out", str(tmp_path)]) == 2
     assert "--scenes must be >= 1" in capsys.readouterr().err
+    for kind, option, value, message in (
+        ("cartosat1", "--gcps", "-1", "--gcps must be >= 0"),
+        ("cartosat1", "--noise-px", "-0.5", "--noise-px must be a finite number >= 0"),
+        ("cartosat1", "--seed", "-2", "--seed must be >= 0"),
+        ("carto2s-strip", "--gcp-every", "0", "--gcp-every must be >= 1"),
+        ("stereo-scene", "--relief-m", "0", "--relief-m must be in (0, 2000]"),
+    ):  # errors name the option, before any work: nothing written
+        argv = ["simulate", kind, option, value, "--out", str(tmp_path / "x")]
+        assert main([*argv, *(["--size", "64"] if kind == "stereo-scene" else [])]) == 2
+        assert message in capsys.readouterr().err
+        assert not (tmp_path / "x").exists()
     (tmp_path / "file").write_text("x")
     assert main(["simulate", "cartosat1", "--out", str(tmp_path / "file")]) == 2
     assert "not a directory" in capsys.readouterr().err

@@ -74,12 +74,13 @@ def batch():
 
 def strip():
     from jaxgeo.lsq import RESULTS
-    from jaxgeo.simulate import carto2s_strip
+    from jaxgeo.simulate import Carto2SStripSettings, carto2s_strip
     from jaxgeo.strip import Level2Config, Strip, StripConfig, TieConfig, adjust_strip
     from jaxgeo.strip._batch import monte_carlo_inputs, two_level_sharded
     from jaxgeo.strip._solve import degree_index
 
-    strip = Strip.from_simulation(carto2s_strip(4, seed=3, gcp_every=1, scene_rows=12000))
+    settings = Carto2SStripSettings(gcp_every=1, scene_rows=12000)
+    strip = Strip.from_simulation(carto2s_strip(4, seed=3, settings=settings))
     config = StripConfig(ties=TieConfig(per_pair=8), level2=Level2Config("shift"))
     config = dataclasses.replace(
         config, solver=dataclasses.replace(config.solver, loss="l2", remove_blunders=False)

@@ -15,7 +15,7 @@ from jaxgeo.models import EphemerisModel, gmst_rad
 from jaxgeo.models import localize_points as localize
 from jaxgeo.models import project_points as project
 from jaxgeo.rotations import angles_from_matrix, omega_phi_kappa
-from jaxgeo.simulate import CircularOrbit, ephemeris_from_orbit
+from jaxgeo.simulate import CircularOrbit, EphemerisSettings, ephemeris_from_orbit
 from jaxgeo.simulate._orbit import ground_track_attitude, sun_synchronous_inclination_deg
 
 LON, LAT = 147.30, -42.88  # Hobart
@@ -29,10 +29,10 @@ def cartosat1_camera(view_deg: float, t_centre: float, span=(-80.0, 40.0)) -> Ep
     orbit = CircularOrbit.over(LON, LAT, 618e3, sun_synchronous_inclination_deg(618e3), theta0)
     wobble = np.array([[3e-6, -2e-6, 1e-6], [-4e-6, 1e-6, 0.0], [2e-6, 0.0, 1e-6]])
     return ephemeris_from_orbit(
-        orbit, span, sidereal_angle_rad=theta0,
-        first_line_time_s=t_centre - (N - 1) / 2 * LINE_TIME,
+        orbit, span, EphemerisSettings(sidereal_angle_rad=theta0,
         line_time_s=LINE_TIME, n_rows=N, n_cols=N, focal_length_m=1.945, pixel_size_m=7e-6,
-        view_angles_deg=(view_deg, 0.0, 0.0), attitude_offsets_rad=wobble, h_ref_m=500.0,
+        h_ref_m=500.0), first_line_time_s=t_centre - (N - 1) / 2 * LINE_TIME,
+        view_angles_deg=(view_deg, 0.0, 0.0), attitude_offsets_rad=wobble,
     )  # fmt: skip
 
 

@@ -22,7 +22,7 @@ from jaxgeo.models import (
     gmst_rad,
     newton_root,
 )
-from jaxgeo.simulate import CircularOrbit, ephemeris_from_orbit
+from jaxgeo.simulate import CircularOrbit, EphemerisSettings, ephemeris_from_orbit
 from jaxgeo.simulate._orbit import sun_synchronous_inclination_deg
 
 LON, LAT = 147.30, -42.88
@@ -54,13 +54,15 @@ def _ephemeris():
     return ephemeris_from_orbit(
         orbit,
         (-3.0, 3.0),
-        sidereal_angle_rad=theta0,
+        EphemerisSettings(
+            sidereal_angle_rad=theta0,
+            line_time_s=0.336e-3,
+            n_rows=12000,
+            n_cols=12000,
+            focal_length_m=1.945,
+            pixel_size_m=7e-6,
+        ),
         first_line_time_s=-2.0,
-        line_time_s=0.336e-3,
-        n_rows=12000,
-        n_cols=12000,
-        focal_length_m=1.945,
-        pixel_size_m=7e-6,
     )
 
 

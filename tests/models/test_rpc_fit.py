@@ -13,7 +13,7 @@ from jaxgeo.models import (
     localize_points,
     project_points,
 )
-from jaxgeo.simulate import CircularOrbit, ephemeris_from_orbit
+from jaxgeo.simulate import CircularOrbit, EphemerisSettings, ephemeris_from_orbit
 from jaxgeo.simulate._orbit import sun_synchronous_inclination_deg
 
 N = 12000
@@ -26,9 +26,9 @@ def cartosat1_camera(view_deg: float, t_centre: float) -> EphemerisModel:
     orbit = CircularOrbit.over(147.3, -42.88, 618e3, sun_synchronous_inclination_deg(618e3), theta0)
     wobble = np.array([[3e-6, -2e-6, 1e-6, 5e-7], [-4e-6, 1e-6, 0.0, 0.0], [2e-6, 0.0, 1e-6, 0.0]])
     return ephemeris_from_orbit(
-        orbit, (-80.0, 40.0), sidereal_angle_rad=theta0,
-        first_line_time_s=t_centre - (N - 1) / 2 * 0.336e-3, line_time_s=0.336e-3, n_rows=N,
-        n_cols=N, focal_length_m=1.945, pixel_size_m=7e-6, view_angles_deg=(view_deg, 0.0, 0.0),
+        orbit, (-80.0, 40.0), EphemerisSettings(sidereal_angle_rad=theta0, line_time_s=0.336e-3,
+        n_rows=N, n_cols=N, focal_length_m=1.945, pixel_size_m=7e-6),
+        first_line_time_s=t_centre - (N - 1) / 2 * 0.336e-3, view_angles_deg=(view_deg, 0.0, 0.0),
         attitude_offsets_rad=wobble,
     )  # fmt: skip
 

@@ -9,7 +9,7 @@ import pytest
 from jaxgeo import geodesy
 from jaxgeo.io import read_ground, read_observations, read_rpc
 from jaxgeo.models import localize_points, project_points
-from jaxgeo.simulate import carto2s_strip
+from jaxgeo.simulate import Carto2SStripSettings, SimulationError, carto2s_strip
 
 N_SCENES = 6
 
@@ -122,4 +122,12 @@ def test_bad_arguments():
     with pytest.raises(ValueError, match="n_scenes"):
         carto2s_strip(0)
     with pytest.raises(ValueError, match="overlap_rows"):
-        carto2s_strip(2, overlap_rows=48000)
+        carto2s_strip(2, settings=Carto2SStripSettings(overlap_rows=48000))
+    for kwargs, setting in ((dict(gcp_every=0), "gcp_every"), (dict(line_time_s=-1.0),
+                            "line_time_s"), (dict(rpc_scenes=(-1,)), "rpc_scenes"),
+                            (dict(scene_rows=1), "scene_rows")):  # fmt: skip
+        with pytest.raises(SimulationError, match=f"^{setting} must") as err:
+            Carto2SStripSettings(**kwargs)
+        assert err.value.setting == setting
+    with pytest.raises(SimulationError, match=r"rpc_scenes must lie in \[0, n_scenes = 2\)"):
+        carto2s_strip(2, settings=Carto2SStripSettings(rpc_scenes=(0, 2)))

@@ -11,14 +11,14 @@ import numpy as np
 import pytest
 
 from jaxgeo.models import project_points
-from jaxgeo.simulate import carto2s_strip
+from jaxgeo.simulate import Carto2SStripSettings, carto2s_strip
 from jaxgeo.simulate._carto2s import VENDOR_RMS_RANGE_PX
 
 
 @pytest.mark.parametrize("n_scenes", [80, 100, 160, 320])
 def test_long_strip_vendor_rpc_error_in_documented_range(n_scenes):
     ends = (0, n_scenes // 2, n_scenes - 1)
-    strip = carto2s_strip(n_scenes, seed=0, rpc_scenes=ends)
+    strip = carto2s_strip(n_scenes, seed=0, settings=Carto2SStripSettings(rpc_scenes=ends))
     # every sub-scene is measured, the two ends included
     assert set(strip.observations.images) == set(strip.names)
     acc = strip.accuracy()

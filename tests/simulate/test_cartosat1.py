@@ -9,7 +9,13 @@ import pytest
 from jaxgeo import geodesy
 from jaxgeo.io import read_ground, read_observations, read_rpc
 from jaxgeo.models import localize_points, project_points
-from jaxgeo.simulate import cartosat1_stereo, demo_dir, write_demo
+from jaxgeo.simulate import (
+    Cartosat1Settings,
+    SimulationError,
+    cartosat1_stereo,
+    demo_dir,
+    write_demo,
+)
 from jaxgeo.simulate._scene import enu_errors, rms
 
 
@@ -104,13 +110,13 @@ def test_vendor_rpcs_err_like_the_papers(scene):
 
 def test_error_range_over_seeds():
     for seed in (1, 2, 3):
-        acc = cartosat1_stereo(seed, site="warsaw").accuracy()
+        acc = cartosat1_stereo(seed, Cartosat1Settings(site="warsaw")).accuracy()
         print(seed, acc["image_px"]["fore"]["rms"], acc["image_px"]["aft"]["rms"])
         assert all(10.0 < v["rms"] < 80.0 for v in acc["image_px"].values())
 
 
 def test_warsaw_field_is_spread():
-    s = cartosat1_stereo(0, site="warsaw", n_gcps=6)
+    s = cartosat1_stereo(0, Cartosat1Settings(site="warsaw", n_gcps=6))
     assert len(s.ground) == 36 and s.ground.role.count("gcp") == 6
     for name in s.names:
         xy = by_image(s.image_true, name, s.ground.ids)
@@ -200,3 +206,27 @@ def test_embedded_demo_is_reproducible(tmp_path):
     )
     acc = json.loads((packaged / "truth.json").read_text())["vendor_accuracy"]
     assert math.isfinite(acc["intersection_m"]["rms_h"])
+
+
+@pytest.mark.parametrize(
+    "kwargs, setting",
+    [
+        (dict(site="paris"), "site"),
+        (dict(layout="ring"), "layout"),
+        (dict(n_gcps=-1), "n_gcps"),
+        (dict(n_points=0), "n_points"),
+        (dict(image_noise_px=-0.1), "image_noise_px"),
+        (dict(image_sigma_px=0.0), "image_sigma_px"),
+        (dict(h_range_m=(500.0, 100.0)), "h_range_m"),
+        (dict(n_rows=1), "n_rows"),
+        (dict(epoch_utc="yesterday"), "epoch_utc"),
+        (dict(rpc_grid=(21, 21, 1)), "rpc_grid"),
+        (dict(terrain_wavelengths_m=(0.0, 10.0)), "terrain_wavelengths_m"),
+    ],
+)
+def test_bad_settings_are_named(kwargs, setting):
+    with pytest.raises(SimulationError, match=f"^{setting} must") as err:
+        Cartosat1Settings(**kwargs)
+    assert err.value.setting == setting
+    with pytest.raises(SimulationError, match="^seed must be >= 0"):
+        cartosat1_stereo(-1)

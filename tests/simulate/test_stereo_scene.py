@@ -15,6 +15,7 @@ from jaxgeo.models import localize_points, project_points
 from jaxgeo.simulate import (
     JitteredModel,
     SimulationError,
+    StereoSceneSettings,
     read_stereo_scene,
     stereo_scene,
     stereo_scene_files,
@@ -23,6 +24,7 @@ from jaxgeo.simulate import (
 from jaxgeo.simulate._stereo_scene_models import localize_on_terrain_exact, project_true
 from jaxgeo.simulate._stereo_scene_render import (
     TILE,
+    RenderedImage,
     render_window,
     scene_windows,
     window_ground,
@@ -37,8 +39,8 @@ JITTER_PX, PERIOD = 1.5, 100.0  # 2.5 periods over the image
 def jittered(tmp_path_factory):
     """A written scene with jitter and exact RPCs, and its truth read back from the folder."""
     out = tmp_path_factory.mktemp("jittered")
-    scene = stereo_scene(out, SIZE, 11, jitter_px=JITTER_PX, jitter_period_lines=PERIOD,
-                         exact_rpc=True)  # fmt: skip
+    settings = StereoSceneSettings(jitter_px=JITTER_PX, jitter_period_lines=PERIOD, exact_rpc=True)
+    scene = stereo_scene(out, SIZE, 11, settings)
     return out, scene, read_stereo_scene(out)
 
 
@@ -176,10 +178,11 @@ def test_block_renderer_is_independent_of_the_windowing(jittered):
     ]
     with pytest.raises(ValueError, match="multiples of 256"):
         scene_windows(100, 100, 100, 256)
-    kw = dict(seed=11, image_index=1, gain=0.97, settings=scene.render)
+    kw = dict(settings=scene.render)
     args = (scene.truth["right"], scene.terrain, scene.texture)
-    top = render_window(*args, (0, 100, 0, 256), **kw)  # windows of any size, anywhere
-    bottom = render_window(*args, (100, 256, 0, 256), **kw)
+    image = RenderedImage(seed=11, index=1, gain=0.97)
+    top = render_window(*args, (0, 100, 0, 256), image, **kw)  # windows of any size, anywhere
+    bottom = render_window(*args, (100, 256, 0, 256), image, **kw)
     assert top.shape == (100, 256) and top.dtype == np.uint16
     with warnings.catch_warnings():
         warnings.simplefilter("ignore", NotGeoreferencedWarning)
@@ -202,17 +205,25 @@ def test_block_renderer_is_independent_of_the_windowing(jittered):
 
 
 @pytest.mark.parametrize(
-    "kwargs, message",
+    "kwargs, setting, message",
     [
-        (dict(size=32), "--size must be an integer >= 64"),
-        (dict(seed=-1), "--seed must be an integer >= 0"),
-        (dict(jitter_px=-1.0), "--jitter-px must be >= 0"),
-        (dict(jitter_period_lines=5.0), "--jitter-period-lines must be >= 10"),
-        (dict(jitter_px=10.0, jitter_period_lines=50.0), "folds the image"),
-        (dict(relief_m=0.0), "--relief-m must be in"),
+        (dict(size=32), "size", "{} must be an integer >= 64"),
+        (dict(seed=-1), "seed", "{} must be an integer >= 0"),
+        (dict(jitter_px=-1.0), "jitter_px", "{} must be >= 0"),
+        (dict(jitter_period_lines=5.0), "jitter_period_lines", "{} must be >= 10"),
+        (dict(jitter_px=10.0, jitter_period_lines=50.0), "jitter_px", "folds the image"),
+        (dict(relief_m=0.0), "relief_m", "{} must be in"),
     ],
 )
-def test_bad_options_are_named(kwargs, message):
+def test_bad_options_are_named(kwargs, setting, message):
+    """The library names the setting (the field of StereoSceneSettings, or the argument), the
+    command its option (``err.render``, as ``jaxgeo simulate stereo-scene`` does)."""
+    from jaxgeo.cli._simulate import OPTIONS
+
     kwargs = {"size": 128, "seed": 0} | kwargs
-    with pytest.raises(SimulationError, match=message):
-        stereo_scene_truth(kwargs.pop("size"), kwargs.pop("seed"), **kwargs)
+    size, seed = kwargs.pop("size"), kwargs.pop("seed")
+    with pytest.raises(SimulationError) as err:
+        stereo_scene_truth(size, seed, StereoSceneSettings(**kwargs))
+    assert err.value.setting == setting
+    assert message.format(setting) in str(err.value)
+    assert message.format(OPTIONS[setting]) in err.value.render(OPTIONS)

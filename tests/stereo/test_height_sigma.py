@@ -16,7 +16,7 @@ import rasterio
 
 from jaxgeo.cli import main
 from jaxgeo.intersect import intersect
-from jaxgeo.simulate import stereo_scene
+from jaxgeo.simulate import StereoSceneSettings, stereo_scene
 from jaxgeo.simulate._stereo_scene import stereo_scene_truth
 from jaxgeo.stereo import (
     DSMSettings,
@@ -38,7 +38,7 @@ EPSG = 32631
 
 @pytest.fixture(scope="module")
 def rpcs():
-    scene = stereo_scene_truth(128, 4, exact_rpc=True)
+    scene = stereo_scene_truth(128, 4, StereoSceneSettings(exact_rpc=True))
     return [scene.rpcs[n] for n in ("left", "right")], scene
 
 
@@ -165,7 +165,8 @@ def test_orientation_covariances_from_adjusted_models_json(tmp_path):
 @pytest.fixture(scope="module")
 def scene(tmp_path_factory):
     folder = tmp_path_factory.mktemp("scene")
-    stereo_scene(folder, 400, 12, exact_rpc=True)  # seed 12: never used for the calibration
+    # seed 12: never used for the calibration
+    stereo_scene(folder, 400, 12, StereoSceneSettings(exact_rpc=True))
     return folder
 
 

@@ -17,7 +17,7 @@ from rasterio.warp import Resampling, reproject
 
 from jaxgeo.cli import main
 from jaxgeo.io import open_image
-from jaxgeo.simulate import stereo_scene
+from jaxgeo.simulate import StereoSceneSettings, stereo_scene
 from jaxgeo.stereo import (
     DSMSettings,
     StereoError,
@@ -36,7 +36,7 @@ QUIET = TileSettings(progress=False)
 @pytest.fixture(scope="module")
 def scene(tmp_path_factory):
     folder = tmp_path_factory.mktemp("scene")
-    stereo_scene(folder, SIZE, SEED, exact_rpc=True)
+    stereo_scene(folder, SIZE, SEED, StereoSceneSettings(exact_rpc=True))
     images = [open_image(folder / name) for name in ("left.tif", "right.tif")]
     return folder, [im.model for im in images], [im.path for im in images]
 

@@ -12,7 +12,7 @@ import warnings
 import numpy as np
 import pytest
 
-from jaxgeo.simulate import carto2s_strip
+from jaxgeo.simulate import Carto2SStripSettings, carto2s_strip
 from jaxgeo.strip import (
     Level1Config,
     Level2Config,
@@ -41,7 +41,7 @@ def strip_config(degree="quadratic", solver=None, **level1):
 
 @pytest.fixture(scope="session")
 def strip_sim():
-    return carto2s_strip(N_SCENES, seed=7, gcp_every=1)
+    return carto2s_strip(N_SCENES, seed=7, settings=Carto2SStripSettings(gcp_every=1))
 
 
 @pytest.fixture(scope="session")
