@@ -61,7 +61,8 @@ EXIT_CODES = {
 def register(sub) -> None:
     from ..bundle import BIAS_CHOICES, JitterSettings
     from ._adjustment_options import add_adjustment_options
-    from ._common import add_command, add_image_options
+    from ._common import add_command
+    from ._inputs import add_image_options
 
     jitter = JitterSettings()
     parser = add_command(sub, "adjust", "bundle block adjustment of RPC images (bias "
@@ -114,7 +115,7 @@ def open_named_images(args: argparse.Namespace) -> dict:
     ``--image-origin`` (their IMG: the image name of ``--image``, its file name or stem)."""
     from ..bundle import sensor_image
     from . import CommandError
-    from ._common import image_settings
+    from ._inputs import image_settings
 
     files = _images(args.image)
     alias = {
@@ -144,7 +145,8 @@ def run(args: argparse.Namespace) -> int:
     from ..bundle import AdjustSettings, JitterSettings, check_out_dir, image_inputs
     from ..lsq import DEFAULT_SOLVER
     from . import _adjustment_options as shared
-    from ._common import dem_inputs, note, print_json
+    from ._common import note, print_json
+    from ._inputs import dem_inputs
 
     start = shared.Start("adjust", args)
     shared.check_adjustment_options(args)

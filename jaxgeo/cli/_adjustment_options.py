@@ -35,7 +35,8 @@ def add_adjustment_options(
     """The options both commands share (see the module docstring); ``tables_required``:
     ``--observations`` must be given (``strip`` finds its tables beside ``strip.json``)."""
     from ..lsq import DEFAULT_SOLVER, LOSSES
-    from ._common import add_dem_options, add_json, add_quiet
+    from ._common import add_json, add_quiet
+    from ._inputs import add_dem_options
 
     where = "" if tables_required else " (default: the one beside STRIP)"
     parser.add_argument("--observations", required=tables_required, metavar="OBS.csv",
@@ -92,7 +93,7 @@ def add_adjustment_options(
 def check_adjustment_options(args: argparse.Namespace) -> None:
     """Every shared option in range, before any file is read (errors name the options)."""
     from . import CommandError
-    from ._common import check_dem_options
+    from ._inputs import check_dem_options
 
     check_dem_options(args)
     if args.dem_offset_m and not args.dem:
@@ -147,7 +148,8 @@ def tie_dem(args: argparse.Namespace):
     """The :class:`~jaxgeo.io.DEM` of ``--dem`` (``--dem-height``, ``--geoid``, then
     ``--dem-offset-m`` added), ``None`` without one."""
     from . import CommandError
-    from ._common import note, open_dem
+    from ._common import note
+    from ._inputs import open_dem
 
     dem = open_dem(args)
     if dem is not None and args.dem_offset_m:

@@ -37,7 +37,8 @@ OPTIONS = {
 
 
 def register(sub) -> None:
-    from ._common import add_command, add_height_options, add_json, add_out, add_quiet
+    from ._common import add_command, add_json, add_out, add_quiet
+    from ._inputs import add_height_options
 
     parser = add_command(
         sub,
@@ -92,13 +93,13 @@ def run(args: argparse.Namespace) -> int:
     from ._common import (
         EXIT_NOT_CONVERGED,
         EXIT_OK,
-        check_height_options,
         guard_outputs,
         name_options,
         note,
         ours,
         print_json,
     )
+    from ._inputs import check_height_options
 
     check_height_options(args)
     inputs = [args.dsm, args.ref] + ([args.mask] if args.mask else [])

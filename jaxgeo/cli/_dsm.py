@@ -26,25 +26,18 @@ from __future__ import annotations
 import argparse
 import re
 
-from ._common import (
-    add_command,
+from ._common import add_command, add_json, add_out, add_quiet, guard_outputs, print_json
+from ._inputs import (
     add_dem_options,
     add_heights,
     add_image_options,
-    add_json,
-    add_out,
-    add_quiet,
-    add_tile_options,
     check_dem_options,
     check_roi,
-    check_tile_options,
     dem_inputs,
-    guard_outputs,
     open_dem,
     open_images,
-    print_json,
-    tiles_kept,
 )
+from ._tile_options import add_tile_options, check_tile_options, tiles_kept
 
 MAX_CELLS = 400_000_000
 """Largest DSM (cells) made without ``--max-cells``: 20 000 x 20 000 (``jaxgeo.stereo.MAX_CELLS``;

@@ -20,22 +20,16 @@ import contextlib
 import math
 import sys
 
-from ._common import (
-    add_command,
+from ._common import add_command, add_json, add_out, add_quiet, guard_outputs, note, print_json
+from ._inputs import (
     add_dem_options,
     add_heights,
     add_image_options,
-    add_json,
-    add_out,
-    add_quiet,
     check_dem_options,
     check_roi,
     dem_inputs,
-    guard_outputs,
-    note,
     open_dem,
     open_images,
-    print_json,
 )
 
 

@@ -22,15 +22,9 @@ import pathlib
 import sys
 import warnings
 
-from ._common import (
-    add_command,
-    add_image_options,
-    add_json,
-    add_out,
-    add_quiet,
-    add_tile_options,
-    ours,
-)
+from ._common import add_command, add_json, add_out, add_quiet, ours
+from ._inputs import add_image_options
+from ._tile_options import add_tile_options
 
 
 def register(sub) -> None:
@@ -156,7 +150,9 @@ def _run(args: argparse.Namespace) -> int:
     from jaxgeo.ortho import orthorectify, plan_ortho
     from jaxgeo.tiles import TileError, write_plan
 
-    from ._common import check_tile_options, note, open_images, print_json, tiles_kept
+    from ._common import note, print_json
+    from ._inputs import open_images
+    from ._tile_options import check_tile_options, tiles_kept
 
     (image,) = open_images([args.image], args)
     dem = read_dem(args.dem, height=args.dem_height, geoid=args.geoid)

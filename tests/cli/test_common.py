@@ -48,7 +48,7 @@ def test_an_unknown_image_is_refused_with_the_names_accepted():
     import pytest
 
     from jaxgeo.cli import CommandError
-    from jaxgeo.cli._common import _by_image
+    from jaxgeo.cli._inputs import _by_image
 
     images = ["data/left.tif", "data/right.tif"]
     for key in ("data/left.tif", "left.tif", "left"):
