@@ -27,8 +27,9 @@ from jaxtyping import Array, ArrayLike, Bool, Float, Int
 
 from ._runtime.kept import kept
 from .geodesy import metres_per_unit
-from .lsq import inv3_spd
-from .models import AbstractSensorModel, newton_root
+from .lsq.internal import inv3_spd
+from .models import AbstractSensorModel
+from .models.internal import newton_root
 
 INTERSECT_ATOL_M = 1e-9
 """The Newton iteration stops at a step this small (m), or after ``max_steps``."""

@@ -20,7 +20,7 @@ API_NAMES = {
     "lsq": ("solve", "solve_batch", "Problem", "SolverConfig", "Solution", "RESULTS"),
     "intersect": ("intersect", "IntersectResult"),
     "io": ("read_rpc", "read_dem", "read_observations"),
-    "bundle": ("adjust", "AdjustResult", "prepare", "snoop", "make_result"),
+    "bundle": ("adjust", "AdjustResult", "prepare", "adjust_files", "AdjustSettings"),
     "strip": ("adjust_strip", "StripConfig"),
     "ortho": ("orthorectify", "OrthoReport"),
     "stereo": ("dsm_from_images", "stereo_pair", "DSMGrid"),

@@ -103,3 +103,55 @@ def test_no_module_over_500_lines_without_a_reason():
         if n > MAX_LINES and REASON_MARK not in text[:2000]:
             too_long.append(f"{path.relative_to(REPO)} ({n} lines)")
     assert not too_long, f"modules over {MAX_LINES} lines without a reason at the top: {too_long}"
+
+
+PACKAGES = sorted(
+    p.parent.name for p in (REPO / "jaxgeo").glob("[!_]*/__init__.py") if p.parent.name != "cli"
+)
+
+
+def _reexports(path: pathlib.Path) -> set[str]:
+    """The names a module re-exports one by one (``from ._x import y as y``)."""
+    return {
+        alias.asname
+        for node in ast.parse(path.read_text()).body
+        if isinstance(node, ast.ImportFrom) and node.level == 1
+        for alias in node.names
+        if alias.asname == alias.name
+    }
+
+
+@pytest.mark.parametrize("package", PACKAGES)
+def test_public_api_is_what_the_init_reexports(package):
+    """A package's public names are exactly the names its ``__init__`` re-exports from its
+    private modules (nothing leaks from an import), and none is also in its ``internal`` module."""
+    module = importlib.import_module(f"jaxgeo.{package}")
+    public = {
+        n
+        for n in vars(module)
+        if not n.startswith("_") and not isinstance(getattr(module, n), types.ModuleType)
+    }
+    assert public == _reexports(REPO / "jaxgeo" / package / "__init__.py")
+    internal = REPO / "jaxgeo" / package / "internal.py"
+    if internal.exists():
+        assert not public & _reexports(internal), public & _reexports(internal)
+
+
+@pytest.mark.parametrize(
+    "package", [p for p in PACKAGES if (REPO / "jaxgeo" / p / "internal.py").exists()]
+)
+def test_internal_names_serve_other_packages(package):
+    """``jaxgeo.<package>.internal`` holds the stages other jaxgeo packages use, not the user API:
+    each of its names is imported by another package of jaxgeo (else it is private to its module,
+    or public)."""
+    names = _reexports(REPO / "jaxgeo" / package / "internal.py")
+    used = set()
+    for path in (REPO / "jaxgeo").rglob("*.py"):
+        if path.is_relative_to(REPO / "jaxgeo" / package):
+            continue
+        for node in ast.walk(ast.parse(path.read_text())):
+            if isinstance(node, ast.ImportFrom) and (node.module or "").endswith(
+                f"{package}.internal"
+            ):
+                used |= {a.name for a in node.names}
+    assert names <= used, f"jaxgeo.{package}.internal: not used by another package: {names - used}"

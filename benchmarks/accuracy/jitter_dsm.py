@@ -315,7 +315,7 @@ def main() -> None:
     args = parser.parse_args()
 
     import jaxgeo
-    from jaxgeo.io import atomic_write_text
+    from jaxgeo.io.internal import atomic_write_text
     from jaxgeo.simulate import StereoSceneSettings, stereo_scene
 
     t0 = time.perf_counter()

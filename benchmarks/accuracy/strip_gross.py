@@ -45,7 +45,8 @@ def main() -> None:
     from jaxgeo.io import Observations
     from jaxgeo.simulate import Carto2SStripSettings, carto2s_strip
     from jaxgeo.simulate._gross import flag_scores
-    from jaxgeo.strip import STRIP_SOLVER, Strip, StripConfig, TieConfig, adjust_strip
+    from jaxgeo.strip import Strip, StripConfig, TieConfig, adjust_strip
+    from jaxgeo.strip._config import STRIP_SOLVER
     from jaxgeo.strip._level1 import level1_input
 
     warnings.simplefilter("ignore")

@@ -68,7 +68,8 @@ def run(n_scenes: int, ties: int, repeat: int) -> dict:
 
     from benchmarks.peers.strip_synth import make_problem
     from jaxgeo.bundle import AdjustSettings, adjust, prepare
-    from jaxgeo.lsq import describe, solve
+    from jaxgeo.lsq import solve
+    from jaxgeo.lsq.internal import describe
 
     problem = make_problem(n_scenes, ties)
     models, obs, ground, initial = to_jaxgeo(problem)

@@ -31,16 +31,10 @@ import jaxgeo
 from benchmarks.harness import best_of, emit
 from jaxgeo.bundle import prepare
 from jaxgeo.io import read_ground, read_observations, read_rpc
-from jaxgeo.lsq import (
-    LOSSES,
-    RESULTS,
-    SolverConfig,
-    default_chunk,
-    solve,
-    solve_batch,
-    with_xy_batch,
-)
-from jaxgeo.models import BIAS_KINDS, Biased
+from jaxgeo.lsq import LOSSES, RESULTS, SolverConfig, solve, solve_batch, with_xy_batch
+from jaxgeo.lsq._batch import default_chunk
+from jaxgeo.models import Biased
+from jaxgeo.models.internal import BIAS_KINDS
 from jaxgeo.simulate import demo_dir
 
 solve_jit = eqx.filter_jit(solve)

@@ -37,7 +37,7 @@ from benchmarks.data import PLEIADES_TIF as TIF
 from benchmarks.harness import best_time, emit, ratio_vs, repeats_for
 from benchmarks.peers import rpc as rpc_peers
 from jaxgeo.io import from_rasterio_rpc
-from jaxgeo.models import monomials
+from jaxgeo.models.internal import monomials
 
 
 def numpy_project(v: dict, ground: np.ndarray) -> np.ndarray:

@@ -73,7 +73,7 @@ def _only_group(res):
 
 def _status(sol) -> str:
     """The level-1 solve's outcome in words (``converged``, ``singular normal equations``...)."""
-    from jaxgeo.lsq import describe
+    from jaxgeo.lsq.internal import describe
 
     return describe(sol.result)[1]
 
@@ -182,14 +182,15 @@ def least_squares_solver():
     measures)."""
     import dataclasses
 
-    from jaxgeo.strip import STRIP_SOLVER
+    from jaxgeo.strip._config import STRIP_SOLVER
 
     return dataclasses.replace(STRIP_SOLVER, loss="l2", remove_blunders=False)
 
 
 def run_jaxgeo(strip, ties: int, repeat: int):
     """``adjust_strip`` once (compilation), then the best of ``repeat`` compiled calls."""
-    from jaxgeo.strip import StripConfig, TieConfig, adjust_strip, time_two_level
+    from jaxgeo.strip import StripConfig, TieConfig, adjust_strip
+    from jaxgeo.strip._batch import time_two_level
 
     t0 = time.perf_counter()
     config = StripConfig(ties=TieConfig(per_pair=ties), solver=least_squares_solver())

@@ -22,8 +22,10 @@ import jax
 import numpy as np
 
 from ..io import GroundPoints, Observations
-from ..lsq import DEFAULT_SOLVER, SolverConfig
-from ..models import BIAS_KINDS, AbstractBias, AbstractSensorModel, Biased, JitterBias
+from ..lsq import SolverConfig
+from ..lsq.internal import DEFAULT_SOLVER
+from ..models import AbstractBias, AbstractSensorModel, Biased, JitterBias
+from ..models.internal import BIAS_KINDS
 from ._prepare import prepare
 from ._result import AdjustResult, make_result
 from ._settings import DEFAULT_JITTER, DEFAULT_SETTINGS, AdjustSettings, JitterSettings

@@ -12,7 +12,8 @@ import equinox as eqx
 import jax.numpy as jnp
 import numpy as np
 
-from ..lsq import Band, Problem, blocks_at, initial_unknowns, reduced_system, unit_scales
+from ..lsq import Band, Problem, blocks_at, initial_unknowns, unit_scales
+from ..lsq.internal import reduced_system
 
 SINGULAR_RTOL = 1e-10
 """Eigenvalues below this fraction of the largest (after unit-diagonal scaling) are zero."""

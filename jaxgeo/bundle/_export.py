@@ -19,7 +19,7 @@ from typing import Any, NamedTuple
 import jax
 import numpy as np
 
-from ..io import (
+from ..io.internal import (
     atomic_output,
     format_rpc_txt,
     image_stem,
@@ -316,7 +316,7 @@ def _same_file(a: pathlib.Path, b: str | os.PathLike) -> bool:
 
 def _refuse_crop_copies(images: Mapping[str, str | os.PathLike]) -> None:
     """A copy of a crop would carry its frame and an RPC already in the crop's pixels."""
-    from ..io import detect_rpc_format, pixel_frame
+    from ..io.internal import detect_rpc_format, pixel_frame
 
     for name, path in images.items():
         if detect_rpc_format(path) == "raster" and pixel_frame(path) != (0.0, 0.0):

@@ -24,16 +24,10 @@ from typing import Any
 import numpy as np
 
 from .._runtime.kept import beside_solve
-from ..io import (
-    DEM,
-    SensorImage,
-    detect_rpc_format,
-    open_image,
-    read_ground,
-    read_observations,
-    table_lines,
-)
-from ..lsq import DEFAULT_SOLVER, SolverConfig
+from ..io import DEM, SensorImage, open_image, read_ground, read_observations
+from ..io.internal import detect_rpc_format, table_lines
+from ..lsq import SolverConfig
+from ..lsq.internal import DEFAULT_SOLVER
 from ._adjustment import BIAS_CHOICES, adjust, bias_prior_sigma, with_bias
 from ._export import RPCOutputs, write_outputs
 from ._prepare.checks import Sources

@@ -15,16 +15,8 @@ from typing import Any
 import numpy as np
 
 from ..io import GroundPoints, Observations
-from ..lsq import (
-    DEFAULT_SOLVER,
-    INFLATION_MAX,
-    RESULTS,
-    Band,
-    Solution,
-    SolverConfig,
-    describe,
-    undetermined_unknowns,
-)
+from ..lsq import RESULTS, Band, Solution, SolverConfig
+from ..lsq.internal import DEFAULT_SOLVER, INFLATION_MAX, describe, undetermined_unknowns
 from ._diagnose import directions, explain, undetermined
 from ._errors import S0_WARN, NotConvergedWarning, PoorFitWarning, SingularNormalEquations
 from ._prepare import Prepared

@@ -35,15 +35,8 @@ import jax.numpy as jnp
 import numpy as np
 
 from .._runtime.arrays import device_array
-from ..lsq import (
-    BLUNDER_K,
-    DEFAULT_SOLVER,
-    RESULTS,
-    Solution,
-    SolverConfig,
-    initial_unknowns,
-    solve_kept,
-)
+from ..lsq import RESULTS, Solution, SolverConfig, initial_unknowns, solve_kept
+from ..lsq.internal import BLUNDER_K, DEFAULT_SOLVER
 from ._prepare import Prepared
 from ._prepare.checks import listing
 from ._report import enu_errors as enu

@@ -59,7 +59,8 @@ EXIT_CODES = {
 
 
 def register(sub) -> None:
-    from ..bundle import BIAS_CHOICES, JitterSettings
+    from ..bundle import JitterSettings
+    from ..bundle.internal import BIAS_CHOICES
     from ._adjustment_options import add_adjustment_options
     from ._common import add_command
     from ._inputs import add_image_options
@@ -113,7 +114,7 @@ def _images(specs: list[str]) -> dict[str, str]:
 def open_named_images(args: argparse.Namespace) -> dict:
     """Image name -> :class:`~jaxgeo.io.SensorImage` from ``--image``, ``--model`` and
     ``--image-origin`` (their IMG: the image name of ``--image``, its file name or stem)."""
-    from ..bundle import sensor_image
+    from ..bundle.internal import sensor_image
     from . import CommandError
     from ._inputs import image_settings
 
@@ -142,8 +143,9 @@ def open_named_images(args: argparse.Namespace) -> dict:
 
 def run(args: argparse.Namespace) -> int:
     from .. import bundle
-    from ..bundle import AdjustSettings, JitterSettings, check_out_dir, image_inputs
-    from ..lsq import DEFAULT_SOLVER
+    from ..bundle import AdjustSettings, JitterSettings
+    from ..bundle.internal import check_out_dir, image_inputs
+    from ..lsq.internal import DEFAULT_SOLVER
     from . import _adjustment_options as shared
     from ._common import note, print_json
     from ._inputs import dem_inputs

@@ -34,7 +34,8 @@ def add_adjustment_options(
 ) -> None:
     """The options both commands share (see the module docstring); ``tables_required``:
     ``--observations`` must be given (``strip`` finds its tables beside ``strip.json``)."""
-    from ..lsq import DEFAULT_SOLVER, LOSSES
+    from ..lsq import LOSSES
+    from ..lsq.internal import DEFAULT_SOLVER
     from ._common import add_json, add_quiet
     from ._inputs import add_dem_options
 

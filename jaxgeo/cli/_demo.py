@@ -14,7 +14,7 @@ import dataclasses
 
 
 def register(sub) -> None:
-    from ..models import BIAS_KINDS
+    from ..models.internal import BIAS_KINDS
     from ._common import add_command, add_json, add_quiet
 
     parser = add_command(
@@ -39,7 +39,8 @@ def run(args: argparse.Namespace) -> int:
     import json
     import time
 
-    from ..bundle import adjust_files, format_reports
+    from ..bundle import adjust_files
+    from ..bundle.internal import format_reports
     from ..simulate import demo_dir
 
     folder = demo_dir()

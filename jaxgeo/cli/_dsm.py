@@ -139,7 +139,8 @@ def run(args: argparse.Namespace) -> int:
         inputs = [p for im in images for p in im.inputs] + dem_inputs(args)
         orientation = None
         if args.orientation is not None:
-            from ..stereo import OrientationError, orientation_covariances
+            from ..stereo import OrientationError
+            from ..stereo.internal import orientation_covariances
 
             inputs.append(args.orientation)
             try:

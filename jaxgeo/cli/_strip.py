@@ -72,8 +72,9 @@ FLAGS = {
 
 
 def register(sub) -> None:
-    from ..models import BIAS_KINDS
-    from ..strip import DEGREES, Level1Config, Level2Config, RefitConfig, TieConfig
+    from ..models.internal import BIAS_KINDS
+    from ..strip import Level1Config, Level2Config, RefitConfig, TieConfig
+    from ..strip.internal import DEGREES
     from ._adjustment_options import add_adjustment_options
     from ._common import add_command
 

@@ -24,7 +24,8 @@ from dataclasses import replace
 
 import numpy as np
 
-from ..io import DEM, atomic_output, refuse_existing
+from ..io import DEM
+from ..io.internal import atomic_output, refuse_existing
 from ._nuth_kaab import (
     Coregistration,
     CoregistrationError,

@@ -9,46 +9,27 @@ centres, ``(0, 0)`` the centre of the first pixel); readers convert vendor conve
 """
 
 # --- other io modules (tables, metadata, ...) re-export below this line ---
-from ._atomic import atomic_output as atomic_output
-from ._atomic import atomic_write_csv as atomic_write_csv
-from ._atomic import atomic_write_text as atomic_write_text
-from ._atomic import refuse_existing as refuse_existing
-from ._atomic import write_bytes as write_bytes
-from ._atomic import write_csv as write_csv
 from ._dem import DEM as DEM
 from ._dem import read_dem as read_dem
-from ._dem_grid import dem_coverage as dem_coverage
 from ._image import ImageError as ImageError
 from ._image import SensorImage as SensorImage
 from ._image import open_image as open_image
-from ._image import outside_domain as outside_domain
-from ._image import pixel_frame as pixel_frame
 from ._metadata import MetadataError as MetadataError
-from ._metadata import SceneMetadata as SceneMetadata
 from ._metadata import read_metadata as read_metadata
 from ._metadata import write_metadata_json as write_metadata_json
 from ._observations import GroundPoints as GroundPoints
 from ._observations import Observations as Observations
 from ._rpc_common import RPCFormatError as RPCFormatError
-from ._rpc_common import vendor_values as vendor_values
-from ._rpc_formats import detect_rpc_format as detect_rpc_format
 from ._rpc_formats import read_rpc as read_rpc
 from ._rpc_gdal import from_rasterio_rpc as from_rasterio_rpc
 from ._rpc_gdal import to_rasterio_rpc as to_rasterio_rpc
 from ._rpc_gdal import write_geotiff_rpc as write_geotiff_rpc
 from ._rpc_geom_dimap import write_dimap_rpc as write_dimap_rpc
 from ._rpc_geom_dimap import write_ossim_geom as write_ossim_geom
-from ._rpc_keys import RPC_KEYS as RPC_KEYS
-from ._rpc_place import image_stem as image_stem
-from ._rpc_place import plan_rpc_outputs as plan_rpc_outputs
-from ._rpc_place import sidecar_name as sidecar_name
-from ._rpc_place import write_rpc_outputs as write_rpc_outputs
-from ._rpc_text import format_rpc_txt as format_rpc_txt
 from ._rpc_text import write_rpb as write_rpb
 from ._rpc_text import write_rpc_text as write_rpc_text
 from ._tables import TableError as TableError
 from ._tables import read_ground as read_ground
 from ._tables import read_observations as read_observations
-from ._tables import table_lines as table_lines
 from ._tables import write_ground as write_ground
 from ._tables import write_observations as write_observations

@@ -50,8 +50,8 @@ from typing import Any
 import numpy as np
 
 from ..errors import JaxgeoError
-from ..models import SCENE_FLOAT_FIELDS
 from ..models import SceneMetadata as SceneMetadata
+from ..models.internal import SCENE_FLOAT_FIELDS
 from ._atomic import atomic_write_text
 
 CORNER_NAMES = ("ul", "ur", "lr", "ll")

@@ -20,7 +20,8 @@ from collections.abc import Callable, Mapping, Sequence
 import numpy as np
 
 from ..errors import JaxgeoError
-from ..models import RPC, TermOrder, check_rpc
+from ..models import RPC
+from ..models.internal import TermOrder, check_rpc
 from ._rpc_keys import COEFFS, N_TERMS, SCALARS, KeyStyle
 
 Lookup = Callable[[str], tuple[str, str] | None]

@@ -23,7 +23,8 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
-from ..models import RPC, monomials
+from ..models import RPC
+from ..models.internal import monomials
 from ._atomic import atomic_write_text
 from ._rpc_common import fmt, vendor_values
 from ._rpc_keys import N_TERMS, STYLES, vendor_items

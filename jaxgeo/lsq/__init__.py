@@ -5,13 +5,14 @@ ground observations, ground points) and returns a :class:`Solution` (unknowns, c
 residuals, s0, :class:`RESULTS`); it is jittable, vmappable and differentiable (the implicit
 derivative of the M-estimate). ``solve_batch`` adjusts many problems of one structure in one
 call. Pure arrays in and out: the host-side workflow (tables, checks, names, reports, files) is
-:mod:`jaxgeo.bundle`, which, like :mod:`jaxgeo.strip`, imports only the names below.
+:mod:`jaxgeo.bundle`, which, like :mod:`jaxgeo.strip`, imports only the names below and the
+engine's stages in :mod:`jaxgeo.lsq.internal` (not the user API).
 
 How the pieces fit (optimistix' pattern: settings, state and solution apart):
 
 - :class:`Problem` (with :class:`ModelGroup`, :class:`ImageObs`, :class:`GroundObs`) holds the
   arrays; :func:`make_structure` the index arrays of who observes what.
-- :class:`SolverConfig` the settings (method, loss, tolerances); :data:`DEFAULT_SOLVER`.
+- :class:`SolverConfig` the settings (method, loss, tolerances).
 - :class:`StructuredGaussNewton`, an ``optimistix.AbstractLeastSquaresSolver`` whose steps
   eliminate the 3x3 point blocks (Schur complement; block-banded for strips) and whose
   robust losses are a reweighting phase of the same solve.
@@ -19,24 +20,15 @@ How the pieces fit (optimistix' pattern: settings, state and solution apart):
 """
 
 from ._band import Band as Band
-from ._batch import default_chunk as default_chunk
 from ._batch import solve_batch as solve_batch
 from ._batch import solve_batch_distributed as solve_batch_distributed
-from ._batch import stack_problems as stack_problems
 from ._batch import with_xy_batch as with_xy_batch
-from ._config import BLUNDER_K as BLUNDER_K
-from ._config import DEFAULT_SOLVER as DEFAULT_SOLVER
 from ._config import LOSSES as LOSSES
 from ._config import SolverConfig as SolverConfig
-from ._covariance import INFLATION_MAX as INFLATION_MAX
 from ._covariance import Covariance as Covariance
 from ._covariance import cofactors as cofactors
-from ._covariance import undetermined_unknowns as undetermined_unknowns
-from ._factor import inv3_spd as inv3_spd
 from ._lm import StructuredGaussNewton as StructuredGaussNewton
-from ._loss import irls_weights as irls_weights
 from ._loss import rho as rho
-from ._observations import GroundFrame as GroundFrame
 from ._observations import GroundObs as GroundObs
 from ._observations import ImageObs as ImageObs
 from ._problem import ModelGroup as ModelGroup
@@ -45,8 +37,6 @@ from ._problem import Structure as Structure
 from ._problem import make_structure as make_structure
 from ._residuals import residuals as residuals
 from ._results import RESULTS as RESULTS
-from ._results import describe as describe
-from ._schur import reduced_system as reduced_system
 from ._solve import Solution as Solution
 from ._solve import blocks_at as blocks_at
 from ._solve import initial_unknowns as initial_unknowns

@@ -1,13 +1,9 @@
 """Sensor models: each an equinox Module with ``project`` and ``localize`` (:mod:`._base`)."""
 
-from ._affine3d import COPLANAR_RTOL as COPLANAR_RTOL
 from ._affine3d import Affine3D as Affine3D
 from ._base import AbstractMultiImageModel as AbstractMultiImageModel
 from ._base import AbstractSensorModel as AbstractSensorModel
-from ._base import nothing as nothing
-from ._bias import BIAS_KINDS as BIAS_KINDS
 from ._bias import AbstractBias as AbstractBias
-from ._bias import AbstractLinearBias as AbstractLinearBias
 from ._bias import AffineBias as AffineBias
 from ._bias import Biased as Biased
 from ._bias import ShiftBias as ShiftBias
@@ -17,24 +13,14 @@ from ._dem import DEMGrid as DEMGrid
 from ._dem import DEMStatus as DEMStatus
 from ._dem import localize_on_dem as localize_on_dem
 from ._ephemeris import EphemerisModel as EphemerisModel
-from ._ephemeris import gmst_rad as gmst_rad
 from ._jitter import JitterBias as JitterBias
-from ._kepler import KeplerCamera as KeplerCamera
-from ._kepler import KeplerImage as KeplerImage
 from ._kepler import KeplerSequence as KeplerSequence
-from ._metadata import SCENE_FLOAT_FIELDS as SCENE_FLOAT_FIELDS
 from ._metadata import SceneMetadata as SceneMetadata
-from ._newton import NewtonSolution as NewtonSolution
-from ._newton import newton_root as newton_root
 from ._pushbroom import GenericPushbroom as GenericPushbroom
 from ._rpc import RPC as RPC
-from ._rpc import TermOrder as TermOrder
-from ._rpc import check_rpc as check_rpc
-from ._rpc import monomials as monomials
 from ._rpc_fit import RPCFitReport as RPCFitReport
 from ._rpc_fit import fit_rpc as fit_rpc
 from ._rpc_fit import fit_rpcs as fit_rpcs
 from ._rpc_fit import localize_points as localize_points
 from ._rpc_fit import project_points as project_points
 from ._spline import Spline as Spline
-from ._spline import SplineObservations as SplineObservations

@@ -11,7 +11,7 @@ import numpy as np
 from .._runtime.kept import kept, kept_points
 from ..errors import JaxgeoWarning
 from ..geodesy import utm_epsg, utm_zone
-from ..io import dem_coverage
+from ..io.internal import dem_coverage
 
 BATCH = 64
 """Host-side localisations on the DEM run in chunks of ``BATCH`` points (the last one padded):

@@ -20,7 +20,8 @@ import warnings
 import numpy as np
 
 from ..models import AbstractSensorModel, DEMGrid
-from ..tiles import NoData, RasterSpec, Tile, write_tile
+from ..tiles import RasterSpec, Tile
+from ..tiles.internal import NoData, write_tile
 from ._kernel import map_pixels, sample_window
 from ._mapping import map_tile, refine
 from ._occlusion import occluded_pixels
@@ -118,7 +119,7 @@ class OrthoJob:
 
     def dem_window(self, nodes: np.ndarray) -> DEMGrid:
         """The DEM under the nodes' box plus the margin, padded to ``dem_shape``."""
-        from ..io import dem_coverage
+        from ..io.internal import dem_coverage
 
         dem = _open_dem(self.dem)
         ok = np.all(np.isfinite(nodes), axis=-1)

@@ -22,8 +22,10 @@ from collections.abc import Sequence
 import numpy as np
 
 from .._runtime.kept import kept
-from ..io import DEM, SensorImage, open_image, read_dem, refuse_existing
-from ..tiles import RasterSpec, TilePlan, overview_factors, plan_tiles
+from ..io import DEM, SensorImage, open_image, read_dem
+from ..io.internal import refuse_existing
+from ..tiles import RasterSpec, TilePlan, plan_tiles
+from ..tiles.internal import overview_factors
 from ._grid import default_crs, dem_for_image, footprint, ground_sample_distance
 from ._grid import output_grid as make_output_grid
 from ._job import DEMSource, OrthoJob

@@ -8,7 +8,7 @@ import math
 import numbers
 from collections.abc import Sequence
 
-from ..tiles import COMPRESSIONS
+from ..tiles.internal import COMPRESSIONS
 from ._kernel import RESAMPLINGS
 from ._validate import MAX_PIXELS, OrthoError, check_bounds, check_crs, check_res
 

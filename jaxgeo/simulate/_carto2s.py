@@ -36,7 +36,8 @@ import jax.numpy as jnp
 import numpy as np
 
 from ..io import GroundPoints, Observations, write_ground, write_observations
-from ..models import RPC, EphemerisModel, RPCFitReport, fit_rpcs, gmst_rad
+from ..models import RPC, EphemerisModel, RPCFitReport, fit_rpcs
+from ..models.internal import gmst_rad
 from . import _scene as sc
 from ._orbit import (
     CircularOrbit,

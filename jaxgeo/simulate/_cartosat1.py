@@ -22,7 +22,8 @@ import numpy as np
 
 from .. import geodesy
 from ..io import GroundPoints, Observations, write_ground, write_observations
-from ..models import RPC, EphemerisModel, RPCFitReport, fit_rpcs, gmst_rad
+from ..models import RPC, EphemerisModel, RPCFitReport, fit_rpcs
+from ..models.internal import gmst_rad
 from . import _scene as sc
 from ._orbit import (
     CircularOrbit,

@@ -348,7 +348,7 @@ def write_image(image: np.ndarray, path: str | os.PathLike, overwrite: bool = Fa
     import rasterio
     from rasterio.errors import NotGeoreferencedWarning
 
-    from ..io import atomic_output
+    from ..io.internal import atomic_output
 
     rows, cols = image.shape
     profile = dict(driver="GTiff", width=cols, height=rows, count=1, dtype=image.dtype.name,

@@ -20,10 +20,10 @@ import jax.numpy as jnp
 import numpy as np
 
 from .. import geodesy
-from ..bundle import enu_errors  # noqa: F401  (re-used by the scenes' reports)
+from ..bundle.internal import enu_errors  # noqa: F401  (re-used by the scenes' reports)
 from ..errors import JaxgeoError
 from ..intersect import intersect
-from ..io import atomic_write_text
+from ..io.internal import atomic_write_text
 from ..models import RPC, EphemerisModel, localize_points, project_points
 from ..rotations import orbit_frame
 from ._terrain import Terrain

@@ -54,7 +54,8 @@ import warnings
 import numpy as np
 
 from ..geodesy import utm_epsg, utm_zone
-from ..io import atomic_output, to_rasterio_rpc
+from ..io import to_rasterio_rpc
+from ..io.internal import atomic_output
 from ..models import RPC, AbstractSensorModel, EphemerisModel
 from . import _scene as sc
 from ._scene import SimulationError

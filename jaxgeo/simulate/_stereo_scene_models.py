@@ -37,8 +37,9 @@ import numpy as np
 from jaxtyping import Array, ArrayLike, Float, PyTree
 
 from .. import geodesy
-from ..models import RPC, AbstractSensorModel, EphemerisModel, RPCFitReport, fit_rpcs, gmst_rad
-from ..models import nothing as _nothing
+from ..models import RPC, AbstractSensorModel, EphemerisModel, RPCFitReport, fit_rpcs
+from ..models.internal import gmst_rad
+from ..models.internal import nothing as _nothing
 from . import _scene as sc
 from ._orbit import (
     CircularOrbit,

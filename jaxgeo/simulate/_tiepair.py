@@ -23,14 +23,8 @@ import shutil
 import numpy as np
 
 from ..geodesy import metres_per_unit
-from ..io import (
-    GroundPoints,
-    Observations,
-    atomic_write_text,
-    read_rpc,
-    write_ground,
-    write_observations,
-)
+from ..io import GroundPoints, Observations, read_rpc, write_ground, write_observations
+from ..io.internal import atomic_write_text
 from ..models import AffineBias, Biased, localize_points, project_points
 from . import _scene as sc
 from ._demo import demo_dir

@@ -28,7 +28,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from ..geodesy import utm_epsg, utm_zone
-from ..io import atomic_output
+from ..io.internal import atomic_output
 from ._uncertainty import cell_sigma
 
 MAX_HOLE_M = 4.0

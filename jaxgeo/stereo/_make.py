@@ -22,15 +22,8 @@ from collections.abc import Sequence
 import numpy as np
 
 from ..io import SensorImage, open_image
-from ..tiles import (
-    DEFAULT_TILES,
-    EmptyProduct,
-    TileError,
-    TileSettings,
-    TileStats,
-    WorkerPool,
-    make_product,
-)
+from ..tiles import EmptyProduct, TileError, TileSettings, TileStats, make_product
+from ..tiles.internal import DEFAULT_TILES, WorkerPool
 from ._report import DSMReport
 from ._settings import DEFAULT_DSM, DSMSettings, DSMSettingsError
 from ._tiled import TILED_MIN_PX, DSMSetup, dsm_workers, plan_dsm

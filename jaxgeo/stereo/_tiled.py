@@ -34,16 +34,8 @@ from collections.abc import Sequence
 import numpy as np
 
 from ..models import AbstractSensorModel
-from ..tiles import (
-    NoData,
-    RasterSpec,
-    Tile,
-    TilePlan,
-    cores,
-    overview_factors,
-    plan_tiles,
-    write_tile,
-)
+from ..tiles import RasterSpec, Tile, TilePlan, plan_tiles
+from ..tiles.internal import NoData, cores, overview_factors, write_tile
 from ._dsm import DSM_BANDS, local_utm_epsg, rasterize, to_map
 from ._pipeline import _height_offsets, _spacing, dsm_from_images, image_size, stereo_pair
 from ._settings import DEFAULT_DSM, DSMSettings

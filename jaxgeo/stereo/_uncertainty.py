@@ -45,7 +45,7 @@ import numpy as np
 
 from ..errors import JaxgeoError
 from ..geodesy import metres_per_unit
-from ..lsq import inv3_spd
+from ..lsq.internal import inv3_spd
 from ..models import AbstractSensorModel
 
 CHUNK = 65536

@@ -29,10 +29,13 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
-from ..bundle import AdjustmentError, AdjustResult, Prepared, make_result, prepare, snoop, with_bias
+from ..bundle import AdjustmentError, AdjustResult, Prepared, prepare, with_bias
+from ..bundle.internal import make_result, snoop
 from ..io import GroundPoints, Observations
-from ..lsq import DEFAULT_SOLVER, SolverConfig
-from ..models import BIAS_KINDS, localize_points
+from ..lsq import SolverConfig
+from ..lsq.internal import DEFAULT_SOLVER
+from ..models import localize_points
+from ..models.internal import BIAS_KINDS
 from ._config import StripConfig
 from ._delivery import Strip
 from ._distribution import check_gcp_distribution

@@ -19,7 +19,7 @@ import equinox as eqx
 import numpy as np
 
 from ..lsq import SolverConfig
-from ..models import BIAS_KINDS
+from ..models.internal import BIAS_KINDS
 from ._errors import ConfigError, Setting
 from ._universal import N_TERMS
 

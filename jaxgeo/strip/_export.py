@@ -18,14 +18,8 @@ from typing import Literal
 
 import numpy as np
 
-from ..io import (
-    atomic_write_text,
-    sidecar_name,
-    write_dimap_rpc,
-    write_ossim_geom,
-    write_rpb,
-    write_rpc_text,
-)
+from ..io import write_dimap_rpc, write_ossim_geom, write_rpb, write_rpc_text
+from ..io.internal import atomic_write_text, sidecar_name
 from ._config import RefitConfig
 from ._delivery import Strip
 from ._errors import ConfigError, Setting

@@ -18,7 +18,7 @@ import pathlib
 from collections.abc import Callable
 from typing import Any
 
-from ..bundle import probe_folder
+from ..bundle.internal import probe_folder
 from ..io import DEM
 from ._adjustment import adjust_strip
 from ._config import RefitConfig, StripConfig

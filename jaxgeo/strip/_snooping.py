@@ -24,8 +24,9 @@ import dataclasses
 import jax.numpy as jnp
 import numpy as np
 
-from ..bundle import MAX_REMOVED_FRACTION, ROBUST_FRACTION
-from ..lsq import Problem, Solution, SolverConfig, irls_weights
+from ..bundle.internal import MAX_REMOVED_FRACTION, ROBUST_FRACTION
+from ..lsq import Problem, Solution, SolverConfig
+from ..lsq.internal import irls_weights
 from ..models import project_points
 from ._delivery import Strip
 from ._level1 import Level1Input

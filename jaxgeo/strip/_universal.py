@@ -17,7 +17,8 @@ import jax.numpy as jnp
 import numpy as np
 from jaxtyping import Array, ArrayLike, Float, PyTree
 
-from ..models import AbstractSensorModel, nothing
+from ..models import AbstractSensorModel
+from ..models.internal import nothing
 from ._errors import ConfigError, Setting
 
 N_TERMS = {"none": 0, "shift": 1, "affine": 3, "quadratic": 6}

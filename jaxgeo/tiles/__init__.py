@@ -14,35 +14,17 @@ processes, one per core, and a small product's in this process; ``scheduler=`` n
 existing dask cluster (:mod:`._runner` says how to start one).
 """
 
-from ._mosaic import COMPRESSIONS as COMPRESSIONS
 from ._mosaic import RasterSpec as RasterSpec
-from ._mosaic import mosaic_cog as mosaic_cog
-from ._mosaic import overview_factors as overview_factors
-from ._mosaic import write_tile as write_tile
-from ._plan import PLAN_FORMAT as PLAN_FORMAT
 from ._plan import PlanError as PlanError
 from ._plan import Tile as Tile
 from ._plan import TilePlan as TilePlan
 from ._plan import plan_tiles as plan_tiles
 from ._plan import read_plan as read_plan
 from ._plan import write_plan as write_plan
-from ._product import DEFAULT_TILES as DEFAULT_TILES
 from ._product import EmptyProduct as EmptyProduct
 from ._product import ProductRun as ProductRun
 from ._product import TileStats as TileStats
 from ._product import make_product as make_product
-from ._runner import IN_PROCESS_MAX_PX as IN_PROCESS_MAX_PX
-from ._runner import NoData as NoData
 from ._runner import TileError as TileError
-from ._runner import TileResult as TileResult
-from ._runner import TileRun as TileRun
-from ._runner import WorkerPool as WorkerPool
-from ._runner import cores as cores
-from ._runner import prepare_folder as prepare_folder
-from ._runner import remove_work as remove_work
-from ._runner import resolve_workers as resolve_workers
-from ._runner import run_one_tile as run_one_tile
 from ._runner import run_tiles as run_tiles
-from ._runner import work_folder as work_folder
-from ._settings import DEFAULT_RETRIES as DEFAULT_RETRIES
 from ._settings import TileSettings as TileSettings

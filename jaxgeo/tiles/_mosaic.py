@@ -20,7 +20,7 @@ from xml.sax.saxutils import escape
 
 import numpy as np
 
-from ..io import atomic_output
+from ..io.internal import atomic_output
 from ._runner import TileRun
 
 COMPRESSIONS = ("deflate", "zstd", "lzw", "none")

@@ -20,7 +20,7 @@ import pathlib
 from collections.abc import Callable
 
 from ..errors import JaxgeoError
-from ..io import atomic_write_text
+from ..io.internal import atomic_write_text
 
 PLAN_FORMAT = "jaxgeo-tile-plan/1"
 """The ``format`` entry of a plan file (bumped when its layout changes)."""

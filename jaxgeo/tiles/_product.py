@@ -18,7 +18,7 @@ import time
 from collections.abc import Callable, Iterable, Mapping
 
 from ..errors import JaxgeoError
-from ..io import refuse_existing
+from ..io.internal import refuse_existing
 from ._mosaic import RasterSpec, mosaic_cog
 from ._plan import TilePlan, write_plan
 from ._runner import TileRun, WorkerPool, remove_work, run_tiles, work_folder

@@ -53,7 +53,7 @@ import time
 from collections.abc import Callable
 
 from ..errors import JaxgeoError
-from ..io import atomic_output, atomic_write_text
+from ..io.internal import atomic_output, atomic_write_text
 from ._plan import PlanError, Tile, TilePlan, read_plan, write_plan
 from ._settings import DEFAULT_RETRIES, TileSettings
 

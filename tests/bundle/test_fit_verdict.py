@@ -15,11 +15,10 @@ from jaxgeo.bundle import (
     AdjustSettings,
     PoorFitWarning,
     adjust,
-    over_limits,
     prepare,
-    removal_cap,
     with_bias,
 )
+from jaxgeo.bundle._snooping import over_limits, removal_cap
 from jaxgeo.io import read_ground, read_observations, read_rpc
 from jaxgeo.simulate import demo_dir
 

@@ -8,7 +8,8 @@ import pytest
 
 from jaxgeo.bundle import with_bias
 from jaxgeo.bundle._prepare import prepare
-from jaxgeo.lsq import RESULTS, SolverConfig, describe, solve
+from jaxgeo.lsq import RESULTS, SolverConfig, solve
+from jaxgeo.lsq.internal import describe
 from tests.bundle.conftest import make_block
 
 

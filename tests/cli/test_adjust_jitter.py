@@ -15,7 +15,8 @@ import numpy as np
 import pytest
 
 from jaxgeo.cli import main
-from jaxgeo.io import format_rpc_txt, read_rpc
+from jaxgeo.io import read_rpc
+from jaxgeo.io.internal import format_rpc_txt
 from jaxgeo.simulate import StereoSceneSettings, stereo_scene_truth
 from jaxgeo.simulate._stereo_scene_models import localize_on_terrain_exact, project_true
 from jaxgeo.stereo import epipolar_offsets

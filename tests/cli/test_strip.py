@@ -15,7 +15,7 @@ from jaxgeo.cli import main
 from jaxgeo.io import read_ground, read_observations, read_rpc, write_observations
 from jaxgeo.models import AffineBias, Biased
 from jaxgeo.simulate import carto2s_strip
-from jaxgeo.strip import UniversalCorrection, UniversallyCorrected
+from jaxgeo.strip._universal import UniversalCorrection, UniversallyCorrected
 
 NAMES = [f"scene_{k:03d}" for k in range(6)]  # GCPs in scenes 0, 4, 5
 FAST = ["--rpc-grid", "9", "9", "5"]

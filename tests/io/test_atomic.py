@@ -7,7 +7,7 @@ import os
 
 import pytest
 
-from jaxgeo.io import atomic_write_csv
+from jaxgeo.io._atomic import atomic_write_csv
 
 HEADER = ["id", "image", "vx_px"]
 ROWS = [["P1", "left", repr(0.1)], ["P,2", "right", repr(-2.5e-7)], ["P3", 'a "b"', "nan"]]

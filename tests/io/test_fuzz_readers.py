@@ -35,7 +35,7 @@ from jaxgeo.io import (
     write_observations,
     write_rpb,
 )
-from jaxgeo.models import check_rpc
+from jaxgeo.models.internal import check_rpc
 
 REAL = pathlib.Path(__file__).parents[1] / "data" / "real"
 DATA = pathlib.Path(__file__).parent / "data"

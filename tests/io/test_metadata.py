@@ -6,7 +6,8 @@ import pathlib
 import numpy as np
 import pytest
 
-from jaxgeo.io import SceneMetadata, read_metadata, write_metadata_json
+from jaxgeo.io import read_metadata, write_metadata_json
+from jaxgeo.models import SceneMetadata
 
 DATA = pathlib.Path(__file__).parent / "data"
 TEXT = DATA / "cartosat1_stereo_meta.txt"

@@ -15,10 +15,11 @@ import pytest
 from scipy.optimize import brentq
 
 from jaxgeo import RPC, read_rpc
-from jaxgeo.io import RPCFormatError, detect_rpc_format, vendor_values
+from jaxgeo.io import RPCFormatError
 from jaxgeo.io._rpc_json import JSON_STYLES
 from jaxgeo.io._rpc_keys import COEFFS, vendor_items
 from jaxgeo.io._rpc_xml import DimapModelsDisagreeWarning
+from jaxgeo.io.internal import detect_rpc_format, vendor_values
 
 DATA = pathlib.Path(__file__).parent / "data"
 DIMAP_V1 = DATA / "PHRDIMAP_P1BP--2018122638935449CP.XML"

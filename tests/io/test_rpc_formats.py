@@ -20,7 +20,8 @@ from rasterio.rpc import RPC as RasterioRPC
 from rasterio.transform import RPCTransformer
 
 from jaxgeo import RPC, read_rpc, write_geotiff_rpc, write_rpb, write_rpc_text
-from jaxgeo.io import RPCFormatError, detect_rpc_format, to_rasterio_rpc
+from jaxgeo.io import RPCFormatError, to_rasterio_rpc
+from jaxgeo.io.internal import detect_rpc_format
 from jaxgeo.models._rpc import B_TO_A
 
 SCENE = "PHR1B_P_201709281038393_SEN_PRG_FC_178609-001"
@@ -177,7 +178,7 @@ def test_dimap_inverse_model_is_the_projection(real_data, real_rpcs, name):
     rpc = real_rpcs[name]
     ground = cube_points(rpc, n=100)
     image = np.asarray(rpc.project(ground))
-    from jaxgeo.models import monomials
+    from jaxgeo.models.internal import monomials
 
     h_norm = (ground[:, 2] - rpc.ground_offset[2]) / rpc.ground_scale[2]
     norm = np.column_stack([(image - rpc.image_offset) / rpc.image_scale, h_norm])

@@ -13,19 +13,20 @@ import pytest
 import rasterio
 
 from jaxgeo import RPC, read_rpc, write_geotiff_rpc
-from jaxgeo.io import (
-    RPC_KEYS,
-    RPCFormatError,
-    detect_rpc_format,
-    format_rpc_txt,
-    from_rasterio_rpc,
-    to_rasterio_rpc,
-    vendor_values,
-)
+from jaxgeo.io import RPCFormatError, from_rasterio_rpc, to_rasterio_rpc
 from jaxgeo.io._rpc_common import read_coeffs, read_scalars
 from jaxgeo.io._rpc_gdal import read_tiff_rpc_tag
-from jaxgeo.io._rpc_keys import COEFFS, GEOTIFF_TAG_ORDER, N_TERMS, SCALARS, STYLES, vendor_items
+from jaxgeo.io._rpc_keys import (
+    COEFFS,
+    GEOTIFF_TAG_ORDER,
+    N_TERMS,
+    RPC_KEYS,
+    SCALARS,
+    STYLES,
+    vendor_items,
+)
 from jaxgeo.io._rpc_text import format_rpb
+from jaxgeo.io.internal import detect_rpc_format, format_rpc_txt, vendor_values
 from tests.io.test_rpc_formats import _awkward_rpc, assert_same_rpc
 
 COMMA_NL = ",\n"

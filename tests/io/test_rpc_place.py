@@ -12,9 +12,11 @@ import rasterio
 from rasterio.transform import RPCTransformer
 
 from jaxgeo.bundle._export import adjusted_rpc
-from jaxgeo.io import image_stem, plan_rpc_outputs, read_rpc, write_rpc_outputs
+from jaxgeo.io import read_rpc
 from jaxgeo.io._rpc_geom_dimap import fit_direct_model, format_dimap_rpc, format_ossim_geom
-from jaxgeo.models import AffineBias, Biased, ShiftDriftBias, monomials
+from jaxgeo.io.internal import image_stem, plan_rpc_outputs, write_rpc_outputs
+from jaxgeo.models import AffineBias, Biased, ShiftDriftBias
+from jaxgeo.models.internal import monomials
 
 REAL = pathlib.Path(__file__).parents[1] / "data" / "real"
 STEM = "PHR1B_P_201709281038393_SEN_PRG_FC_178609-001"

@@ -5,7 +5,8 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from jaxgeo.io import TableError, read_ground, read_observations, table_lines
+from jaxgeo.io import TableError, read_ground, read_observations
+from jaxgeo.io.internal import table_lines
 
 OBS = """# measured by hand
 id,image,x,y,sigma_px

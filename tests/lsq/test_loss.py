@@ -6,8 +6,8 @@ import jax.numpy as jnp
 import numpy as np
 import pytest
 
-from jaxgeo.lsq import irls_weights
 from jaxgeo.lsq._loss import CURVATURE_FLOOR, curvature_ratio, newton_corrected, robust
+from jaxgeo.lsq.internal import irls_weights
 
 C = 3.0
 

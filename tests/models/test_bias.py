@@ -8,7 +8,7 @@ import pytest
 from jax.test_util import check_grads
 
 from jaxgeo import AffineBias, Biased, ShiftBias, ShiftDriftBias
-from jaxgeo.models import BIAS_KINDS
+from jaxgeo.models.internal import BIAS_KINDS
 from tests.conftest import cube_points
 
 BIASES = {

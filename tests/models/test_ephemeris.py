@@ -11,9 +11,10 @@ import pytest
 from jax.test_util import check_grads
 
 from jaxgeo import geodesy
-from jaxgeo.models import EphemerisModel, gmst_rad
+from jaxgeo.models import EphemerisModel
 from jaxgeo.models import localize_points as localize
 from jaxgeo.models import project_points as project
+from jaxgeo.models.internal import gmst_rad
 from jaxgeo.rotations import angles_from_matrix, omega_phi_kappa
 from jaxgeo.simulate import CircularOrbit, EphemerisSettings, ephemeris_from_orbit
 from jaxgeo.simulate._orbit import ground_track_attitude, sun_synchronous_inclination_deg

@@ -19,9 +19,8 @@ from jaxgeo.models import (
     SceneMetadata,
     ShiftBias,
     ShiftDriftBias,
-    gmst_rad,
-    newton_root,
 )
+from jaxgeo.models.internal import gmst_rad, newton_root
 from jaxgeo.simulate import CircularOrbit, EphemerisSettings, ephemeris_from_orbit
 from jaxgeo.simulate._orbit import sun_synchronous_inclination_deg
 

@@ -16,8 +16,14 @@ import pytest
 import scipy.integrate
 from jax.test_util import check_grads
 
-from jaxgeo.models import KeplerImage, KeplerSequence, SceneMetadata
-from jaxgeo.models._kepler import propagate, propagate_taylor2, taylor_coefficients, taylor_state
+from jaxgeo.models import KeplerSequence, SceneMetadata
+from jaxgeo.models._kepler import (
+    KeplerImage,
+    propagate,
+    propagate_taylor2,
+    taylor_coefficients,
+    taylor_state,
+)
 
 GM = 398600.4415e9
 OMEGA_E = 7.2921151467e-5

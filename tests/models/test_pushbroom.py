@@ -20,8 +20,10 @@ from scipy.interpolate import BSpline
 from scipy.optimize import brentq
 
 from jaxgeo import GenericPushbroom
-from jaxgeo.models import SceneMetadata, Spline, SplineObservations, newton_root
+from jaxgeo.models import SceneMetadata, Spline
 from jaxgeo.models._pushbroom import mounting_rotation
+from jaxgeo.models._spline import SplineObservations
+from jaxgeo.models.internal import newton_root
 from tests.typecheck import unchecked
 
 GM_M3_S2 = 398600.4418e9

@@ -9,10 +9,10 @@ from jaxgeo.models import (
     EphemerisModel,
     fit_rpc,
     fit_rpcs,
-    gmst_rad,
     localize_points,
     project_points,
 )
+from jaxgeo.models.internal import gmst_rad
 from jaxgeo.simulate import CircularOrbit, EphemerisSettings, ephemeris_from_orbit
 from jaxgeo.simulate._orbit import sun_synchronous_inclination_deg
 

@@ -8,7 +8,8 @@ import rasterio
 
 from jaxgeo.io import read_dem
 from jaxgeo.ortho import OrthoSettings, orthorectify, plan_ortho
-from jaxgeo.tiles import NoData, Tile, TileSettings
+from jaxgeo.tiles import Tile, TileSettings
+from jaxgeo.tiles.internal import NoData
 from tests.ortho.conftest import ventoux_dem_ellipsoidal  # noqa: F401
 
 IN_PROCESS = TileSettings(workers=0, progress=False)

@@ -9,7 +9,7 @@ import textwrap
 import pytest
 
 from jaxgeo._runtime import interrupt as _interrupt
-from jaxgeo.io import atomic_output
+from jaxgeo.io.internal import atomic_output
 
 
 @pytest.fixture

@@ -18,9 +18,9 @@ from jaxgeo.simulate import (
     StereoSceneSettings,
     read_stereo_scene,
     stereo_scene,
-    stereo_scene_files,
     stereo_scene_truth,
 )
+from jaxgeo.simulate._stereo_scene import stereo_scene_files
 from jaxgeo.simulate._stereo_scene_models import localize_on_terrain_exact, project_true
 from jaxgeo.simulate._stereo_scene_render import (
     TILE,

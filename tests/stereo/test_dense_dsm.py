@@ -4,17 +4,11 @@ import numpy as np
 import pytest
 import rasterio
 
-from jaxgeo.stereo import (
-    EpipolarGrids,
-    rasterize,
-    refine_disparity,
-    resample_epipolar,
-    sgm_disparity,
-    write_dsm,
-)
+from jaxgeo.stereo import rasterize, sgm_disparity, write_dsm
+from jaxgeo.stereo._dense import refine_disparity, resample_epipolar
 from jaxgeo.stereo._dsm import to_map
 from jaxgeo.stereo._matching import to_uint8
-from jaxgeo.stereo._rectification import node_xy
+from jaxgeo.stereo._rectification import EpipolarGrids, node_xy
 
 
 def _texture(rows, cols, seed=0):

@@ -22,16 +22,13 @@ from jaxgeo.stereo import (
     DSMSettings,
     OrientationError,
     adjustment_covariance,
-    cell_sigma,
-    correlation_sigma_px,
     dsm_from_images,
-    intersection_jacobian,
-    orientation_covariances,
-    point_height_sigmas,
     rasterize,
-    refine_disparity_sigma,
     sigma_calibration,
 )
+from jaxgeo.stereo._dense import correlation_sigma_px, refine_disparity_sigma
+from jaxgeo.stereo._uncertainty import cell_sigma, intersection_jacobian, point_height_sigmas
+from jaxgeo.stereo.internal import orientation_covariances
 
 EPSG = 32631
 

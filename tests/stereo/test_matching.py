@@ -6,7 +6,8 @@ import pytest
 
 from jaxgeo.cli import main
 from jaxgeo.io import read_observations, read_rpc
-from jaxgeo.stereo import epipolar_candidates, epipolar_offsets, guided_matches
+from jaxgeo.stereo import epipolar_offsets, guided_matches
+from jaxgeo.stereo._matching import epipolar_candidates
 
 
 def test_match_agrees_with_s2p_ties(shared_data, tmp_path):

@@ -8,7 +8,9 @@ import pytest
 import rasterio
 
 from jaxgeo.io import read_rpc
-from jaxgeo.stereo import EpipolarGrids, disparity_to_matches, epipolar_grids, triangulate
+from jaxgeo.stereo import epipolar_grids, triangulate
+from jaxgeo.stereo._rectification import EpipolarGrids
+from jaxgeo.stereo._triangulation import disparity_to_matches
 
 LEFT_WINDOW = (5000, 5000, 500, 500)  # left_image.tif: geotransform origin (5000, 5000)
 

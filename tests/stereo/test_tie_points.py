@@ -8,14 +8,10 @@ from rasterio.transform import from_origin
 
 from jaxgeo.io import open_image, read_dem
 from jaxgeo.models import Biased, ShiftBias
-from jaxgeo.stereo import (
-    MatchSettings,
-    TieError,
-    join_ties,
-    sift_features_raster,
-    tie_points,
-    validity_heights,
-)
+from jaxgeo.stereo import MatchSettings, TieError, tie_points
+from jaxgeo.stereo._join import join_ties
+from jaxgeo.stereo._matching import sift_features_raster
+from jaxgeo.stereo._ties import validity_heights
 
 
 def dsm_heights(ground, dsm_path):

@@ -26,7 +26,9 @@ from jaxgeo.stereo import (
     tiled_dsm,
     write_dsm,
 )
-from jaxgeo.tiles import NoData, Tile, TileError, TileSettings, WorkerPool, mosaic_cog, run_tiles
+from jaxgeo.tiles import Tile, TileError, TileSettings, run_tiles
+from jaxgeo.tiles._mosaic import mosaic_cog
+from jaxgeo.tiles.internal import NoData, WorkerPool
 from tests.tiles.test_ortho_tiles import FailOn  # a job failing on one tile
 
 SIZE, SEED, RES, TILE = 400, 3, 0.65, 256
@@ -193,7 +195,8 @@ def test_keep_is_refused_for_a_tiled_dsm(scene, tmp_path, capsys):
 def test_scene_heights_cover_the_terrain(scene):
     """The height range the tiles' windows are projected at holds the truth's heights (and
     stays within the models' validity range)."""
-    from jaxgeo.stereo import los_heights, scene_heights
+    from jaxgeo.stereo import los_heights
+    from jaxgeo.stereo._tiled import scene_heights
 
     folder, models, paths = scene
     lo, hi = scene_heights(models, paths, (0, 0, SIZE, SIZE))
@@ -207,7 +210,8 @@ def test_scene_heights_cover_the_terrain(scene):
 
 def test_default_workers_are_one_per_core_for_several_tiles(monkeypatch):
     """``jaxgeo dsm`` starts its workers before the planning with the rule ``tiled_dsm`` uses."""
-    from jaxgeo.stereo import _tiled, dsm_workers
+    from jaxgeo.stereo import _tiled
+    from jaxgeo.stereo._tiled import dsm_workers
 
     monkeypatch.setattr(_tiled, "cores", lambda: 4)
     assert dsm_workers(None) == 4 and dsm_workers(None, tiles=9) == 4

@@ -7,12 +7,14 @@ import jax.numpy as jnp
 import numpy as np
 import pytest
 
-from jaxgeo.bundle import SingularNormalEquations, make_result
+from jaxgeo.bundle import SingularNormalEquations
+from jaxgeo.bundle.internal import make_result
 from jaxgeo.lsq import RESULTS
 from jaxgeo.lsq import _band as band
 from jaxgeo.lsq._solve import solve_jit
-from jaxgeo.strip import STRIP_SOLVER, UniversalCorrectionWarning, adjust_strip
-from jaxgeo.strip import strip_summary as summary
+from jaxgeo.strip import UniversalCorrectionWarning, adjust_strip
+from jaxgeo.strip._config import STRIP_SOLVER
+from jaxgeo.strip._export import strip_summary as summary
 from tests.strip.conftest import strip_config
 
 

@@ -5,12 +5,8 @@ import warnings
 import numpy as np
 import pytest
 
-from jaxgeo.strip import (
-    GCPDistributionWarning,
-    UniversallyCorrected,
-    check_gcp_distribution,
-    fit_universal_correction,
-)
+from jaxgeo.strip import GCPDistributionWarning, check_gcp_distribution
+from jaxgeo.strip._universal import UniversallyCorrected, fit_universal_correction
 from tests.conftest import cube_points
 
 

@@ -7,9 +7,10 @@ import numpy as np
 import pytest
 
 from jaxgeo.io import Observations
-from jaxgeo.strip import MeasuredTieWarning, adjust_strip, strip_ties
+from jaxgeo.strip import MeasuredTieWarning, adjust_strip
 from jaxgeo.strip._level1 import level1_input
 from jaxgeo.strip._snooping import gross_checks
+from jaxgeo.strip._ties import strip_ties
 from tests.strip.conftest import TIES, strip_config
 
 GSD_M = 0.65  # Carto-2S, as test_solve

@@ -3,8 +3,8 @@
 import numpy as np
 import pytest
 
-from jaxgeo.strip import SubScene, strip_ties
-from jaxgeo.strip._ties import overlap_lines
+from jaxgeo.strip._delivery import SubScene
+from jaxgeo.strip._ties import overlap_lines, strip_ties
 
 
 def _strip(n=5, rows=1000, step=900, cols=800):

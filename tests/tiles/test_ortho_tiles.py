@@ -19,7 +19,9 @@ import rasterio
 from jaxgeo.cli import main
 from jaxgeo.io import read_dem
 from jaxgeo.ortho import OrthoSettings, plan_ortho
-from jaxgeo.tiles import TileError, TileSettings, WorkerPool, mosaic_cog, run_tiles
+from jaxgeo.tiles import TileError, TileSettings, run_tiles
+from jaxgeo.tiles._mosaic import mosaic_cog
+from jaxgeo.tiles.internal import WorkerPool
 from tests.ortho.conftest import ventoux_dem_ellipsoidal  # noqa: F401  (fixture)
 
 HERE = TileSettings(workers=0, progress=False)

@@ -12,15 +12,14 @@ import rasterio
 
 from jaxgeo.tiles import (
     EmptyProduct,
-    NoData,
     RasterSpec,
     TileError,
     TileSettings,
     TileStats,
     make_product,
     plan_tiles,
-    write_tile,
 )
+from jaxgeo.tiles.internal import NoData, write_tile
 
 SPEC = RasterSpec(1, "float32", float("nan"), "EPSG:32631", (1.0, 0.0, 500_000.0, 0.0, -1.0,
                   5_000_000.0))  # fmt: skip

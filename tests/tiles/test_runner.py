@@ -8,7 +8,8 @@ import pathlib
 import numpy as np
 import pytest
 
-from jaxgeo.tiles import NoData, PlanError, TileError, TileSettings, plan_tiles, run_tiles
+from jaxgeo.tiles import PlanError, TileError, TileSettings, plan_tiles, run_tiles
+from jaxgeo.tiles.internal import NoData
 
 HERE = TileSettings(workers=0, progress=False)
 
@@ -87,7 +88,8 @@ def test_a_folder_of_another_plan_is_refused(tmp_path):
 
 
 def test_small_plans_stay_in_process_by_default():
-    from jaxgeo.tiles import IN_PROCESS_MAX_PX, cores, resolve_workers
+    from jaxgeo.tiles._runner import IN_PROCESS_MAX_PX, resolve_workers
+    from jaxgeo.tiles.internal import cores
 
     small = plan_tiles("demo", 1000, 1000, 256)
     assert resolve_workers(small, None, None) == 0

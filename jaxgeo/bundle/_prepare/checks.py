@@ -14,7 +14,8 @@ from jaxtyping import PyTree
 from ...errors import JaxgeoWarning
 from ...geodesy import metres_per_unit
 from ...io import GroundPoints, Observations
-from ...models import COPLANAR_RTOL, AbstractMultiImageModel, AbstractSensorModel, Affine3D
+from ...models import AbstractMultiImageModel, AbstractSensorModel, Affine3D
+from ...models.internal import COPLANAR_RTOL
 from .._errors import AdjustmentError, TooFewControlPoints
 
 

@@ -1,0 +1,2 @@
+"""Stages of :mod:`jaxgeo.simulate` that other jaxgeo packages use: not the user API (names here
+may change without notice); a user imports from ``jaxgeo.simulate``."""
