@@ -125,6 +125,7 @@ def run(args: argparse.Namespace) -> int:
 def _simulate(args: argparse.Namespace, out, note) -> tuple[dict, list[str]]:
     """Build the settings, make the one library call: ``(the JSON summary, the human lines)``."""
     from .. import simulate as sim
+    from ..simulate.internal import stereo_scene_files
 
     head = {"kind": args.kind, "out": str(out), "seed": args.seed}
     if args.kind == "cartosat1":
@@ -165,7 +166,7 @@ def _simulate(args: argparse.Namespace, out, note) -> tuple[dict, list[str]]:
     vs = {n: info["rpc_vs_truth"][n] for n in info["rpc_vs_truth"]}
     summary = {
         **head,
-        "files": [p.name for p in sim.stereo_scene_files(out)],
+        "files": [p.name for p in stereo_scene_files(out)],
         "size": args.size,
         "gsd_m": info["gsd_m"],
         "base_to_height": info["base_to_height"],

@@ -117,6 +117,7 @@ def strip_config(args: argparse.Namespace, dem=None):
     """The :class:`jaxgeo.strip.StripConfig` and :class:`~jaxgeo.strip.RefitConfig` of the
     arguments (tie heights from ``dem``, a :class:`~jaxgeo.io.DEM`, else ``--tie-height``)."""
     from .. import strip as lib
+    from ..strip.internal import STRIP_SOLVER
     from ._adjustment_options import solver_config
 
     ties = lib.TieConfig(
@@ -132,7 +133,7 @@ def strip_config(args: argparse.Namespace, dem=None):
         bias_prior_shift_px=args.bias_prior_shift_px,
         bias_prior_matrix=args.bias_prior_matrix,
     )
-    solver = solver_config(args, lib.STRIP_SOLVER)
+    solver = solver_config(args, STRIP_SOLVER)
     level2 = lib.Level2Config(args.degree)
     config = lib.StripConfig(ties=ties, level1=level1, level2=level2, solver=solver)
     return config, lib.RefitConfig(grid=tuple(args.rpc_grid))
@@ -150,6 +151,7 @@ def run(args: argparse.Namespace) -> int:
 
 def _run(args: argparse.Namespace) -> int:
     from .. import strip as library
+    from ..strip.internal import REFIT_WARN_PX, worst_refit
     from . import CommandError
     from . import _adjustment_options as shared
     from ._common import print_json
@@ -185,8 +187,8 @@ def _run(args: argparse.Namespace) -> int:
         data = run.write()
     except (OSError, ValueError) as err:
         return start.write_failed(err, run.summary())
-    worst, px = library.worst_refit(data)
-    if px > library.REFIT_WARN_PX:
+    worst, px = worst_refit(data)
+    if px > REFIT_WARN_PX:
         start.warn(f"the refitted RPC of {worst} differs from its adjusted model by up to "
                    f"{px:.3g} px on the check grid")  # fmt: skip
     if args.json:
