@@ -1,12 +1,15 @@
 """``jaxgeo adjust``: bundle block adjustment of RPC images with bias compensation.
 
-    jaxgeo adjust --image NAME=FILE [--image ...] [--model NAME=FILE] [--image-origin NAME=C,R]
+    jaxgeo adjust IMG [IMG ...] | --image NAME=FILE [--image ...] [--model IMG=FILE]
+                  [--image-origin IMG=C,R]
                   --observations OBS.csv [--ground GROUND.csv] [--bias KIND]
                   [--bias-prior-shift-px S --bias-prior-matrix M]
                   [--dem FILE [--dem-height H] [--geoid G] [--dem-offset-m N]]
                   [-o DIR [--overwrite]] [--json] [--quiet]
 
-FILE is the image raster (its RPC in its tags or an .RPB/_RPC.TXT sidecar; ``--model`` names
+The images are named by their file stem (as ``jaxgeo match`` writes them in OBS.csv), as in
+every command, or by ``--image NAME=FILE`` where a name differs from the stem. IMG or FILE is
+the image raster (its RPC in its tags or an .RPB/_RPC.TXT sidecar; ``--model`` names
 another model file, ``--image-origin`` a crop's origin in the model's frame when the raster
 does not carry it; IMG there is the image's name, its file name or its stem) or a model file
 alone. With a raster, every measurement must lie inside it;
@@ -68,9 +71,12 @@ def register(sub) -> None:
     jitter = JitterSettings()
     parser = add_command(sub, "adjust", "bundle block adjustment of RPC images (bias "
                          "compensation)", __doc__, EXIT_CODES)  # fmt: skip
-    parser.add_argument("--image", action="append", required=True, metavar="NAME=FILE",
-                        help="an image name (as in OBS.csv) and its raster (RPC in its tags or "
-                        "sidecar) or model file; repeat per image")  # fmt: skip
+    parser.add_argument("images", nargs="*", metavar="IMG",
+                        help="the images: rasters (RPC in their tags or sidecar) or model "
+                        "files, named by their file stem as in OBS.csv")  # fmt: skip
+    parser.add_argument("--image", action="append", default=[], metavar="NAME=FILE",
+                        help="an image named otherwise than its file stem: its name (as in "
+                        "OBS.csv) and its raster or model file; repeat per image")  # fmt: skip
     add_image_options(parser)
     add_adjustment_options(
         parser,
@@ -97,16 +103,24 @@ def register(sub) -> None:
     parser.set_defaults(func=run)
 
 
-def _images(specs: list[str]) -> dict[str, str]:
+def _images(files: list[str], specs: list[str]) -> dict[str, str]:
+    """Image name -> file: each IMG named by its stem, each ``--image NAME=FILE`` by NAME."""
     from . import CommandError
 
-    out: dict[str, str] = {}
+    named = [(pathlib.Path(f).stem, f, f"image {f}") for f in files]
     for spec in specs:
         name, sep, path = spec.partition("=")
         if not sep or not name or not path:
             raise CommandError(f"--image {spec!r}: expected NAME=FILE (a raster or model file)")
+        named.append((name, path, f"--image {spec}"))
+    if not named:
+        raise CommandError("give the images: IMG ... (named by their file stem) or --image "
+                           "NAME=FILE")  # fmt: skip
+    out: dict[str, str] = {}
+    for name, path, given in named:
         if name in out:
-            raise CommandError(f"--image {name!r} given twice")
+            raise CommandError(f"{given}: image {name!r} given twice (images are named by their "
+                               "file stem; --image NAME=FILE names one otherwise)")  # fmt: skip
         out[name] = path
     return out
 
@@ -118,7 +132,7 @@ def open_named_images(args: argparse.Namespace) -> dict:
     from . import CommandError
     from ._inputs import image_settings
 
-    files = _images(args.image)
+    files = _images(args.images, args.image)
     alias = {
         a: n for n, f in files.items() for a in (f, pathlib.Path(f).name, pathlib.Path(f).stem)
     }

@@ -156,3 +156,26 @@ def test_adjust_writes_rpcs_gdal_finds(scene, tmp_path, capsys):
     data = json.loads(capsys.readouterr().out)
     assert {p.split("/")[-1] for p in data["rpc_files"]["fore"]["files"]} == {"fore.tif"}
     assert not list(out2.glob("*.RPB"))
+
+
+def test_images_named_by_their_file_stem_as_in_every_command(scene, capsys):
+    """``jaxgeo adjust IMG ...`` names each image by its file stem (as ``jaxgeo match`` writes
+    them), the same adjustment as ``--image NAME=FILE``; a stem given twice, or no image at all,
+    is refused naming the option."""
+    tables = ["--ground", str(scene / "ground.csv"), "--observations",
+              str(scene / "observations.csv"), "--bias", "shift", "--json"]  # fmt: skip
+    assert main(_args(scene, "--bias", "shift", "--json")) == 0
+    named = json.loads(capsys.readouterr().out)
+    assert main(["adjust", str(scene / "fore.txt"), str(scene / "aft.txt"), *tables]) == 0
+    positional = json.loads(capsys.readouterr().out)
+    assert positional["s0"] == named["s0"] and positional["images"] == named["images"]
+    # one positional, one named otherwise than its stem (a copy of aft's model)
+    shutil.copy(scene / "aft.txt", scene / "aft_copy.txt")
+    mixed = ["adjust", str(scene / "fore.txt"), "--image", f"aft={scene / 'aft_copy.txt'}"]
+    assert main([*mixed, *tables]) == 0
+    assert json.loads(capsys.readouterr().out)["s0"] == named["s0"]
+    twice = ["adjust", str(scene / "fore.txt"), "--image", f"fore={scene / 'aft.txt'}"]
+    assert main([*twice, *tables]) == 2
+    assert "image 'fore' given twice" in capsys.readouterr().err
+    assert main(["adjust", *tables]) == 2
+    assert "give the images" in capsys.readouterr().err
