@@ -155,3 +155,16 @@ def test_internal_names_serve_other_packages(package):
             ):
                 used |= {a.name for a in node.names}
     assert names <= used, f"jaxgeo.{package}.internal: not used by another package: {names - used}"
+
+
+def test_raster_io_goes_through_io():
+    """Every raster jaxgeo opens or writes is opened by :mod:`jaxgeo.io` (one place for GDAL's
+    options): no ``rasterio.open`` outside it."""
+    found = []
+    for path in sorted((REPO / "jaxgeo").rglob("*.py")):
+        if path.is_relative_to(REPO / "jaxgeo" / "io"):
+            continue
+        for node in ast.walk(ast.parse(path.read_text())):
+            if isinstance(node, ast.Call) and ast.unparse(node.func) == "rasterio.open":
+                found.append(f"{path.relative_to(REPO)}:{node.lineno}")
+    assert not found, f"rasterio.open outside jaxgeo.io: {found}"

@@ -25,7 +25,7 @@ from dataclasses import replace
 import numpy as np
 
 from ..io import DEM
-from ..io.internal import atomic_output, refuse_existing
+from ..io.internal import atomic_output, open_raster, raster_writer, refuse_existing
 from ._nuth_kaab import (
     Coregistration,
     CoregistrationError,
@@ -47,13 +47,12 @@ def _same_file(a: pathlib.Path, b: pathlib.Path) -> bool:
 
 
 def _open(path: pathlib.Path, role: str):
-    import rasterio
     from rasterio.errors import RasterioIOError
 
     if not path.exists():
         raise FileNotFoundError(f"{path}: no such file ({role})")
     try:
-        return rasterio.open(path)
+        return open_raster(path)
     except RasterioIOError as err:
         raise CoregistrationError(f"{path}: cannot read it as a raster ({role}): {err}") from None
 
@@ -231,7 +230,7 @@ def _write_shifted(dsm_path, ds, out, shift_m, overwrite, ref_name) -> None:
     )  # fmt: skip
     dx, dy, dz = shift_m
     sink = atomic_output(out, overwrite=overwrite, suffix=".tif", leftovers=(".aux.xml",))
-    with sink as tmp, rasterio.open(tmp, "w", **profile) as dst:
+    with sink as tmp, raster_writer(tmp, profile) as dst:
         for start in range(0, ds.height, WRITE_ROWS):
             stop = min(start + WRITE_ROWS, ds.height)
             block = _read_rows(ds, start - margin, stop + margin, nodata)

@@ -26,6 +26,7 @@ import numpy as np
 
 from ..errors import JaxgeoError
 from ..models import RPC, AbstractSensorModel, Biased, ShiftBias
+from ._raster import open_raster
 
 
 class ImageError(JaxgeoError, ValueError):
@@ -92,21 +93,12 @@ class SensorImage:
         return message
 
 
-def _quiet_open(path):
-    import rasterio
-    from rasterio.errors import NotGeoreferencedWarning
-
-    with warnings.catch_warnings():
-        warnings.simplefilter("ignore", NotGeoreferencedWarning)
-        return rasterio.open(path)
-
-
 def pixel_frame(path: str | os.PathLike) -> tuple[float, float]:
     """The model pixel ``(col, row)`` of a raster's first pixel read from its geotransform:
     ``(0, 0)`` for none (identity) or a map georeferencing (a CRS); the translation of a
     pixel-space geotransform (unit scale, no rotation, no CRS). Anything else is an
     :class:`ImageError` naming the file."""
-    with _quiet_open(path) as src:
+    with open_raster(path) as src:
         t, crs = src.transform, src.crs
     if crs is not None:
         return (0.0, 0.0)
@@ -155,7 +147,7 @@ def open_image(
         if not raster.is_file():
             raise FileNotFoundError(f"{raster}: no such image file")
         try:
-            with _quiet_open(raster) as src:
+            with open_raster(raster) as src:
                 size = (int(src.width), int(src.height))
         except Exception as err:  # rasterio's RasterioIOError and GDAL's messages
             raise ImageError(f"{raster}: not a raster GDAL can read ({err})") from None

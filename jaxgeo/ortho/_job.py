@@ -19,6 +19,7 @@ import warnings
 
 import numpy as np
 
+from ..io.internal import open_raster
 from ..models import AbstractSensorModel, DEMGrid
 from ..tiles import RasterSpec, Tile
 from ..tiles.internal import NoData, write_tile
@@ -159,17 +160,13 @@ class OrthoJob:
 
     def read_window(self, win) -> np.ndarray:
         """The image window ``(col0, row0, cols, rows)``, zero-padded to ``window_shape``."""
-        import rasterio
-        import rasterio.errors
         from rasterio.windows import Window
 
         c0, r0, cols, rows = win
         wh, ww = self.window_shape
         wh, ww = max(wh, _bucket(rows, 256)), max(ww, _bucket(cols, 256))
-        with warnings.catch_warnings():  # a raster in its own pixel frame: no georeferencing
-            warnings.simplefilter("ignore", rasterio.errors.NotGeoreferencedWarning)
-            with rasterio.open(self.image) as src:
-                data = src.read(window=Window(c0, r0, cols, rows))
+        with open_raster(self.image) as src:  # a raster in its own pixel frame
+            data = src.read(window=Window(c0, r0, cols, rows))
         out = np.zeros((data.shape[0], wh, ww), dtype=data.dtype)
         out[:, :rows, :cols] = data
         return out

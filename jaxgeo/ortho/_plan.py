@@ -16,14 +16,13 @@ import hashlib
 import math
 import os
 import pathlib
-import warnings
 from collections.abc import Sequence
 
 import numpy as np
 
 from .._runtime.kept import kept
 from ..io import DEM, SensorImage, open_image, read_dem
-from ..io.internal import refuse_existing
+from ..io.internal import open_raster, refuse_existing
 from ..tiles import RasterSpec, TilePlan, plan_tiles
 from ..tiles.internal import overview_factors
 from ._grid import default_crs, dem_for_image, footprint, ground_sample_distance
@@ -154,14 +153,9 @@ def plan_ortho(
     out_crs = check_crs(s.crs) if s.crs is not None else None
     box = s.bounds
 
-    import rasterio
-    import rasterio.errors
-
     width, height = sensor.size
-    with warnings.catch_warnings():  # a raster in its own pixel frame: no georeferencing
-        warnings.simplefilter("ignore", rasterio.errors.NotGeoreferencedWarning)
-        with rasterio.open(sensor.path) as src:
-            bands, dtype = src.count, src.dtypes[0]
+    with open_raster(sensor.path) as src:  # a raster in its own pixel frame
+        bands, dtype = src.count, src.dtypes[0]
     model = sensor.model
     dem_grid = dem_for_image(model, dem, width, height, source=str(sensor.path))
     ground = footprint(model, dem_grid, width, height, source=str(dem.path))

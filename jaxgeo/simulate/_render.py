@@ -345,10 +345,9 @@ def write_image(image: np.ndarray, path: str | os.PathLike, overwrite: bool = Fa
     """A single-band tiled GeoTIFF without georeferencing (the sensor model is separate)."""
     import warnings
 
-    import rasterio
     from rasterio.errors import NotGeoreferencedWarning
 
-    from ..io.internal import atomic_output
+    from ..io.internal import atomic_output, raster_writer
 
     rows, cols = image.shape
     profile = dict(driver="GTiff", width=cols, height=rows, count=1, dtype=image.dtype.name,
@@ -356,7 +355,7 @@ def write_image(image: np.ndarray, path: str | os.PathLike, overwrite: bool = Fa
     with warnings.catch_warnings():
         warnings.simplefilter("ignore", NotGeoreferencedWarning)
         with atomic_output(path, overwrite=overwrite, suffix=".tif") as tmp:
-            with rasterio.open(tmp, "w", **profile) as dst:
+            with raster_writer(tmp, profile) as dst:
                 dst.write(image, 1)
     return path
 

@@ -55,7 +55,7 @@ import numpy as np
 
 from ..geodesy import utm_epsg, utm_zone
 from ..io import to_rasterio_rpc
-from ..io.internal import atomic_output
+from ..io.internal import atomic_output, raster_writer
 from ..models import RPC, AbstractSensorModel, EphemerisModel
 from . import _scene as sc
 from ._scene import SimulationError
@@ -389,7 +389,7 @@ def write_stereo_scene(
                 atomic_output(paths[i], overwrite, suffix=".tmp.tif", leftovers=[".aux.xml"])
             )
             profile = image_profile(size, size, to_rasterio_rpc(scene.rpcs[name]))
-            with rasterio.open(tmp, "w", **profile) as dst:
+            with raster_writer(tmp, profile) as dst:
                 model = scene.truth[name]
                 image = RenderedImage(seed, i, GAINS[name], f"{name}.tif")
                 write(dst, img_blocks, lambda w, m=model, im=image: render_window(
@@ -403,7 +403,7 @@ def write_stereo_scene(
                        crs=f"EPSG:{d.epsg}", nodata=np.nan, tiled=True, blockxsize=256,
                        blockysize=256, compress="deflate", predictor=3,
                        transform=transform)  # fmt: skip
-        with rasterio.open(tmp, "w", **profile) as dst:
+        with raster_writer(tmp, profile) as dst:
             write(dst, dsm_blocks, lambda w: _dsm_window(scene, rings, to_lonlat, w), "truth_dsm")
             dst.set_band_description(1, "true height above WGS84 ellipsoid (m)")
         text = json.dumps(scene.to_json(), indent=1, allow_nan=False) + "\n"

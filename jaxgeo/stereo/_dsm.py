@@ -28,7 +28,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from ..geodesy import utm_epsg, utm_zone
-from ..io.internal import atomic_output
+from ..io.internal import atomic_output, raster_writer
 from ._uncertainty import cell_sigma
 
 MAX_HOLE_M = 4.0
@@ -317,7 +317,6 @@ def write_dsm(dsm: DSMGrid, path: str | os.PathLike, overwrite: bool = False):
     (band description = the name; ``units`` and a ``meaning`` tag per band): ``height``
     (ellipsoidal m), ``count``, ``spread`` (m), ``filled`` (1 = interpolated, 0 = measured),
     ``height_sigma`` (m)."""
-    import rasterio
 
     bands = dsm.bands()
     rows, cols = dsm.height.shape
@@ -336,7 +335,7 @@ def write_dsm(dsm: DSMGrid, path: str | os.PathLike, overwrite: bool = False):
         compress="deflate",
     )
     out = atomic_output(path, overwrite=overwrite, suffix=".tif", leftovers=(".aux.xml",))
-    with out as tmp, rasterio.open(tmp, "w", **profile) as dst:
+    with out as tmp, raster_writer(tmp, profile) as dst:
         for i, (name, values) in enumerate(bands.items(), start=1):
             dst.write(values, i)
             dst.set_band_description(i, name)

@@ -19,6 +19,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from ..io.internal import open_raster
 from ..models import AbstractSensorModel
 from ._rectification import _batched, _transfer
 
@@ -90,11 +91,10 @@ def sift_features_raster(
     (whole image by default), reading one tile at a time (bounded memory for large images);
     the uint8 stretch comes from a decimated read. Keypoints in full-image pixels."""
     import cv2
-    import rasterio
     from rasterio.windows import Window
 
     sift = cv2.SIFT_create()
-    with rasterio.open(path) as src, pixels_of(path):
+    with open_raster(path) as src, pixels_of(path):
         col, row, w, h = window if window is not None else (0, 0, src.width, src.height)
         scale = max(1, int(np.ceil(max(w, h) / 1024)))
         small = src.read(1, window=Window(col, row, w, h), out_shape=(h // scale, w // scale))

@@ -34,6 +34,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
+from ..io.internal import open_raster
 from ..models import AbstractSensorModel
 from ._dense import (
     BandMatcher,
@@ -78,14 +79,8 @@ def read_window(path: str | os.PathLike, window: tuple[int, int, int, int]) -> n
 
 def _open(path):
     """rasterio dataset of a sensor image: no geotransform is expected (no warning for it)."""
-    import warnings
 
-    import rasterio
-    from rasterio.errors import NotGeoreferencedWarning
-
-    with warnings.catch_warnings():
-        warnings.simplefilter("ignore", NotGeoreferencedWarning)
-        return rasterio.open(path)
+    return open_raster(path)
 
 
 def image_size(path: str | os.PathLike) -> tuple[int, int]:

@@ -38,6 +38,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
+from ..io.internal import open_raster
 from ..models import AbstractSensorModel
 from ._match_settings import MatchSettings, TieError, TieWarning
 from ._matching import Candidates, Features, epipolar_candidates, sift_features_raster
@@ -166,13 +167,8 @@ def validity_heights(model: AbstractSensorModel) -> tuple[float, float]:
 
 
 def _image_size(path) -> tuple[int, int]:
-    import rasterio
-    from rasterio.errors import NotGeoreferencedWarning
-
-    with warnings.catch_warnings():
-        warnings.simplefilter("ignore", NotGeoreferencedWarning)
-        with rasterio.open(path) as src:
-            return int(src.width), int(src.height)
+    with open_raster(path) as src:
+        return int(src.width), int(src.height)
 
 
 def _check_roi(roi, size, path) -> tuple[int, int, int, int]:

@@ -20,7 +20,7 @@ from xml.sax.saxutils import escape
 
 import numpy as np
 
-from ..io.internal import atomic_output
+from ..io.internal import atomic_output, raster_writer
 from ._runner import TileRun
 
 COMPRESSIONS = ("deflate", "zstd", "lzw", "none")
@@ -71,14 +71,13 @@ class RasterSpec:
 def write_tile(path, spec: RasterSpec, row: int, col: int, data: np.ndarray) -> None:
     """``data`` ``(count, rows, cols)`` as an uncompressed tiled GeoTIFF of the product's window
     at ``(row, col)``, with the overviews of ``spec``."""
-    import rasterio
     from rasterio.enums import Resampling
 
     count, rows, cols = data.shape
     profile = dict(driver="GTiff", width=cols, height=rows, count=count, dtype=spec.dtype,
                    crs=spec.crs, transform=spec.tile_transform(row, col), nodata=spec.nodata,
                    tiled=True, blockxsize=256, blockysize=256)  # fmt: skip
-    with rasterio.open(path, "w", **profile) as dst:
+    with raster_writer(path, profile) as dst:
         dst.write(data.astype(spec.dtype, copy=False))
         if spec.overviews:  # every tile every level: the mosaic's overviews are made of them
             dst.build_overviews(list(spec.overviews), Resampling[spec.overview_resampling])
