@@ -1,5 +1,16 @@
 """Writing an adjustment: adjusted models (JSON and RPC files), points, residuals, report.
 
+Pixel frames (docs/conventions.md, "Pixel frames of crops"): the adjustment works in the
+pixels of each raster given (a crop's origin folded into its model when it was opened). Every
+adjusted model written as a file of its own (``adjusted_models.json``, the RPC files in the
+output folder, ``<image>_jitter.csv``) is moved back to the frame of the model the image was
+given with (:func:`~._models_json.framed_models`; the full product for a crop with its
+product's model), so that a reader applies the crop's origin exactly once, as for the input
+model. An RPC beside a copy of the raster or in its tags (``--copy-images``, ``--write-into``)
+is in that raster's own pixels: GDAL's rule for a raster's own RPC. The adjusted parameters,
+their sigmas and covariance (``adjusted_models.json``, the reports) are the adjustment's: in
+the pixels of the rasters.
+
 Nothing the user gave is overwritten: every path is checked against the inputs and against
 existing files before anything is written, and each file is written atomically.
 """
@@ -16,7 +27,6 @@ import pathlib
 from collections.abc import Iterable, Mapping
 from typing import Any, NamedTuple
 
-import jax
 import numpy as np
 
 from ..io.internal import (
@@ -25,12 +35,12 @@ from ..io.internal import (
     image_stem,
     plan_rpc_outputs,
     sidecar_name,
-    vendor_values,
     write_bytes,
     write_csv,
     write_rpc_outputs,
 )
 from ..models import RPC, AffineBias, Biased, JitterBias, fit_rpc
+from ._models_json import delivered_rpcs, framed_models, models_json
 from ._report import format_reports
 
 
@@ -81,15 +91,6 @@ def jitter_grid(model: Any) -> str | None:
                                              zip(lines, corr, strict=True)])  # fmt: skip
 
 
-def delivered_rpcs(result) -> dict[str, RPC | None]:
-    """Image name -> the exact RPC of the model the adjustment started from (``None`` if it
-    has none): the validity domain of a refit, and the delivered RPC in the JSON."""
-    setup = result.setup
-    groups = setup.problem.groups
-    start = setup.image_models(groups, tuple(g.theta0 for g in groups))
-    return {name: model.exact_rpc() for name, model in start.items()}
-
-
 def _csv(header: list[str], rows: Iterable[Iterable[Any]]) -> str:
     buf = io.StringIO()
     w = csv.writer(buf, lineterminator="\n")
@@ -115,61 +116,6 @@ def _fill(tmp: pathlib.Path, content: str | _Table) -> None:
 
 def _r(v: float) -> str:
     return repr(float(v))
-
-
-def _leaves(tree) -> dict[str, Any]:
-    out = {}
-    for path, leaf in jax.tree_util.tree_flatten_with_path(tree)[0]:
-        out[jax.tree_util.keystr(path)] = np.asarray(leaf).tolist()
-    return out
-
-
-def models_json(result) -> dict[str, Any]:
-    """JSON-ready adjusted models: per image the RPC (vendor names) and bias, or the parameters,
-    with a posteriori sigmas of every adjusted parameter; the biases' joint covariance
-    (:func:`bias_covariance`) under ``"covariance"``."""
-    images = {}
-    delivered = delivered_rpcs(result)
-    for name, model in result.models.items():
-        entry: dict[str, Any] = {"model": type(model).__name__}
-        key = next(k for k in result.blocks if k == name or (not isinstance(k, str) and name in k))
-        own = result.parameters(key)
-        entry["parameters"] = {k: v for k, (v, _) in own.items()}
-        entry["sigmas"] = {k: s for k, (_, s) in own.items()}
-        if delivered[name] is not None:
-            entry["rpc"] = vendor_values(delivered[name])
-        if isinstance(model, Biased):  # the correction on its own, with its kind
-            entry["bias"] = {"kind": type(model.bias).__name__, **_leaves(model.bias)}
-        images[name] = entry
-    out: dict[str, Any] = {"images": images}
-    joint = bias_covariance(result)
-    if joint is not None:
-        out["covariance"] = joint
-    return out
-
-
-JOINT_LEAVES = (".bias.shift_px[", ".bias.matrix[", ".bias.drift[")
-"""The bias parameters whose joint covariance :func:`models_json` writes (not a jitter's
-knots: a spline of a long image has hundreds)."""
-
-
-def bias_covariance(result) -> dict[str, Any] | None:
-    """The joint a posteriori covariance of every image's bias shift and matrix/drift terms,
-    correlations between images included (px^2, px^2/px, ...): ``{"parameters": [names],
-    "matrix": [[...]]}`` with the names of ``result.param_names`` (``left.bias.shift_px[0]``);
-    ``None`` without a bias. What ``jaxgeo dsm --orientation`` propagates to its heights."""
-    names = [n for n in result.param_names if any(leaf in n for leaf in JOINT_LEAVES)]
-    if not names:
-        return None
-    import scipy.sparse  # here: 90 ms of every start otherwise
-
-    idx = [result.param_names.index(n) for n in names]
-    cov = result.param_cov
-    if scipy.sparse.issparse(cov):  # a banded problem: within the band only
-        sub = cov[idx][:, idx].toarray()
-    else:
-        sub = np.asarray(cov)[np.ix_(idx, idx)]
-    return {"parameters": names, "matrix": [[float(v) for v in row] for row in sub]}
 
 
 FIXED_OUTPUTS = (
@@ -335,13 +281,17 @@ class RPCOutputs:
     where GDAL/OTB/shareloc find it for that image (:mod:`jaxgeo.io._rpc_place`:
     ``<image stem>_RPC.TXT`` / ``.RPB`` / ``.geom`` / ``RPC_<stem>.XML`` by ``rpc_format``,
     beside a copy of the image with ``copy_images``, or in the tags of a copy of the GeoTIFF
-    with ``write_into``); ``rpc_files=False``: no RPC at all."""
+    with ``write_into``); ``rpc_files=False``: no RPC at all. ``origins``: image name -> the
+    model pixel of the raster's first pixel (a crop's origin): the models written as files of
+    their own are moved back by it to their input model's frame (module docstring); the RPCs
+    beside a copy of the raster or in its tags stay in the raster's pixels."""
 
     images: Mapping[str, str | os.PathLike] | None = None
     rpc_format: str = "txt"
     copy_images: bool = False
     write_into: bool = False
     rpc_files: bool = True
+    origins: Mapping[str, tuple[float, float]] | None = None
 
 
 def write_outputs(
@@ -358,18 +308,17 @@ def write_outputs(
     ``rpcs`` says (:class:`RPCOutputs`); an RPC is folded exactly where the bias allows, else
     refitted; the refit error is in ``report.txt`` and ``report.json``."""
     images, rpc_files = rpcs.images, rpcs.rpc_files
-    rpc_format, copy_images, write_into = rpcs.rpc_format, rpcs.copy_images, rpcs.write_into
+    origins = rpcs.origins or {}
+    framed = framed_models(result, origins)  # every model written as a file of its own
     out = pathlib.Path(out_dir)
     files: dict[str, str | _Table] = {}
     notes = []
     placed = []
     if rpc_files and images is not None:
-        placed, notes, report = _place_rpcs(
-            result, images, out, rpc_format, copy_images, write_into, report
-        )
+        placed, notes, report = _place_rpcs(result, out, rpcs, report)
     elif rpc_files:
-        delivered = delivered_rpcs(result)
-        for name, model in result.models.items():
+        delivered = delivered_rpcs(result, origins)
+        for name, model in framed.items():
             try:
                 rpc, err, how = adjusted_rpc(model, delivered[name])
             except TypeError:
@@ -379,7 +328,7 @@ def write_outputs(
                 f"{name}_adjusted_RPC.TXT: {how}"
                 + (f" (max error {err:.3g} px on the check grid)" if how == "refit" else "")
             )
-    for name, model in result.models.items():
+    for name, model in framed.items():
         grid = jitter_grid(model)
         if grid is not None:
             files[f"{name}_jitter.csv"] = grid
@@ -387,7 +336,14 @@ def write_outputs(
                 f"{name}_jitter.csv: the jitter correction along the lines (image = RPC(ground) "
                 "+ (dx, dy) at the RPC's line); the RPC holds the affine bias only"
             )
-    files["adjusted_models.json"] = json.dumps(models_json(result), indent=1) + "\n"
+    if any(np.any(np.asarray(o) != 0) for o in origins.values()):
+        notes.append(
+            "pixel frames: adjusted_models.json, the RPC files and jitter grids are in the "
+            "pixels of each image's input model (a crop's product: its geotransform or "
+            "--image-origin applies to them as to that model); an RPC beside a copy of a raster "
+            "or in its tags, in that raster's pixels"
+        )
+    files["adjusted_models.json"] = json.dumps(models_json(result, origins), indent=1) + "\n"
     files["ground_adjusted.csv"] = _Table(
         ["id", "lon", "lat", "h", "role", "sigma_e_m", "sigma_n_m", "sigma_h_m"],
         (
@@ -443,20 +399,25 @@ def write_outputs(
     return written + [targets[n] for n in files]
 
 
-def _place_rpcs(result, images, out, rpc_format, copy_images, write_into, report):
-    """Plan every image's adjusted RPC (exact or refitted) before anything is written."""
-    delivered = delivered_rpcs(result)
-    plans = rpc_plans({n: images[n] for n in result.models}, out, rpc_format, copy_images,
-                      write_into)  # fmt: skip
+def _place_rpcs(result, out, rpcs: RPCOutputs, report):
+    """Plan every image's adjusted RPC (exact or refitted) before anything is written: in the
+    frame of the image's input model, or in the raster's pixels beside a copy of it."""
+    origins = rpcs.origins or {}
+    framed, delivered = framed_models(result, origins), delivered_rpcs(result, origins)
+    own, own_delivered = result.models, delivered_rpcs(result)
+    plans = rpc_plans({n: rpcs.images[n] for n in result.models}, out, rpcs.rpc_format,
+                      rpcs.copy_images, rpcs.write_into)  # fmt: skip
     placed, notes, info = [], [], {}
-    for name, model in result.models.items():
+    for name in result.models:
+        plan = plans[name]
+        beside = plan.image_copy is not None or plan.write_into  # the raster's own RPC
+        model = own[name] if beside else framed[name]
         try:
-            rpc, err, how = adjusted_rpc(model, delivered[name])
+            rpc, err, how = adjusted_rpc(model, (own_delivered if beside else delivered)[name])
         except TypeError as e:
             notes.append(f"{name}: no RPC written ({e})")
             info[name] = {"how": "none", "reason": str(e)}
             continue
-        plan = plans[name]
         placed.append((rpc, plan))
         where = ", ".join(p.name for p in plan.targets)
         notes.append(f"{name} -> {where}: {how}" + (
@@ -467,12 +428,9 @@ def _place_rpcs(result, images, out, rpc_format, copy_images, write_into, report
 
 __all__ = [
     "adjusted_rpc",
-    "bias_covariance",
     "check_out_dir",
-    "delivered_rpcs",
     "format_reports",
     "jitter_grid",
-    "models_json",
     "output_paths",
     "rpc_plans",
     "sidecar_clash",

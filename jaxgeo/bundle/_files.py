@@ -4,8 +4,13 @@ An image is a raster (its RPC in its tags or an ``.RPB``/``_RPC.TXT`` sidecar, o
 model file) or a model file alone (:func:`jaxgeo.io.open_image`). With a raster, its measurements
 are checked against its size and its model works in its pixel frame (a crop's pixel-space
 geotransform, or an origin given, folded in); with a model file alone, against the RPC's image
-domain. The adjusted RPCs written (:meth:`FileAdjustment.write`) refer to the pixels of the
-raster given (GDAL's convention for that raster), or to the model file's frame without one.
+domain. Measurements refer to the pixels of the raster given; the adjusted models written
+(:meth:`FileAdjustment.write`) are in the frame of the model each image was given with (the
+full product for a crop with its product's model: the crop's origin is moved back out, so that
+every reader applies it once; docs/conventions.md, "Pixel frames of crops"), except an RPC
+beside a copy of the raster or in its tags (the raster's own pixels). A model given already
+adjusted (an ``adjusted_models.json`` entry) starts the new bias from its values
+(:func:`restarted`).
 
 Without any GCP the block is a relative orientation: unless bias priors are given, the biases
 get :data:`RELATIVE_PRIOR_SHIFT_PX` and :data:`RELATIVE_PRIOR_MATRIX` (a note says so), which
@@ -28,6 +33,7 @@ from ..io import DEM, SensorImage, open_image, read_ground, read_observations
 from ..io.internal import detect_rpc_format, table_lines
 from ..lsq import SolverConfig
 from ..lsq.internal import DEFAULT_SOLVER
+from ..models import AffineBias, Biased, JitterBias, ShiftBias, ShiftDriftBias
 from ._adjustment import BIAS_CHOICES, adjust, bias_prior_sigma, with_bias
 from ._export import RPCOutputs, write_outputs
 from ._prepare.checks import Sources
@@ -35,6 +41,8 @@ from ._report import AccuracyReport, direct_georeferencing, format_reports
 from ._result import AdjustResult
 from ._settings import DEFAULT_SETTINGS, AdjustSettings
 
+KNOWN_BIASES = (ShiftBias, ShiftDriftBias, AffineBias, JitterBias)
+"""The biases a start model may carry (:func:`restarted`)."""
 RELATIVE_PRIOR_SHIFT_PX = 10.0
 """Prior sigma (px) of the bias shifts when no GCP is given and no prior either: the given
 models' pointing (a few px for current sensors) holds the block's position."""
@@ -216,14 +224,80 @@ class FileAdjustment:
         """Write the adjusted models, points, residuals and report (never over an input, nor
         over an existing file unless ``overwrite``); returns the paths written. ``rpc_options``:
         ``rpc_format``, ``copy_images``, ``write_into`` of :class:`~._export.RPCOutputs`
-        (``images`` defaults to :meth:`rpc_sources`). An image given as a raster gets an RPC in
-        the raster's pixels (its pixel frame folded in): the RPC GDAL needs for that raster."""
+        (``images`` defaults to :meth:`rpc_sources`, ``origins`` to the images' origins). The
+        models written as files of their own (``adjusted_models.json``, the RPC files, the
+        jitter grids) are in the frame of each image's input model (a crop's product); an RPC
+        beside a copy of the raster or in its tags, in the raster's pixels (GDAL's rule)."""
         if self.images:
             rpc_options.setdefault("images", self.rpc_sources())
+            rpc_options.setdefault("origins", {n: im.origin for n, im in self.images.items()})
         return write_outputs(
             out_dir, self.result, self.format(), self.summary(), self.inputs, overwrite=overwrite,
             rpcs=RPCOutputs(**rpc_options),
         )  # fmt: skip
+
+
+def restarted(
+    models: Mapping[str, Any], bias: str, domains: Mapping[str, Sequence[float]], jitter
+) -> dict[str, Any]:
+    """:func:`~._adjustment.with_bias` of ``models``, where a model that already has a bias (an
+    adjusted model, e.g. the ``adjusted_models.json`` entry of a previous adjustment) starts the
+    new ``bias`` from its values instead of zero (the priors then hold the block near it): the
+    wrapped model gets the new kind, initialised with the old shift and matrix (a jitter's
+    spline least-squares fitted to the new knots). ``ValueError`` naming the image when the new
+    kind cannot hold the old correction (e.g. ``shift`` after ``affine``, or a jitter dropped)."""
+    plain = {
+        n: m.model if isinstance(m, Biased) and isinstance(m.bias, KNOWN_BIASES) else m
+        for n, m in models.items()
+    }
+    out = with_bias(plain, bias, domains, jitter)
+    for name, model in models.items():
+        if plain[name] is not model and isinstance(out[name], Biased):
+            out[name] = Biased(plain[name], _started(out[name].bias, model.bias, name, bias))
+    return out
+
+
+def _started(new, old, name: str, kind: str):
+    """The zero bias ``new`` with the values of ``old`` (:func:`restarted`)."""
+    a0, m = (np.asarray(v, dtype=float) for v in old.coefficients())
+    knots = None
+    if isinstance(old, JitterBias):
+        if not isinstance(new, JitterBias):
+            raise ValueError(
+                f"image {name!r}: its model holds a jitter correction; adjusting it with "
+                f"--bias {kind} would drop it: use --bias jitter"
+            )
+        knots = _refitted_knots(old, new)
+    if isinstance(new, ShiftBias) and np.any(m):
+        raise ValueError(f"image {name!r}: its model's {type(old).__name__} has terms --bias "
+                         f"{kind} cannot hold: use --bias affine")  # fmt: skip
+    if isinstance(new, ShiftBias):
+        return ShiftBias(a0)
+    if isinstance(new, ShiftDriftBias):
+        if np.any(m[:, 0]):
+            raise ValueError(f"image {name!r}: its model's {type(old).__name__} has terms "
+                             f"--bias {kind} cannot hold: use --bias affine")  # fmt: skip
+        return ShiftDriftBias(a0, m[:, 1])
+    if isinstance(new, AffineBias):
+        return AffineBias(a0, m)
+    n = new.knots_px.shape[0]
+    lines = (new.line0, new.line0 + (n - 3) * new.knot_lines)
+    return JitterBias(lines, new.knot_lines, new.smoothness_px, a0, m,
+                      np.zeros((n, 2)) if knots is None else knots)  # fmt: skip
+
+
+def _refitted_knots(old: JitterBias, new: JitterBias) -> np.ndarray:
+    """The knots of ``new``'s layout whose spline is closest (least squares, 8 samples per knot
+    spacing over ``new``'s lines) to ``old``'s: exact when the layouts agree."""
+    n = new.knots_px.shape[0]
+    if old.knots_px.shape[0] == n and (old.line0, old.knot_lines) == (new.line0, new.knot_lines):
+        return np.asarray(old.knots_px)
+    lines = np.linspace(new.line0, new.line0 + (n - 3) * new.knot_lines, 8 * (n - 3) + 1)
+    basis = np.stack([np.asarray(JitterBias((new.line0, lines[-1]), new.knot_lines,
+                                            knots_px=np.eye(n)[:, [j, j]]).offsets(lines))[:, 0]
+                      for j in range(n)], axis=1)  # fmt: skip
+    target = np.asarray(old.offsets(lines))
+    return np.linalg.lstsq(basis, target, rcond=None)[0]
 
 
 def adjust_files(
@@ -259,7 +333,7 @@ def adjust_files(
         table_lines(ground) if ground is not None else (),
     )
     if bias != "none":
-        models = with_bias(
+        models = restarted(
             models, bias, {n: img.domain() for n, img in opened.items()}, settings.jitter
         )
     notes = []
@@ -282,7 +356,10 @@ def adjust_files(
         if img.path is not None and img.origin != (0.0, 0.0):
             notes.append(
                 f"image {name!r} is a crop at model pixel {img.origin[0]:g}, {img.origin[1]:g} "
-                "of its product: its measurements and adjusted RPC are in the crop's pixels"
+                "of its product: its measurements are in the crop's pixels; its adjusted models "
+                "written (RPC, adjusted_models.json, jitter grid) in its input model's (the "
+                "product's: the crop's geotransform or --image-origin applies to them as to "
+                "the input model)"
             )
     prior = bias_prior_sigma(models, settings.bias_prior_shift_px, settings.bias_prior_matrix)
     settings = settings.replace(sources=sources, image_domains=domains)

@@ -3,29 +3,41 @@
 Every command and the API take an image the same way. The raster (any file GDAL reads) is optional
 where only its model is needed; the model is the raster's own RPC (GeoTIFF tags, ``.RPB`` or
 ``_RPC.TXT`` sidecar) unless a model file is given. The **pixel frame** relates the raster's pixels
-to the model's: a crop of a product whose model describes the full product carries a pixel-space
-geotransform (a translation with unit scale and no CRS; shareloc's and CARS' convention), read as
-the model pixel ``origin = (col, row)`` of the raster's first pixel. ``origin=`` overrides it (the
-CLI's ``--image-origin``); a conflict with the file's own frame is an error.
+to the model's (docs/conventions.md, "Pixel frames of crops"):
 
-:attr:`SensorImage.model` works in the raster's pixels (the origin folded in: an RPC's image offsets
-are shifted, any other model is wrapped in a :class:`~jaxgeo.models.ShiftBias`), so every stage
-downstream (matching, rectification, orthorectification, adjustment) is frame-agnostic, and every
-pixel coordinate jaxgeo reads or writes for an image is a pixel of the raster the user gave.
+- a model file given separately (any RPC file :func:`~jaxgeo.io.read_rpc` reads, or the
+  ``adjusted_models.json`` of ``jaxgeo adjust``: the entry of the image's name) is in the frame
+  of the product it was made for; a crop of that product carries a pixel-space geotransform (a
+  translation with unit scale and no CRS; shareloc's and CARS' convention), read as the model
+  pixel ``origin = (col, row)`` of the raster's first pixel. ``origin=`` overrides it (the CLI's
+  ``--image-origin``); a conflict with the file's own frame is an error;
+- the raster's own model (its RPC tags or sidecar) is in the raster's own pixels, as GDAL reads
+  it: a geotransform's origin is not applied to it (``origin=`` still is).
+
+:attr:`SensorImage.model` works in the raster's pixels (the origin folded in by :func:`reframed`:
+an RPC's image offsets are shifted, a bias re-expressed, any other model wrapped in a
+:class:`~jaxgeo.models.ShiftBias`), so every stage downstream (matching, rectification,
+orthorectification, adjustment) is frame-agnostic, and every pixel coordinate jaxgeo reads or
+writes for an image is a pixel of the raster the user gave. A model jaxgeo writes as a file of its
+own is moved back to its input model's frame (``reframed(model, origin)``), so that the origin is
+applied exactly once by every reader.
 """
 
 from __future__ import annotations
 
+import json
 import math
 import os
 import pathlib
 import warnings
 from dataclasses import dataclass
+from typing import Any
 
 import numpy as np
 
 from ..errors import JaxgeoError
 from ..models import RPC, AbstractSensorModel, Biased, ShiftBias
+from ._adjusted import is_adjusted_models, read_adjusted_model
 from ._raster import open_raster
 
 
@@ -110,18 +122,63 @@ def pixel_frame(path: str | os.PathLike) -> tuple[float, float]:
     )
 
 
-def _shifted(model: AbstractSensorModel, origin: tuple[float, float]) -> AbstractSensorModel:
-    """``model`` in the frame whose pixel (0, 0) is the model's pixel ``origin``."""
-    if origin == (0.0, 0.0):
+def reframed(model: AbstractSensorModel, offset: tuple[float, float]) -> AbstractSensorModel:
+    """``model`` in the pixel frame whose pixels are the model's plus ``offset = (dx, dy)`` px:
+    ``reframed(m, d).project(g) == m.project(g) + d`` (exact: no refit).
+
+    Moving a crop's model (pixel (0, 0) at model pixel ``o``) back to its product's frame is
+    ``reframed(m, o)``; the crop's model of a product's is ``reframed(m, -o)``. An RPC's image
+    offsets move by ``d``; a :class:`~jaxgeo.models.Biased` model keeps its structure, the
+    wrapped model moved by ``d`` and its bias re-expressed in the new pixels: for
+    ``to_model(x) = x + a0 + M x [+ s(y)]`` (every bias of :mod:`jaxgeo.models`, the jitter's
+    spline ``s`` included) ``a0' = a0 - M d`` and a jitter's first line ``line0 + dy``. Any
+    other model is wrapped in a :class:`~jaxgeo.models.ShiftBias` of ``-d`` (one that already
+    is: its shift changed, or dropped when it cancels)."""
+    d = np.asarray(offset, dtype=float).reshape(2)
+    if not np.any(d):
         return model
     if isinstance(model, RPC):
         import equinox as eqx
         import jax.numpy as jnp
 
-        return eqx.tree_at(
-            lambda m: m.image_offset, model, model.image_offset - jnp.asarray(origin, float)
-        )
-    return Biased(model, ShiftBias(origin))
+        return eqx.tree_at(lambda m: m.image_offset, model, model.image_offset + jnp.asarray(d))
+    if isinstance(model, Biased):
+        inner, bias = model.model, model.bias
+        if isinstance(bias, ShiftBias) and not isinstance(inner, RPC | Biased):
+            shift = np.asarray(bias.shift_px) - d  # undo (or move) a frame shift of its own
+            return inner if not np.any(shift) else Biased(inner, ShiftBias(shift))
+        return Biased(reframed(inner, tuple(d)), moved_bias(bias, d))
+    return Biased(model, ShiftBias(-d))
+
+
+def moved_bias(bias, offset) -> Any:
+    """``bias`` for pixels moved by ``offset`` (and the model's pixels moved alike, see
+    :func:`reframed`): ``to_model'(x) = to_model(x - d) + d``. Raises ``TypeError`` for a bias
+    of a kind it does not know."""
+    from ..models import AffineBias, JitterBias, ShiftDriftBias
+
+    d = np.asarray(offset, dtype=float).reshape(2)
+    a0, m = (np.asarray(v, dtype=float) for v in bias.coefficients())
+    shift = a0 - m @ d
+    if isinstance(bias, ShiftBias):
+        return ShiftBias(shift)
+    if isinstance(bias, ShiftDriftBias):
+        return ShiftDriftBias(shift, bias.drift)
+    if isinstance(bias, AffineBias):
+        return AffineBias(shift, bias.matrix)
+    if isinstance(bias, JitterBias):
+        n = bias.knots_px.shape[0]
+        line0 = bias.line0 + float(d[1])
+        return JitterBias((line0, line0 + (n - 3) * bias.knot_lines), bias.knot_lines,
+                          bias.smoothness_px, shift, bias.matrix, bias.knots_px)  # fmt: skip
+    raise TypeError(f"cannot move a {type(bias).__name__} to another pixel frame")
+
+
+def _shifted(model: AbstractSensorModel, origin: tuple[float, float]) -> AbstractSensorModel:
+    """``model`` in the frame whose pixel (0, 0) is the model's pixel ``origin``."""
+    if origin == (0.0, 0.0):
+        return model
+    return reframed(model, (-origin[0], -origin[1]))
 
 
 def open_image(
@@ -131,11 +188,15 @@ def open_image(
     name: str | None = None,
 ) -> SensorImage:
     """A :class:`SensorImage` from a raster ``path`` and/or a ``model`` (a file any RPC reader
-    of :func:`~jaxgeo.io.read_rpc` knows, or a model object; default: the raster's own RPC).
+    of :func:`~jaxgeo.io.read_rpc` knows, an ``adjusted_models.json`` of ``jaxgeo adjust`` (the
+    adjusted model of image ``name``, its bias and jitter included), or a model object; default:
+    the raster's own RPC). ``name``: the image's name (default: the raster's file stem, else the
+    model file's).
 
     ``origin``: the model pixel of the raster's first pixel, overriding the raster's pixel-space
-    geotransform; a different non-zero frame in the file is an :class:`ImageError`. Missing
-    files raise ``FileNotFoundError``; a raster without a model an :class:`ImageError` naming it.
+    geotransform (applied to a separate model only, see the module docstring); a different
+    non-zero frame in the file is an :class:`ImageError`. Missing files raise
+    ``FileNotFoundError``; a raster without a model an :class:`ImageError` naming it.
     """
     from ._rpc_formats import read_rpc
 
@@ -151,7 +212,8 @@ def open_image(
                 size = (int(src.width), int(src.height))
         except Exception as err:  # rasterio's RasterioIOError and GDAL's messages
             raise ImageError(f"{raster}: not a raster GDAL can read ({err})") from None
-        frame = pixel_frame(raster)
+        if model is not None:  # the raster's own RPC is in its own pixels (GDAL's rule)
+            frame = pixel_frame(raster)
     if origin is not None:
         origin = (float(origin[0]), float(origin[1]))
         if frame != (0.0, 0.0) and not np.allclose(frame, origin):
@@ -163,10 +225,15 @@ def open_image(
     model_path = None
     if isinstance(model, AbstractSensorModel):
         source_model = model
+        stem = name or (raster or pathlib.Path("image")).stem
     else:
         model_path = pathlib.Path(model) if model is not None else raster
+        stem = name or (raster or model_path).stem
         try:
-            source_model = read_rpc(model_path)
+            if model is not None and _is_adjusted(model_path):
+                source_model = read_adjusted_model(model_path, stem)
+            else:
+                source_model = read_rpc(model_path)
         except FileNotFoundError:
             raise
         except ValueError as err:
@@ -176,7 +243,6 @@ def open_image(
                     f"sidecar) ({_first_line(err)}); give its model file"
                 ) from None
             raise
-    stem = name or (raster or model_path or pathlib.Path("image")).stem
     return SensorImage(
         name=stem,
         model=_shifted(source_model, frame),
@@ -186,6 +252,19 @@ def open_image(
         model_path=model_path if model_path != raster else None,
         source_model=source_model,
     )
+
+
+def _is_adjusted(path: pathlib.Path) -> bool:
+    """Whether ``path`` is an ``adjusted_models.json`` (read whole only when it is JSON)."""
+    from ._rpc_formats import detect_rpc_format
+
+    if not path.is_file() or detect_rpc_format(path) != "json":
+        return False
+    try:
+        root = json.loads(path.read_text(encoding="utf-8"))
+    except ValueError:
+        return False  # read_rpc names what is wrong
+    return is_adjusted_models(root)
 
 
 def _first_line(err: BaseException) -> str:

@@ -33,9 +33,10 @@ import pathlib
 import re
 
 from ..models import RPC
+from ._adjusted import is_adjusted_models
 from ._rpc_common import RPCFormatError, source_name
 from ._rpc_gdal import read_raster_rpc, write_geotiff_rpc
-from ._rpc_json import looks_like_json, read_rpc_json
+from ._rpc_json import looks_like_json, parse_json, read_rpc_json
 from ._rpc_text import (
     GEOM_MARKER,
     read_ossim_geom,
@@ -128,6 +129,12 @@ def read_rpc(path: str | os.PathLike) -> RPC:
     if kind == "ossim_geom":
         return read_ossim_geom(text, source)
     if kind == "json":
+        if is_adjusted_models(parse_json(text, source)):
+            raise RPCFormatError(
+                f"{source}: an adjusted_models.json (per image an RPC and its adjusted bias): "
+                "give it as an image's model (--model IMG=FILE; jaxgeo.io.open_image(raster, "
+                "model=FILE, name=IMG)); its RPC alone would leave the adjustment out"
+            )
         return read_rpc_json(text, source)
     return read_rpc_txt(text, source)
 

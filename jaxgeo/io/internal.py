@@ -1,6 +1,7 @@
 """Stages of :mod:`jaxgeo.io` that other jaxgeo packages use: not the user API (names here
 may change without notice); a user imports from ``jaxgeo.io``."""
 
+from ._adjusted import JITTER_STATICS as JITTER_STATICS
 from ._atomic import atomic_output as atomic_output
 from ._atomic import atomic_write_text as atomic_write_text
 from ._atomic import refuse_existing as refuse_existing
@@ -8,6 +9,7 @@ from ._atomic import write_bytes as write_bytes
 from ._atomic import write_csv as write_csv
 from ._dem_grid import dem_coverage as dem_coverage
 from ._image import pixel_frame as pixel_frame
+from ._image import reframed as reframed
 from ._raster import open_raster as open_raster
 from ._raster import raster_writer as raster_writer
 from ._rpc_common import vendor_values as vendor_values
