@@ -19,7 +19,8 @@ def add_image_options(parser: argparse.ArgumentParser) -> None:
         default=[],
         metavar="IMG=FILE",
         help="the sensor model file of image IMG (default: the RPC in the image or its "
-        "sidecar); repeat per image",
+        "sidecar), in its product's pixels; the adjusted_models.json of jaxgeo adjust gives "
+        "IMG's adjusted model (bias and jitter); repeat per image",
     )
     parser.add_argument(
         "--image-origin",
