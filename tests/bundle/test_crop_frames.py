@@ -7,7 +7,8 @@ The pair is :func:`jaxgeo.simulate.stereo_scene_truth` (400 px, a 1.5 px jitter 
 lines, exact RPCs fitted without it; seed 5151, used nowhere else), not rendered: ties are
 terrain points projected through the true models plus 0.1 px of noise; each image is then a
 "crop" at origin (100, 150) of that product: a sparse raster with a pixel-space geotransform,
-its measurements in its own pixels, its model the product's RPC file.
+its measurements in its own pixels, its model the product's RPC file. And ``adjust`` from an
+adjusted model (an ``adjusted_models.json`` entry) starts the new bias from the old one.
 """
 
 import warnings
@@ -114,3 +115,40 @@ def test_adjusted_crop_models_put_the_truth_on_its_pixels(adjusted):
         # relative orientation: what the ties leave open is held at the given models)
         assert rms["given"] > 0.5
         assert rms["adjusted"] < 0.4 and rms["adjusted"] < 0.5 * rms["given"]
+
+
+def test_a_start_model_already_adjusted_restarts_its_bias():
+    """``adjust`` from an ``adjusted_models.json`` entry: the new bias starts from the old one's
+    values (the priors then hold the block near the adjusted model), or says why it cannot."""
+    from jaxgeo.bundle._files import restarted
+    from jaxgeo.models import AffineBias, ShiftBias, ShiftDriftBias
+    from tests.conftest import REAL_DATA
+
+    rpc = open_image(model=REAL_DATA / "phr_ventoux__left_image.geom").model
+    domain = {"a": (-0.5, -0.5, 499.5, 499.5)}
+    jitter = JitterSettings(100.0, 1.0)
+    drift = Biased(rpc, ShiftDriftBias((1.0, -2.0), (1e-4, -3e-4)))
+    new = restarted({"a": drift}, "affine", domain, jitter)["a"]
+    assert isinstance(new.bias, AffineBias) and new.model is rpc
+    ground = np.asarray(rpc.localize(np.array([[10.0, 20.0], [400.0, 300.0]]), 900.0))
+    np.testing.assert_allclose(np.asarray(new.project(ground)),
+                               np.asarray(drift.project(ground)), atol=1e-9)  # fmt: skip
+    with pytest.raises(ValueError, match=r"image 'a': .* --bias shift cannot hold"):
+        restarted({"a": drift}, "shift", domain, jitter)
+    as_jitter = restarted({"a": drift}, "jitter", domain, jitter)["a"]
+    np.testing.assert_allclose(np.asarray(as_jitter.project(ground)),
+                               np.asarray(drift.project(ground)), atol=1e-9)  # fmt: skip
+    # a jitter: kept by a jitter of another knot layout (least squares), refused by any other
+    old = as_jitter.bias
+    knots = np.stack([np.sin(np.arange(old.knots_px.shape[0]))] * 2, axis=1) * 0.5
+    wavy = Biased(rpc, JitterBias((-0.5, 499.5), 100.0, 1.0, old.shift_px, old.matrix, knots))
+    same = restarted({"a": wavy}, "jitter", domain, jitter)["a"]
+    np.testing.assert_allclose(np.asarray(same.project(ground)),
+                               np.asarray(wavy.project(ground)), atol=1e-9)  # fmt: skip
+    finer = restarted({"a": wavy}, "jitter", domain, JitterSettings(50.0, 1.0))["a"]
+    np.testing.assert_allclose(np.asarray(finer.project(ground)),
+                               np.asarray(wavy.project(ground)), atol=1e-6)  # fmt: skip
+    with pytest.raises(ValueError, match="would drop it: use --bias jitter"):
+        restarted({"a": wavy}, "affine", domain, jitter)
+    plain = restarted({"a": rpc}, "shift", domain, jitter)["a"]  # a model without a bias
+    assert isinstance(plain.bias, ShiftBias) and not np.any(np.asarray(plain.bias.shift_px))
