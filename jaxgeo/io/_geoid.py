@@ -50,6 +50,7 @@ class GeoidGrid:
     lat0_deg: float
     dlon_deg: float
     dlat_deg: float  # negative for north-up grids
+    name: str | None = None  # "egm96", "egm2008" when opened by name: found again on a worker
 
     def __call__(self, lon_deg, lat_deg) -> np.ndarray | float:
         lon = np.asarray(lon_deg, dtype=float)
@@ -130,8 +131,10 @@ def read_geoid(geoid: str | os.PathLike) -> GeoidGrid:
     """
     import rasterio
 
+    name = None
     if isinstance(geoid, str) and geoid.lower() in GEOID_GRIDS:
-        path = _find_grid(geoid.lower())
+        name = geoid.lower()
+        path = _find_grid(name)
     else:
         path = pathlib.Path(geoid)
         if not path.is_file():
@@ -148,4 +151,5 @@ def read_geoid(geoid: str | os.PathLike) -> GeoidGrid:
         z = src.read(1, masked=True)
         scale, offset = float(src.scales[0]), float(src.offsets[0])
     values = np.ma.filled(z.astype(float), np.nan) * scale + offset  # e.g. int16 cm, scale 0.01
-    return GeoidGrid(str(path), values, t.c + 0.5 * t.a, t.f + 0.5 * t.e, float(t.a), float(t.e))
+    return GeoidGrid(str(path), values, t.c + 0.5 * t.a, t.f + 0.5 * t.e, float(t.a), float(t.e),
+                     name)  # fmt: skip

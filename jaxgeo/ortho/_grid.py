@@ -159,7 +159,7 @@ def dem_for_image(model, dem, width: int, height: int, source: str = "image", ne
             f"{dem.path}: the DEM covers only {100 * cover:.1f}% of {what} (lon "
             f"{check[0]:.5f}..{check[2]:.5f}, lat {check[1]:.5f}..{check[3]:.5f}); it spans lon "
             f"{b[0]:.5f}..{b[2]:.5f}, lat {b[1]:.5f}..{b[3]:.5f}: give output bounds inside it, "
-            "or a DEM (or a fill DEM) that covers it"
+            "or a DEM that covers it (or a fill DEM: fill=)"
         )
     b = dem.bounds_lonlat
 
@@ -185,14 +185,14 @@ def footprint(
 
     Border points whose line of sight meets no DEM height (the DEM's nodata: a DSM's holes, its
     area outside a stereo overlap) are placed at the DEM's median height, so that the product
-    still spans the whole image (nodata there), with a warning naming ``source`` (unless
-    ``warn`` is false: output bounds the DEM covers); a border that meets the DEM nowhere is an
-    error."""
+    still spans the whole image (nodata there), with a warning naming ``source``; a border
+    that meets the DEM nowhere is an error. With ``warn`` false (output bounds the DEM covers:
+    the border need not meet it) neither."""
     border = border_pixels(width, height)
     g, ok = on_dem(model, border, grid)
     if ok.all():
         return g
-    if not ok.any():
+    if not ok.any() and warn:
         raise ValueError(
             f"{source}: no point of the image border meets a DEM height: the DEM (or its valid "
             "cells) does not cover the image footprint"

@@ -31,7 +31,7 @@ from ._occlusion import occluded_pixels
 @dataclasses.dataclass(frozen=True)
 class DEMSource:
     """How to open the DEM on a worker: :func:`jaxgeo.io.read_dem` arguments (a geoid by its
-    file or name; the fill DEM as its own source)."""
+    name, found again where the worker runs, or its file; the fill DEM as its own source)."""
 
     path: str
     offset_m: float = 0.0
@@ -45,7 +45,8 @@ class DEMSource:
         geoid = getattr(dem, "geoid", None)
         fill = getattr(dem, "fill", None)
         return cls(str(dem.path), float(dem.offset_m), str(dem.height_reference),
-                   None if geoid is None else str(geoid.source), int(getattr(dem, "band", 1)),
+                   None if geoid is None else getattr(geoid, "name", None) or str(geoid.source),
+                   int(getattr(dem, "band", 1)),
                    None if fill is None else cls.of(fill))  # fmt: skip
 
 
