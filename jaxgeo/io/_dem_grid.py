@@ -21,7 +21,12 @@ import numpy as np
 from ..models import DEMGrid
 from ._dem import implausible
 
-__all__ = ["dem_coverage", "dem_grid"]
+__all__ = ["MAX_FILLED_CELLS", "dem_coverage", "dem_grid"]
+
+MAX_FILLED_CELLS = 16_000_000
+"""Most cells of the grid of a DEM with a fill (128 MB of float64): a DSM of a small area at
+0.5 m asked for over a whole scene (an ortho plan reads the whole footprint) is read with its
+cells averaged by an integer factor beyond this, rather than exhaust the memory."""
 
 
 def _footprints(dem) -> list[tuple[float, float, float, float]]:
@@ -72,6 +77,7 @@ def dem_grid(dem, bounds_lonlat, margin_cells: int = 2) -> DEMGrid:
     (with its fill) does not cover the whole box, or when the window holds only nodata.
     """
     import pyproj
+    from affine import Affine
     from rasterio.warp import Resampling, reproject, transform_bounds
     from rasterio.windows import Window, from_bounds
 
@@ -103,9 +109,17 @@ def dem_grid(dem, bounds_lonlat, margin_cells: int = 2) -> DEMGrid:
         if fill is None:  # its own raster only; with a fill, the cells beyond it are filled
             c0, r0, c1, r1 = max(c0, 0), max(r0, 0), min(c1, src.width), min(r1, src.height)
         window = Window(c0, r0, max(c1 - c0, 2), max(r1 - r0, 2))
-        band = src.read(getattr(dem, "band", 1), window=window, masked=True,
-                        boundless=fill is not None)  # fmt: skip
+        read = {"window": window, "masked": True, "boundless": fill is not None}
+        factor = math.ceil(math.sqrt(window.width * window.height / MAX_FILLED_CELLS))
+        if fill is not None and factor > 1:  # a fine DSM asked for far beyond its edges
+            read["out_shape"] = (max(math.ceil(window.height / factor), 2),
+                                 max(math.ceil(window.width / factor), 2))  # fmt: skip
+            read["resampling"] = Resampling.average
+        band = src.read(getattr(dem, "band", 1), **read)
         wt = src.window_transform(window)
+        if "out_shape" in read:
+            rows, cols = read["out_shape"]
+            wt = wt @ Affine.scale(window.width / cols, window.height / rows)
         z = np.ma.filled(band.astype(float), np.nan)
         z[implausible(z)] = np.nan  # non-finite, or a void marker the file does not declare
         src_crs = src.crs
@@ -128,8 +142,6 @@ def dem_grid(dem, bounds_lonlat, margin_cells: int = 2) -> DEMGrid:
         dlon = dlat / max(math.cos(math.radians(lat_mid)), 1e-6)
         cols = int(math.ceil((e - w) / dlon)) + 2 * margin_cells + 1
         rows = int(math.ceil((n - s) / dlat)) + 2 * margin_cells + 1
-        from affine import Affine
-
         dst_t = Affine(dlon, 0, w - (margin_cells + 0.5) * dlon, 0, -dlat,
                        n + (margin_cells + 0.5) * dlat)  # fmt: skip
         out = np.full((rows, cols), np.nan)

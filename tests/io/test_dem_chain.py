@@ -83,7 +83,8 @@ def test_a_dsm_with_a_fill_is_the_next_dem(tmp_path, capsys):
         valid[name] = report["valid_fraction"]
         with rasterio.open(out) as src:
             data[name] = src.read(1, masked=True).astype(float)  # uint16: no wrap-around
-    print("valid fraction of the ortho over the DSM's box:", valid)
+    with capsys.disabled():  # the figures a reader wants
+        print("\nvalid fraction of the ortho over the DSM's box:", valid)
     assert valid["dsm+fill"] == pytest.approx(1.0) and valid["dsm"] < 0.9
     assert valid["dsm+fill"] > valid["dsm"] + 0.1
     # the rule: the fill's orthometric heights made ellipsoidal with EGM96 (~50 m here) before
@@ -95,7 +96,8 @@ def test_a_dsm_with_a_fill_is_the_next_dem(tmp_path, capsys):
     scale = float(truth[holes].std())
     err = {k: float(np.abs(data[k][holes] - truth[holes]).mean()) / scale
            for k in ("dsm+fill", "geoid forgotten")}  # fmt: skip
-    print("mean |ortho - truth ortho| / std in the filled pixels:", err)
+    with capsys.disabled():
+        print("mean |ortho - truth ortho| / std in the filled pixels:", err)
     assert err["dsm+fill"] < 0.5 * err["geoid forgotten"]
 
     # beyond the DSM: the whole image on the DSM with its fill
@@ -103,6 +105,7 @@ def test_a_dsm_with_a_fill_is_the_next_dem(tmp_path, capsys):
     code_s, report_s, _ = _ortho(capsys, left, tmp_path / "srtm.tif", "--dem", srtm,
                                  "--geoid", "egm96")  # fmt: skip
     assert code == 0 and code_s == 0
-    print("whole image: dsm+fill", report["valid_fraction"], "srtm alone",
-          report_s["valid_fraction"])  # fmt: skip
+    with capsys.disabled():
+        print("whole image valid fraction: dsm+fill", report["valid_fraction"], "srtm alone",
+              report_s["valid_fraction"])  # fmt: skip
     assert report["valid_fraction"] == pytest.approx(report_s["valid_fraction"], abs=0.02)
