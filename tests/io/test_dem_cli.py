@@ -117,3 +117,36 @@ def test_bad_dem_options_are_named(crop, tmp_path, capsys, extra, words):
     for part in words.format(**files).split("..."):
         assert part in err, err
     assert "Traceback" not in err and not (tmp_path / "out.tif").exists()
+
+
+def test_dsm_heights_range_tolerates_holes_of_a_dsm_dem(crop, tmp_path):
+    """``dsm``/``match --dem dsm.tif``: a point of the ROI's 5 x 5 grid on a hole of the DSM
+    takes the others' median height (it was an error); a DEM far away is still named."""
+    from jaxgeo.stereo._dsm import DSMGrid, write_dsm
+    from jaxgeo.stereo._ties import TieError, footprint_dem_heights
+
+    ll = _footprint(crop)
+    srtm = read_dem(crop["dem"], geoid="egm96")
+    to_map = pyproj.Transformer.from_crs(4326, 32631, always_xy=True)
+    x, y = to_map.transform(ll[:, 0], ll[:, 1])
+    x0, y0, res = np.floor(x.min()) - 100, np.ceil(y.max()) + 100, 2.0
+    rows, cols = int((y0 - y.min() + 100) / res), int((x.max() + 100 - x0) / res)
+    cc, rr = np.meshgrid(x0 + (np.arange(cols) + 0.5) * res, y0 - (np.arange(rows) + 0.5) * res)
+    lon, lat = pyproj.Transformer.from_crs(32631, 4326, always_xy=True).transform(cc, rr)
+    h = srtm(np.stack([lon, lat], -1))
+    cx, cy = to_map.transform(*ll[4])
+    h[np.hypot(cc - cx, rr - cy) < 40] = np.nan  # a hole under the crop's centre
+    path = write_dsm(DSMGrid(h.astype(np.float32), np.ones_like(h), np.zeros_like(h), x0, y0,
+                             res, 32631), tmp_path / "dsm.tif")  # fmt: skip
+    image = open_image(crop["image"], model=crop["model"])
+    dsm = read_dem(path)
+    with pytest.raises(ValueError, match="nodata cells"):
+        dsm(ll[4:5])  # the centre of the ROI's grid is on the hole
+    lo, hi = footprint_dem_heights(image.model, dsm, (0, 0, *image.size))
+    ref = footprint_dem_heights(image.model, srtm, (0, 0, *image.size))
+    # the DSM is SRTM resampled: its range lies within SRTM's over its (wider, 90 m) cells
+    assert ref[0] - 0.01 <= lo < hi <= ref[1] + 0.01 and hi - lo > 20
+    far = write_dsm(DSMGrid(h.astype(np.float32), np.ones_like(h), np.zeros_like(h),
+                            x0 + 5000, y0, res, 32631), tmp_path / "far.tif")  # fmt: skip
+    with pytest.raises((TieError, ValueError), match="far.tif"):
+        footprint_dem_heights(image.model, read_dem(far), (0, 0, *image.size))
