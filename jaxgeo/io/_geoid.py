@@ -11,7 +11,8 @@ offset are applied.
 EGM96 works offline: jaxgeo ships NGA's 15-arcminute grid (``jaxgeo/io/data/egm96_15.tif``, from
 ``WW15MGH.DAC``, public domain; int16 centimetres, the same values as PROJ's
 ``us_nga_egm96_15.tif`` to 5 mm; made by ``tools/make_egm96_grid.py``), used when PROJ's grid
-is not installed. EGM2008 (2.5-arcminute, ~80 MB) is not shipped: PROJ's grid or a file.
+is not installed. EGM2008 (2.5-arcminute; tens of MB even compressed) is not shipped: PROJ's
+grid or a file.
 """
 
 from __future__ import annotations
