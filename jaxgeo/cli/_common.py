@@ -117,6 +117,8 @@ OPTION_WORDS = {
     "pass height= and geoid= explicitly": "pass --dem-height and --geoid",
     "orthometric heights need a geoid (": "orthometric heights need a geoid (--geoid ",
     "(read_dem(REF, height=, geoid=))": "(--dem-height, --geoid)",
+    "(band=N)": "(--dem-band N)",
+    "a fill DEM: fill=": "--dem-fill DEM2",
 }
 """Library messages name the API's keywords; on the command line they are options (every
 error a command prints goes through these replacements)."""

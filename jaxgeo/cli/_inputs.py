@@ -1,6 +1,7 @@
 """What the commands read, given the same way everywhere: images (``--model IMG=FILE`` with IMG
 the path, file name or stem, ``--image-origin``), the DEM (``--dem``, ``--dem-height``,
-``--geoid``, ``--heights``) and a window (``--roi``)."""
+``--geoid``, ``--dem-band``, ``--dem-fill``, ``--dem-fill-geoid``, ``--heights``) and a window
+(``--roi``)."""
 
 from __future__ import annotations
 
@@ -33,9 +34,26 @@ def add_image_options(parser: argparse.ArgumentParser) -> None:
 
 
 def add_dem_options(parser: argparse.ArgumentParser, use: str) -> None:
-    """``--dem``, ``--dem-height``, ``--geoid`` (``use``: what the DEM is for, in the help)."""
+    """``--dem``, ``--dem-height``, ``--geoid`` and :func:`add_dem_fill_options` (``use``: what
+    the DEM is for, in the help)."""
     parser.add_argument("--dem", default=None, metavar="DEM", help=f"DEM raster (any CRS): {use}")
     add_height_options(parser)
+    add_dem_fill_options(parser)
+
+
+def add_dem_fill_options(parser: argparse.ArgumentParser) -> None:
+    """``--dem-band``, ``--dem-fill``, ``--dem-fill-geoid`` (read by :func:`open_dem`)."""
+    parser.add_argument("--dem-band", type=int, default=None, metavar="N",
+                        help="band of heights of --dem (default: its only band, or a jaxgeo "
+                        "DSM's band described 'height')")  # fmt: skip
+    parser.add_argument("--dem-fill", default=None, metavar="DEM2",
+                        help="a second DEM (any CRS) whose heights fill the holes of --dem and "
+                        "reach beyond its edges, e.g. SRTM under a jaxgeo DSM")  # fmt: skip
+    parser.add_argument("--dem-fill-geoid", default=None, metavar="GEOID",
+                        help="the values of --dem-fill are orthometric above GEOID (egm96, "
+                        "egm2008 or a geoid file; default: its vertical CRS if it declares one, "
+                        "else ellipsoidal); both DEMs are made ellipsoidal before one fills the "
+                        "other (--dem-height/--geoid describe --dem only)")  # fmt: skip
 
 
 def add_height_options(
@@ -96,24 +114,49 @@ def check_dem_options(args: argparse.Namespace) -> None:
         raise CommandError("--geoid applies to a DEM: give --dem too")
     if args.dem_height is not None and args.dem is None:
         raise CommandError("--dem-height applies to a DEM: give --dem too")
+    check_dem_fill_options(args)
+
+
+def check_dem_fill_options(args: argparse.Namespace) -> None:
+    """``--dem-band``, ``--dem-fill`` need ``--dem``; ``--dem-fill-geoid`` needs ``--dem-fill``."""
+    from . import CommandError
+
+    for option, value, needs in (("--dem-band", args.dem_band, args.dem), ("--dem-fill",
+                                 args.dem_fill, args.dem), ("--dem-fill-geoid",
+                                 args.dem_fill_geoid, args.dem_fill)):  # fmt: skip
+        if value is not None and needs is None:
+            raise CommandError(f"{option} needs {'--dem-fill' if 'geoid' in option else '--dem'}")
 
 
 def dem_inputs(args: argparse.Namespace) -> list[pathlib.Path]:
-    """The DEM and geoid files among a command's inputs."""
+    """The DEM, fill DEM and geoid files among a command's inputs."""
     files = [pathlib.Path(args.dem)] if args.dem is not None else []
-    if args.geoid is not None and pathlib.Path(args.geoid).exists():
-        files.append(pathlib.Path(args.geoid))
+    if getattr(args, "dem_fill", None) is not None:
+        files.append(pathlib.Path(args.dem_fill))
+    for geoid in (args.geoid, getattr(args, "dem_fill_geoid", None)):
+        if geoid is not None and pathlib.Path(geoid).exists():
+            files.append(pathlib.Path(geoid))
     return files
 
 
 def open_dem(args: argparse.Namespace):
-    """The :class:`~jaxgeo.io.DEM` of ``--dem`` (``None`` without one); its height reference
-    is printed on stderr unless ``--quiet``."""
+    """The :class:`~jaxgeo.io.DEM` of ``--dem`` (``--dem-height``, ``--geoid``, ``--dem-band``)
+    with its holes filled from ``--dem-fill`` (``--dem-fill-geoid``); ``None`` without one. Its
+    height reference is printed on stderr unless ``--quiet``."""
     if args.dem is None:
         return None
     from ..io import read_dem
 
-    dem = read_dem(args.dem, height=args.dem_height, geoid=args.geoid)
+    check_dem_fill_options(args)
+    fill = None
+    if args.dem_fill is not None:
+        try:
+            fill = read_dem(args.dem_fill, geoid=args.dem_fill_geoid)
+        except ValueError as err:  # the fill's reference is --dem-fill-geoid, not --geoid
+            text = str(err).replace("height= and geoid=", "--dem-fill-geoid")
+            raise ValueError(f"--dem-fill: {text}") from None
+    dem = read_dem(args.dem, height=args.dem_height, geoid=args.geoid, band=args.dem_band,
+                   fill=fill)  # fmt: skip
     note(dem.describe(), getattr(args, "quiet", False))
     return dem
 

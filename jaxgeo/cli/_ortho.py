@@ -23,7 +23,7 @@ import sys
 import warnings
 
 from ._common import add_command, add_json, add_out, add_quiet, ours
-from ._inputs import add_image_options
+from ._inputs import add_dem_fill_options, add_image_options
 from ._tile_options import add_tile_options
 
 
@@ -48,6 +48,7 @@ def register(sub) -> None:
         help="egm96, egm2008 (PROJ grids) or a geoid grid file, for orthometric "
         "DEMs (implies --dem-height orthometric)",
     )
+    add_dem_fill_options(parser)
     add_image_options(parser)
     parser.add_argument(
         "--crs",
@@ -104,10 +105,7 @@ def register(sub) -> None:
 
 
 def _inputs(image, dem) -> list[pathlib.Path]:
-    paths = [*image.inputs, pathlib.Path(dem.path)]
-    if dem.geoid is not None and pathlib.Path(str(dem.geoid.source)).exists():
-        paths.append(pathlib.Path(str(dem.geoid.source)))
-    return paths
+    return [*image.inputs, *dem.inputs]
 
 
 def run(args: argparse.Namespace) -> int:
@@ -146,18 +144,16 @@ def _settings(args: argparse.Namespace):
 
 
 def _run(args: argparse.Namespace) -> int:
-    from jaxgeo.io import read_dem
     from jaxgeo.ortho import orthorectify, plan_ortho
     from jaxgeo.tiles import TileError, write_plan
 
-    from ._common import note, print_json
-    from ._inputs import open_images
+    from ._common import print_json
+    from ._inputs import open_dem, open_images
     from ._tile_options import check_tile_options, tiles_kept
 
     (image,) = open_images([args.image], args)
-    dem = read_dem(args.dem, height=args.dem_height, geoid=args.geoid)
+    dem = open_dem(args)  # its height reference noted
     check_tile_options(args, _inputs(image, dem), 64)
-    note(dem.describe(), args.quiet)
     settings, tiles = _settings(args)
     if args.plan:
         setup = plan_ortho(image, dem, args.out, settings, overwrite=True)

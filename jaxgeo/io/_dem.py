@@ -21,6 +21,20 @@ A point outside the raster or on a nodata cell raises a ``ValueError`` naming th
 many points are affected and where: the DEM must cover everything it is asked about. Values no
 terrain has (outside :data:`PLAUSIBLE_HEIGHTS_M`, e.g. an undeclared void value -32768 or -9999)
 are nodata, whatever the file declares, and :func:`read_dem` warns when a file holds them.
+
+**A jaxgeo DSM is a DEM.** A raster of several bands is read at its band described ``height``
+(what :func:`jaxgeo.stereo.make_dsm` writes: ``height``, ``count``, ``spread``, ...); its NaN
+cells (occlusions, water, outside the stereo overlap) are holes, and its heights are ellipsoidal
+as its ``heights`` tag declares (a geoid is refused for it). Any other multi-band raster needs
+``band=``.
+
+**Holes filled from a second DEM.** ``read_dem("dsm.tif", fill=read_dem("srtm.tif",
+geoid="egm96"))``: where the first has no height (its holes, beyond its edges), the second's is
+used. Each DEM makes its own values ellipsoidal (its own ``height=`` / ``geoid=`` or its file's
+declaration) before one fills the other, so an orthometric SRTM fills an ellipsoidal DSM
+correctly, in any CRS. Where both have heights their median difference is measured
+(:attr:`DEM.fill_difference_m`, printed by :meth:`DEM.describe`), and a difference over
+:data:`FILL_MISMATCH_M` is warned about: the sign of a vertical datum given wrongly.
 """
 
 from __future__ import annotations
@@ -29,15 +43,21 @@ import dataclasses
 import math
 import os
 import pathlib
-import warnings
 from typing import Any
 
 import numpy as np
 
-from ..errors import JaxgeoWarning
 from ..models import AbstractDEM
 
-__all__ = ["DEM", "PLAUSIBLE_HEIGHTS_M", "implausible", "read_dem"]
+__all__ = ["DEM", "FILL_MISMATCH_M", "PLAUSIBLE_HEIGHTS_M", "implausible", "read_dem"]
+
+FILL_MISMATCH_M = 10.0
+"""Median difference (m) between a DEM and its fill DEM, where both have heights, above which
+:func:`read_dem` warns: terrain seen by two DEMs (a DSM with its trees and roofs, a bare-earth
+DEM) differs by metres, a geoid left out or counted twice by tens of metres."""
+
+HEIGHT_BAND = "height"
+"""The description of a jaxgeo DSM's band of heights (``jaxgeo.stereo``'s ``DSM_BANDS``)."""
 
 PLAUSIBLE_HEIGHTS_M = (-500.0, 9000.0)
 """Heights (m) a DEM value may take (the Dead Sea shore to above Everest, geoid to ellipsoid
@@ -66,8 +86,12 @@ class DEM(AbstractDEM):
 
     Attributes: ``path``; ``shape`` ``(rows, cols)``; ``crs`` (the raster CRS as WKT, ``None``
     when it is WGS84 lon/lat and no transformation is needed); ``bounds_lonlat`` ``(lon_min,
-    lat_min, lon_max, lat_max)`` the raster footprint in WGS84 degrees; ``vertical_crs`` the
-    name of a vertical CRS the file declares (``None`` if it declares none); ``offset_m``.
+    lat_min, lon_max, lat_max)`` the raster footprint in WGS84 degrees (with a ``fill``: the box
+    around both footprints, ``raster_bounds_lonlat`` the raster's own); ``vertical_crs`` the
+    name of a vertical CRS the file declares (``None`` if it declares none); ``offset_m``;
+    ``band`` the band of heights (1-based); ``fill`` the :class:`DEM` that gives the heights
+    this one lacks (``None``: none) and ``fill_difference_m`` the median of this DEM minus the
+    fill where both have heights (m, ``None``: no common cell).
     """
 
     path: pathlib.Path
@@ -80,6 +104,10 @@ class DEM(AbstractDEM):
     _transformer: Any = dataclasses.field(repr=False)  # WGS84 lon/lat -> raster CRS, or None
     height_reference: str = "ellipsoidal"  # of the file's values; "orthometric": geoid added
     geoid: Any = dataclasses.field(default=None, repr=False)  # io.geoid.GeoidGrid or None
+    band: int = 1
+    fill: DEM | None = None
+    raster_bounds_lonlat: tuple[float, float, float, float] | None = None  # None: bounds_lonlat
+    fill_difference_m: float | None = None
 
     def describe(self) -> str:
         """The height reference assumed, in words (the CLI prints it)."""
@@ -90,7 +118,27 @@ class DEM(AbstractDEM):
             ref = "ellipsoidal heights (WGS84), as read"
         if self.offset_m:
             ref += f", {self.offset_m:+g} m offset"
-        return f"DEM {self.path.name}: {ref}"
+        what = f"DEM {self.path.name}" + (f" (band {self.band})" if self.band != 1 else "")
+        text = f"{what}: {ref}"
+        if self.fill is not None:
+            diff = ("no cell in common" if self.fill_difference_m is None else
+                    f"median difference {self.fill_difference_m:+.2f} m where both have "
+                    "heights")  # fmt: skip
+            text += f"; its holes filled from {self.fill.describe()} ({diff})"
+        return text
+
+    @property
+    def inputs(self) -> list[pathlib.Path]:
+        """The files this DEM reads: the raster, a geoid file, and those of its fill."""
+        out = [self.path]
+        if self.geoid is not None and pathlib.Path(str(self.geoid.source)).is_file():
+            out.append(pathlib.Path(str(self.geoid.source)))
+        return out + (self.fill.inputs if self.fill is not None else [])
+
+    @property
+    def own_bounds_lonlat(self) -> tuple[float, float, float, float]:
+        """The WGS84 box of this DEM's own raster (``bounds_lonlat`` also spans the fill)."""
+        return self.raster_bounds_lonlat or self.bounds_lonlat
 
     def grid(self, bounds_lonlat, margin_cells: int = 2):
         """The DEM over ``(lon_min, lat_min, lon_max, lat_max)`` as a models-layer ``DEMGrid``.
@@ -114,38 +162,32 @@ class DEM(AbstractDEM):
         row = a.d * x + a.e * y + a.f
         return col, row
 
-    def __call__(self, lonlat) -> np.ndarray:
-        """Ellipsoidal heights (m) at ``lonlat`` ``(..., 2)`` (lon, lat degrees)."""
-        import rasterio
-        from rasterio.errors import RasterioError
-        from rasterio.windows import Window
-
+    def _points(self, lonlat) -> tuple[np.ndarray, tuple[int, ...]]:
         pts = np.asarray(lonlat, dtype=float)
         if pts.ndim < 1 or pts.shape[-1] != 2:
             raise ValueError(f"{self.path}: DEM points must have shape (..., 2) lon, lat; got "
                              f"{pts.shape}")  # fmt: skip
-        batch = pts.shape[:-1]
-        pts = pts.reshape(-1, 2)
+        return pts.reshape(-1, 2), pts.shape[:-1]
+
+    def _own(self, pts: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """Heights of this DEM's own raster at finite ``pts`` ``(n, 2)`` (geoid and offset
+        added; NaN where it has none) and the masks of the points outside it and on nodata."""
+        from rasterio.errors import RasterioError
+        from rasterio.windows import Window
+
+        from ._raster import open_raster
+
         n = len(pts)
-        if n == 0:
-            return np.zeros(batch)
-        bad = ~np.all(np.isfinite(pts), axis=1)
-        if bad.any():
-            raise ValueError(
-                f"{self.path}: {int(bad.sum())} of {n} points have non-finite lon/lat "
-                f"(first at index {int(np.flatnonzero(bad)[0])})"
-            )
         col, row = self._index(pts)
         rows, cols = self.shape
         with np.errstate(invalid="ignore"):
             outside = ~((col >= 0) & (col <= cols) & (row >= 0) & (row <= rows))
-        if outside.any():
-            b = self.bounds_lonlat
-            raise ValueError(
-                f"{self.path}: {int(outside.sum())} of {n} points lie outside the DEM "
-                f"({_span(pts[outside])}); it covers lon {b[0]:.5f}..{b[2]:.5f}, lat "
-                f"{b[1]:.5f}..{b[3]:.5f}: the DEM must cover the whole area"
-            )
+        h = np.full(n, np.nan)
+        hole = np.zeros(n, dtype=bool)
+        inside = np.flatnonzero(~outside)
+        if len(inside) == 0:
+            return h, outside, hole
+        col, row = col[inside], row[inside]
         # pixel centres at integer + 0.5 (corner-based); held at the edge in the outer half pixel
         fc = np.clip(col - 0.5, 0.0, cols - 1.0)
         fr = np.clip(row - 0.5, 0.0, rows - 1.0)
@@ -156,15 +198,15 @@ class DEM(AbstractDEM):
         wc0, wr0 = int(c0.min()), int(r0.min())
         window = Window(wc0, wr0, int(c1.max()) - wc0 + 1, int(r1.max()) - wr0 + 1)
         try:
-            with rasterio.open(self.path) as src:
-                band = src.read(1, window=window, masked=True)
+            with open_raster(self.path) as src:
+                band = src.read(self.band, window=window, masked=True)
         except RasterioError as err:  # e.g. a truncated or corrupt file
             raise ValueError(f"{self.path}: cannot read the DEM's heights ({err})") from None
         z = np.ma.getdata(band).astype(float)
         invalid = np.ma.getmaskarray(band) | implausible(z)
         z = np.where(invalid, 0.0, z)
-        h = np.zeros(n)
-        hole = np.zeros(n, dtype=bool)
+        hi = np.zeros(len(inside))
+        hole_in = np.zeros(len(inside), dtype=bool)
         for r, c, w in (
             (r0, c0, (1 - tr) * (1 - tc)),
             (r0, c1, (1 - tr) * tc),
@@ -172,16 +214,67 @@ class DEM(AbstractDEM):
             (r1, c1, tr * tc),
         ):
             rr, cc = r - wr0, c - wc0
-            h += w * z[rr, cc]
-            hole |= invalid[rr, cc] & (w > 0)
+            hi += w * z[rr, cc]
+            hole_in |= invalid[rr, cc] & (w > 0)
+        if self.geoid is not None:
+            hi = hi + self.geoid(pts[inside, 0], pts[inside, 1])
+        hi = np.where(hole_in, np.nan, hi + self.offset_m)
+        h[inside] = hi
+        hole[inside] = hole_in
+        return h, outside, hole
+
+    def sample(self, lonlat) -> np.ndarray:
+        """Ellipsoidal heights (m) at ``lonlat`` ``(..., 2)``, NaN where neither this DEM nor
+        its fill has one (outside, nodata, non-finite points): :meth:`__call__` without its
+        errors."""
+        pts, batch = self._points(lonlat)
+        h = np.full(len(pts), np.nan)
+        finite = np.flatnonzero(np.all(np.isfinite(pts), axis=1))
+        if len(finite):
+            h[finite] = self._own(pts[finite])[0]
+        missing = finite[np.isnan(h[finite])]
+        if self.fill is not None and len(missing):
+            h[missing] = self.fill.sample(pts[missing])
+        return h.reshape(batch)
+
+    def __call__(self, lonlat) -> np.ndarray:
+        """Ellipsoidal heights (m) at ``lonlat`` ``(..., 2)`` (lon, lat degrees)."""
+        pts, batch = self._points(lonlat)
+        n = len(pts)
+        if n == 0:
+            return np.zeros(batch)
+        bad = ~np.all(np.isfinite(pts), axis=1)
+        if bad.any():
+            raise ValueError(
+                f"{self.path}: {int(bad.sum())} of {n} points have non-finite lon/lat "
+                f"(first at index {int(np.flatnonzero(bad)[0])})"
+            )
+        h, outside, hole = self._own(pts)
+        if self.fill is not None:
+            missing = np.isnan(h)
+            if missing.any():
+                h[missing] = self.fill.sample(pts[missing])
+            left = np.isnan(h)
+            if left.any():
+                raise ValueError(
+                    f"{self.path}: {int(left.sum())} of {n} points have no height, neither in "
+                    f"this DEM nor in its fill {self.fill.path} ({_span(pts[left])})"
+                )
+            return h.reshape(batch)
+        if outside.any():
+            b = self.bounds_lonlat
+            raise ValueError(
+                f"{self.path}: {int(outside.sum())} of {n} points lie outside the DEM "
+                f"({_span(pts[outside])}); it covers lon {b[0]:.5f}..{b[2]:.5f}, lat "
+                f"{b[1]:.5f}..{b[3]:.5f}: the DEM must cover the whole area"
+            )
         if hole.any():
             raise ValueError(
                 f"{self.path}: {int(hole.sum())} of {n} points fall on nodata cells of the DEM "
-                f"({_span(pts[hole])}): fill the voids or use a DEM that covers the whole area"
+                f"({_span(pts[hole])}): fill the voids (a fill DEM: fill=) or use a DEM that "
+                "covers the whole area"
             )
-        if self.geoid is not None:
-            h = h + self.geoid(pts[:, 0], pts[:, 1])
-        return (h + self.offset_m).reshape(batch)
+        return h.reshape(batch)
 
 
 def read_dem(
@@ -190,28 +283,38 @@ def read_dem(
     *,
     height: str | None = None,
     geoid: str | os.PathLike | None = None,
+    band: int | None = None,
+    fill: DEM | None = None,
 ) -> DEM:
-    """Open a single-band height raster (GeoTIFF or anything rasterio reads) as a :class:`DEM`.
+    """Open a height raster (GeoTIFF or anything rasterio reads, a jaxgeo DSM) as a :class:`DEM`.
 
     Args:
         path: the raster; its CRS may be any (geographic or projected, e.g. UTM); nodata cells
-            (the nodata value, a mask band, or NaN) are refused when a point needs them.
+            (the nodata value, a mask band, or NaN) are refused when a point needs them, unless
+            ``fill`` has a height there.
         offset_m: added to every height: e.g. a constant geoid undulation ``N`` (m) to turn
             orthometric heights ``H`` into ellipsoidal ``h = H + N`` over a small area. jaxgeo
             takes the result as WGS84 ellipsoidal heights (see the module docstring).
         height: ``"ellipsoidal"`` (values are WGS84 ellipsoidal heights) or ``"orthometric"``
             (values are above the geoid ``geoid``; ``h = H + N``). ``None``: orthometric with
-            the file's own vertical CRS when it declares EGM96/EGM2008, else ellipsoidal.
-        geoid: ``"egm96"``, ``"egm2008"`` (PROJ grids pyproj finds) or a geoid grid file path
-            (GTX/GeoTIFF); only with orthometric heights.
+            the file's own vertical CRS when it declares EGM96/EGM2008, ellipsoidal when it
+            declares that (a jaxgeo DSM), else ellipsoidal.
+        geoid: ``"egm96"`` (PROJ's grid, else the one jaxgeo ships), ``"egm2008"`` (PROJ's
+            grid) or a geoid grid file path (GTX/GeoTIFF); only with orthometric heights.
+        band: the band of heights (1-based). ``None``: the only band, or the band described
+            ``height`` (a jaxgeo DSM).
+        fill: a :class:`DEM` whose heights are used where this one has none (its nodata cells,
+            beyond its edges); already made ellipsoidal by its own ``read_dem`` arguments.
 
     Raises ``FileNotFoundError`` for a missing path, ``ValueError`` naming the file when it is
-    not a raster, has more than one band, or has no CRS or transform.
+    not a raster, has several bands and none chosen, or has no CRS or transform.
     """
     import pyproj
-    import rasterio
-    from rasterio.errors import NotGeoreferencedWarning, RasterioIOError
+    from rasterio.errors import RasterioIOError
     from rasterio.warp import transform_bounds
+
+    from ._dem_checks import fill_difference, height_band, height_reference, warn_implausible
+    from ._raster import open_raster
 
     path = pathlib.Path(path)
     if not path.exists():
@@ -219,15 +322,14 @@ def read_dem(
     offset_m = float(offset_m)
     if not math.isfinite(offset_m):
         raise ValueError(f"{path}: offset_m must be finite, got {offset_m}")
+    if fill is not None and not isinstance(fill, DEM):
+        raise TypeError(f"fill must be a DEM (read_dem(...)), got {type(fill).__name__}")
     try:
-        with warnings.catch_warnings():  # no transform: refused below, with the file named
-            warnings.simplefilter("ignore", NotGeoreferencedWarning)
-            src = rasterio.open(path)
+        src = open_raster(path)  # no transform: refused below, with the file named
     except RasterioIOError as err:
         raise ValueError(f"{path}: not a raster rasterio/GDAL can read ({err})") from None
     with src:
-        if src.count != 1:
-            raise ValueError(f"{path}: a DEM must have one band, this raster has {src.count}")
+        band, declared = height_band(path, src, band)
         if src.crs is None:
             raise ValueError(f"{path}: the raster has no CRS: cannot place it on the ground")
         if src.transform.is_identity or src.transform.determinant == 0:
@@ -251,67 +353,15 @@ def read_dem(
     else:
         transformer = pyproj.Transformer.from_crs(wgs84, horizontal, always_xy=True)
         crs_out = wkt
-    reference, geoid_grid = _height_reference(path, vertical, height, geoid)
-    _warn_implausible(path)
-    return DEM(path, shape, crs_out, bounds_lonlat, vertical, offset_m, inverse, transformer,
-               reference, geoid_grid)  # fmt: skip
-
-
-def _height_reference(path, vertical: str | None, height, geoid):
-    """Resolve ``(height, geoid)`` against the file's vertical CRS -> (reference, GeoidGrid)."""
-    from ._geoid import read_geoid
-
-    if height not in (None, "ellipsoidal", "orthometric"):
-        raise ValueError(f"{path}: height must be 'ellipsoidal' or 'orthometric', got {height!r}")
-    declared = None
-    if vertical is not None:
-        v = vertical.upper().replace(" ", "")
-        declared = (
-            "egm2008" if ("EGM2008" in v or "EGM08" in v) else "egm96" if "EGM96" in v else None
-        )
-    if height is None:
-        if geoid is not None or declared is not None:
-            height = "orthometric"
-        elif vertical is not None:
-            raise ValueError(f"{path}: the file declares vertical CRS {vertical!r}, which jaxgeo "
-                             "does not know: pass height= and geoid= explicitly")  # fmt: skip
-        else:
-            height = "ellipsoidal"
-    if height == "ellipsoidal":
-        if geoid is not None:
-            raise ValueError(f"{path}: a geoid only applies to orthometric heights "
-                             "(height='orthometric')")  # fmt: skip
-        return "ellipsoidal", None
-    geoid = geoid if geoid is not None else declared
-    if geoid is None:
-        raise ValueError(f"{path}: orthometric heights need a geoid ('egm96', 'egm2008' or a "
-                         "geoid grid file)")  # fmt: skip
-    return "orthometric", read_geoid(geoid)
-
-
-def _warn_implausible(path: pathlib.Path, max_cells: int = 4_000_000) -> None:
-    """Warn (naming the file) when valid-looking cells hold impossible heights: an undeclared
-    void marker such as -32768. They are read as nodata. Large rasters are checked on a
-    decimated read."""
-    import rasterio
-    from rasterio.errors import RasterioError
-
-    try:
-        with rasterio.open(path) as src:
-            scale = max(1, math.ceil(math.sqrt(src.width * src.height / max_cells)))
-            shape = (max(src.height // scale, 1), max(src.width // scale, 1))
-            band = src.read(1, out_shape=shape, masked=True)
-    except RasterioError as err:  # a truncated or corrupt file: refused when opened
-        raise ValueError(f"{path}: cannot read the DEM's heights ({err})") from None
-    z = np.ma.getdata(band).astype(float)
-    bad = implausible(z) & ~np.ma.getmaskarray(band) & np.isfinite(z)
-    if bad.any():
-        values = np.unique(z[bad])
-        shown = ", ".join(f"{v:g}" for v in values[:3]) + (", ..." if len(values) > 3 else "")
-        warnings.warn(
-            f"{path}: {100 * bad.mean():.2g}% of the cells hold heights no terrain has ({shown}; "
-            f"plausible: {PLAUSIBLE_HEIGHTS_M[0]:g}..{PLAUSIBLE_HEIGHTS_M[1]:g} m) without being "
-            "declared nodata: they are read as nodata (voids)",
-            JaxgeoWarning,
-            stacklevel=3,
-        )
+    reference, geoid_grid = height_reference(path, vertical, height, geoid, declared)
+    warn_implausible(path, band)
+    dem = DEM(path, shape, crs_out, bounds_lonlat, vertical, offset_m, inverse, transformer,
+              reference, geoid_grid, band)  # fmt: skip
+    if fill is None:
+        return dem
+    fb = fill.bounds_lonlat
+    union = (min(bounds_lonlat[0], fb[0]), min(bounds_lonlat[1], fb[1]),
+             max(bounds_lonlat[2], fb[2]), max(bounds_lonlat[3], fb[3]))  # fmt: skip
+    dem = dataclasses.replace(dem, fill=fill, bounds_lonlat=union,
+                              raster_bounds_lonlat=bounds_lonlat)  # fmt: skip
+    return dataclasses.replace(dem, fill_difference_m=fill_difference(dem))

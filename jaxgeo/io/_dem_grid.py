@@ -5,6 +5,11 @@ heights get the geoid undulation of each cell centre, so the grid holds ellipsoi
 Rasters in geographic WGS84 and WGS84 UTM are kept on their own grid (the models layer samples
 both exactly); any other CRS is resampled (bilinear) onto a geographic grid of about the same
 cell size, on the host.
+
+A DEM with a fill DEM (``read_dem(..., fill=)``) gives its grid over the whole area asked for,
+beyond its own raster where the fill reaches: the cells without a height of their own take the
+fill's (bilinear in the fill at the cell centre, ellipsoidal), so the grid keeps the first DEM's
+cells and resolution.
 """
 
 from __future__ import annotations
@@ -16,17 +21,42 @@ import numpy as np
 from ..models import DEMGrid
 from ._dem import implausible
 
-__all__ = ["dem_coverage", "dem_grid"]
+__all__ = ["MAX_FILLED_CELLS", "dem_coverage", "dem_grid"]
+
+MAX_FILLED_CELLS = 16_000_000
+"""Most cells of the grid of a DEM with a fill (128 MB of float64): a DSM of a small area at
+0.5 m asked for over a whole scene (an ortho plan reads the whole footprint) is read with its
+cells averaged by an integer factor beyond this, rather than exhaust the memory."""
+
+
+def _footprints(dem) -> list[tuple[float, float, float, float]]:
+    """The lon/lat boxes of a DEM's raster and of its fill DEMs' rasters."""
+    out = []
+    while dem is not None:
+        out.append(getattr(dem, "own_bounds_lonlat", dem.bounds_lonlat))
+        dem = getattr(dem, "fill", None)
+    return out
 
 
 def dem_coverage(dem, bounds_lonlat) -> float:
-    """Fraction (0..1) of the lon/lat box ``bounds_lonlat`` inside the DEM's footprint."""
+    """Fraction (0..1) of the lon/lat box ``bounds_lonlat`` inside the DEM's footprint (with
+    a fill DEM: inside the union of the footprints)."""
     w, s, e, n = (float(v) for v in bounds_lonlat)
-    bw, bs, be, bn = dem.bounds_lonlat
-    iw, ie = max(w, bw), min(e, be)
-    is_, in_ = max(s, bs), min(n, bn)
     area = max(e - w, 1e-12) * max(n - s, 1e-12)
-    return max(ie - iw, 0.0) * max(in_ - is_, 0.0) / area
+    boxes = [(max(w, b[0]), max(s, b[1]), min(e, b[2]), min(n, b[3])) for b in _footprints(dem)]
+    boxes = [b for b in boxes if b[2] > b[0] and b[3] > b[1]]
+    if not boxes:
+        return 0.0
+    # exact area of a union of boxes: the cells between their edges, each in a box or not
+    xs = sorted({v for b in boxes for v in (b[0], b[2])})
+    ys = sorted({v for b in boxes for v in (b[1], b[3])})
+    inside = 0.0
+    for x0, x1 in zip(xs[:-1], xs[1:], strict=True):
+        for y0, y1 in zip(ys[:-1], ys[1:], strict=True):
+            cx, cy = 0.5 * (x0 + x1), 0.5 * (y0 + y1)
+            if any(b[0] <= cx <= b[2] and b[1] <= cy <= b[3] for b in boxes):
+                inside += (x1 - x0) * (y1 - y0)
+    return min(inside / area, 1.0)
 
 
 def _utm_zone_of(crs) -> int:
@@ -44,12 +74,14 @@ def dem_grid(dem, bounds_lonlat, margin_cells: int = 2) -> DEMGrid:
 
     ``bounds_lonlat`` is ``(lon_min, lat_min, lon_max, lat_max)``; ``margin_cells`` cells are
     added around it. Raises ``ValueError`` naming the file and the covered fraction when the DEM
-    does not cover the whole box, or when the window holds only nodata.
+    (with its fill) does not cover the whole box, or when the window holds only nodata.
     """
     import pyproj
-    import rasterio
+    from affine import Affine
     from rasterio.warp import Resampling, reproject, transform_bounds
     from rasterio.windows import Window, from_bounds
+
+    from ._raster import open_raster
 
     w, s, e, n = (float(v) for v in bounds_lonlat)
     if not (e > w and n > s):
@@ -62,20 +94,32 @@ def dem_grid(dem, bounds_lonlat, margin_cells: int = 2) -> DEMGrid:
             f"{w:.5f}..{e:.5f}, lat {s:.5f}..{n:.5f}); it spans lon {b[0]:.5f}..{b[2]:.5f}, lat "
             f"{b[1]:.5f}..{b[3]:.5f}: use a DEM that covers the whole footprint"
         )
-    with rasterio.open(dem.path) as src:
+    fill = getattr(dem, "fill", None)
+    with open_raster(dem.path) as src:
         crs = pyproj.CRS.from_wkt(src.crs.to_wkt())
         if crs.is_compound:
             crs = next((c for c in crs.sub_crs_list if not c.is_vertical), crs.sub_crs_list[0])
         t = src.transform
         box = transform_bounds("EPSG:4326", src.crs, w, s, e, n, densify_pts=21)
         win = from_bounds(*box, transform=t)
-        c0 = max(int(math.floor(win.col_off)) - margin_cells, 0)
-        r0 = max(int(math.floor(win.row_off)) - margin_cells, 0)
-        c1 = min(int(math.ceil(win.col_off + win.width)) + margin_cells, src.width)
-        r1 = min(int(math.ceil(win.row_off + win.height)) + margin_cells, src.height)
+        c0 = int(math.floor(win.col_off)) - margin_cells
+        r0 = int(math.floor(win.row_off)) - margin_cells
+        c1 = int(math.ceil(win.col_off + win.width)) + margin_cells
+        r1 = int(math.ceil(win.row_off + win.height)) + margin_cells
+        if fill is None:  # its own raster only; with a fill, the cells beyond it are filled
+            c0, r0, c1, r1 = max(c0, 0), max(r0, 0), min(c1, src.width), min(r1, src.height)
         window = Window(c0, r0, max(c1 - c0, 2), max(r1 - r0, 2))
-        band = src.read(1, window=window, masked=True)
+        read = {"window": window, "masked": True, "boundless": fill is not None}
+        factor = math.ceil(math.sqrt(window.width * window.height / MAX_FILLED_CELLS))
+        if fill is not None and factor > 1:  # a fine DSM asked for far beyond its edges
+            read["out_shape"] = (max(math.ceil(window.height / factor), 2),
+                                 max(math.ceil(window.width / factor), 2))  # fmt: skip
+            read["resampling"] = Resampling.average
+        band = src.read(getattr(dem, "band", 1), **read)
         wt = src.window_transform(window)
+        if "out_shape" in read:
+            rows, cols = read["out_shape"]
+            wt = wt @ Affine.scale(window.width / cols, window.height / rows)
         z = np.ma.filled(band.astype(float), np.nan)
         z[implausible(z)] = np.nan  # non-finite, or a void marker the file does not declare
         src_crs = src.crs
@@ -98,8 +142,6 @@ def dem_grid(dem, bounds_lonlat, margin_cells: int = 2) -> DEMGrid:
         dlon = dlat / max(math.cos(math.radians(lat_mid)), 1e-6)
         cols = int(math.ceil((e - w) / dlon)) + 2 * margin_cells + 1
         rows = int(math.ceil((n - s) / dlat)) + 2 * margin_cells + 1
-        from affine import Affine
-
         dst_t = Affine(dlon, 0, w - (margin_cells + 0.5) * dlon, 0, -dlat,
                        n + (margin_cells + 0.5) * dlat)  # fmt: skip
         out = np.full((rows, cols), np.nan)
@@ -110,7 +152,8 @@ def dem_grid(dem, bounds_lonlat, margin_cells: int = 2) -> DEMGrid:
     rows, cols = z.shape
     origin = (wt.c + 0.5 * wt.a, wt.f + 0.5 * wt.e)
     step = (wt.a, wt.e)
-    if dem.geoid is not None or dem.offset_m:
+    holes = ~np.isfinite(z) if fill is not None else None
+    if dem.geoid is not None or dem.offset_m or (holes is not None and holes.any()):
         cc, rr = np.meshgrid(np.arange(cols), np.arange(rows))
         x, y = origin[0] + cc * step[0], origin[1] + rr * step[1]
         if geographic:
@@ -121,6 +164,8 @@ def dem_grid(dem, bounds_lonlat, margin_cells: int = 2) -> DEMGrid:
         if dem.geoid is not None:
             z = z + dem.geoid(lon, lat)
         z = z + dem.offset_m
+        if holes is not None and holes.any():  # the fill's ellipsoidal heights at the centres
+            z[holes] = fill.sample(np.stack([lon[holes], lat[holes]], -1))
     if not np.any(np.isfinite(z)):
         raise ValueError(f"{dem.path}: the DEM holds only nodata over lon {w:.5f}..{e:.5f}, "
                          f"lat {s:.5f}..{n:.5f}")  # fmt: skip

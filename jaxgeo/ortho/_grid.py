@@ -139,17 +139,27 @@ def rough_bounds(model, border_xy: np.ndarray, dh_m: float = 500.0, heights=None
     return box, ref_box
 
 
-def dem_for_image(model, dem, width: int, height: int, source: str = "image"):
-    """The :class:`DEMGrid` around the image footprint; error if the DEM does not cover it."""
+def dem_for_image(model, dem, width: int, height: int, source: str = "image", need=None):
+    """The :class:`DEMGrid` around the image footprint (clipped to the DEM); error if the DEM
+    does not cover the footprint, or, given ``need`` (the lon/lat box of the requested output,
+    e.g. its bounds), the part of the footprint in ``need``: a DEM that covers the output is
+    enough."""
     border = border_pixels(width, height)
     box, ref_box = rough_bounds(model, border)
-    cover = dem_coverage(dem, ref_box)
+    check, what = ref_box, f"the footprint of {source}"
+    if need is not None:
+        inner = (max(ref_box[0], need[0]), max(ref_box[1], need[1]), min(ref_box[2], need[2]),
+                 min(ref_box[3], need[3]))  # fmt: skip
+        if inner[2] > inner[0] and inner[3] > inner[1]:  # else: the bounds' own check says so
+            check, what = inner, f"the requested output over {source}"
+    cover = dem_coverage(dem, check)
     if cover < 1.0 - 1e-9:
         b = dem.bounds_lonlat
         raise ValueError(
-            f"{dem.path}: the DEM covers only {100 * cover:.1f}% of the footprint of {source} "
-            f"(lon {ref_box[0]:.5f}..{ref_box[2]:.5f}, lat {ref_box[1]:.5f}..{ref_box[3]:.5f}); "
-            f"it spans lon {b[0]:.5f}..{b[2]:.5f}, lat {b[1]:.5f}..{b[3]:.5f}"
+            f"{dem.path}: the DEM covers only {100 * cover:.1f}% of {what} (lon "
+            f"{check[0]:.5f}..{check[2]:.5f}, lat {check[1]:.5f}..{check[3]:.5f}); it spans lon "
+            f"{b[0]:.5f}..{b[2]:.5f}, lat {b[1]:.5f}..{b[3]:.5f}: give output bounds inside it, "
+            "or a DEM that covers it (or a fill DEM: fill=)"
         )
     b = dem.bounds_lonlat
 
@@ -168,18 +178,21 @@ def dem_for_image(model, dem, width: int, height: int, source: str = "image"):
     return grid
 
 
-def footprint(model, grid, width: int, height: int, source: str = "the DEM") -> np.ndarray:
+def footprint(
+    model, grid, width: int, height: int, source: str = "the DEM", warn: bool = True
+) -> np.ndarray:
     """``(m, 3)`` ground points of the image border on the DEM.
 
     Border points whose line of sight meets no DEM height (the DEM's nodata: a DSM's holes, its
     area outside a stereo overlap) are placed at the DEM's median height, so that the product
     still spans the whole image (nodata there), with a warning naming ``source``; a border
-    that meets the DEM nowhere is an error."""
+    that meets the DEM nowhere is an error. With ``warn`` false (output bounds the DEM covers:
+    the border need not meet it) neither."""
     border = border_pixels(width, height)
     g, ok = on_dem(model, border, grid)
     if ok.all():
         return g
-    if not ok.any():
+    if not ok.any() and warn:
         raise ValueError(
             f"{source}: no point of the image border meets a DEM height: the DEM (or its valid "
             "cells) does not cover the image footprint"
@@ -189,13 +202,14 @@ def footprint(model, grid, width: int, height: int, source: str = "the DEM") -> 
     far = np.asarray(_at_height(model, border[~ok], np.full(int((~ok).sum()), h)))
     if not np.all(np.isfinite(far)):
         raise ValueError(f"{source}: the model cannot localise the image border")
-    warnings.warn(
-        f"{source}: {100 * (1 - ok.mean()):.0f}% of the image border falls where the DEM has "
-        f"no height ({100 * np.isnan(z).mean():.0f}% of its cells under the image are nodata): "
-        "the orthoimage is nodata there",
-        JaxgeoWarning,
-        stacklevel=2,
-    )
+    if warn:
+        warnings.warn(
+            f"{source}: {100 * (1 - ok.mean()):.0f}% of the image border falls where the DEM "
+            f"has no height ({100 * np.isnan(z).mean():.0f}% of its cells under the image are "
+            "nodata): the orthoimage is nodata there",
+            JaxgeoWarning,
+            stacklevel=2,
+        )
     out = g.copy()
     out[~ok] = far
     return out

@@ -31,27 +31,34 @@ from ._occlusion import occluded_pixels
 @dataclasses.dataclass(frozen=True)
 class DEMSource:
     """How to open the DEM on a worker: :func:`jaxgeo.io.read_dem` arguments (a geoid by its
-    file or name)."""
+    name, found again where the worker runs, or its file; the fill DEM as its own source)."""
 
     path: str
     offset_m: float = 0.0
     height: str = "ellipsoidal"
     geoid: str | None = None
+    band: int = 1
+    fill: DEMSource | None = None
 
     @classmethod
     def of(cls, dem) -> DEMSource:
         geoid = getattr(dem, "geoid", None)
+        fill = getattr(dem, "fill", None)
         return cls(str(dem.path), float(dem.offset_m), str(dem.height_reference),
-                   None if geoid is None else str(geoid.source))  # fmt: skip
+                   None if geoid is None else getattr(geoid, "name", None) or str(geoid.source),
+                   int(getattr(dem, "band", 1)),
+                   None if fill is None else cls.of(fill))  # fmt: skip
 
 
 @functools.lru_cache(maxsize=4)
 def _open_dem(source: DEMSource):
     from ..io import read_dem
 
+    fill = None if source.fill is None else _open_dem(source.fill)
     with warnings.catch_warnings():  # warned once, in the process that planned the job
         warnings.simplefilter("ignore")
-        return read_dem(source.path, source.offset_m, height=source.height, geoid=source.geoid)
+        return read_dem(source.path, source.offset_m, height=source.height, geoid=source.geoid,
+                        band=source.band, fill=fill)  # fmt: skip
 
 
 @functools.lru_cache(maxsize=4)

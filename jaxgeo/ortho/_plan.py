@@ -142,9 +142,7 @@ def plan_ortho(
     if not isinstance(dem, DEM):
         dem = read_dem(dem, height="ellipsoidal")
     out = pathlib.Path(out)
-    inputs = [*sensor.inputs, pathlib.Path(dem.path)]
-    if dem.geoid is not None and os.path.exists(str(dem.geoid.source)):
-        inputs.append(pathlib.Path(str(dem.geoid.source)))
+    inputs = [*sensor.inputs, *dem.inputs]
     for p in inputs:
         if out.resolve() == p.resolve():
             raise OrthoError(f"{out}: this output is an input (image, model or DEM); name another")
@@ -157,8 +155,14 @@ def plan_ortho(
     with open_raster(sensor.path) as src:  # a raster in its own pixel frame
         bands, dtype = src.count, src.dtypes[0]
     model = sensor.model
-    dem_grid = dem_for_image(model, dem, width, height, source=str(sensor.path))
-    ground = footprint(model, dem_grid, width, height, source=str(dem.path))
+    need = None  # the output asked for: a DEM that covers it is enough
+    if box is not None:
+        import pyproj
+
+        to_ll = pyproj.Transformer.from_crs(out_crs, 4326, always_xy=True)
+        need = to_ll.transform_bounds(*box, densify_pts=21)
+    dem_grid = dem_for_image(model, dem, width, height, source=str(sensor.path), need=need)
+    ground = footprint(model, dem_grid, width, height, source=str(dem.path), warn=need is None)
     out_crs = out_crs if out_crs is not None else default_crs(ground)
     gsd = ground_sample_distance(model, dem_grid, out_crs, width, height)
     gsd_m = gsd * M_PER_DEG if out_crs.is_geographic else gsd

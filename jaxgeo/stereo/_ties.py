@@ -196,7 +196,8 @@ def footprint_dem_heights(
     image: a 5 x 5 grid of its pixels localised on the DEM (localisation at a height, the DEM
     read there, repeated), then every DEM cell in the box they span. ``dem`` is a
     :class:`jaxgeo.io.DEM` (:func:`jaxgeo.io.read_dem`); a DEM that does not cover the footprint
-    raises its ``ValueError`` naming the file."""
+    raises its ``ValueError`` naming the file. A point on a hole of the DEM (a DSM's) takes the
+    median of the others' heights."""
     xy = _roi_points(roi)
     lo, hi = validity_heights(model)
     h = np.full(len(xy), (lo + hi) / 2)
@@ -204,7 +205,11 @@ def footprint_dem_heights(
         ground = _batched(_loc, (model,), xy, h)
         if not np.all(np.isfinite(ground)):
             raise TieError(f"{dem.path}: the image's corners cannot be localised on the DEM")
-        h_new = np.asarray(dem(ground[:, :2]), dtype=float)
+        h_new = np.asarray(dem.sample(ground[:, :2]), dtype=float)  # NaN: outside, a hole
+        if not np.isfinite(h_new).any():
+            raise TieError(f"{dem.path}: no DEM height under the ROI's footprint (outside the "
+                           "DEM or on its nodata)")  # fmt: skip
+        h_new = np.where(np.isfinite(h_new), h_new, np.nanmedian(h_new))
         done = np.max(np.abs(h_new - h)) < 0.5
         h = h_new
         if done:
