@@ -181,11 +181,11 @@ def _run(args: argparse.Namespace) -> int:
     from ._inputs import open_images
     from ._tile_options import check_tile_options, tiles_kept
 
-    settings, tiles = _settings(args)  # the options first (--like: a raster's grid, read)
     (image,) = open_images([args.image], args)
     dem = read_dem(args.dem, height=args.dem_height, geoid=args.geoid)
     check_tile_options(args, _inputs(image, dem, args.like), 64)
     note(dem.describe(), args.quiet)
+    settings, tiles = _settings(args)
     if args.plan:
         setup = plan_ortho(image, dem, args.out, settings, overwrite=True)
         write_plan(setup.plan, args.plan, overwrite=args.overwrite)
