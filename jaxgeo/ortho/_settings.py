@@ -123,7 +123,7 @@ def _take_like(s: OrthoSettings) -> None:
     if not isinstance(like, OutputGrid):
         raise OrthoError(f"like must be a raster path or a jaxgeo.tiles.OutputGrid, got "
                          f"{type(like).__name__}")  # fmt: skip
-    check_crs(like.crs)
+    like = dataclasses.replace(like, crs=check_crs(like.crs))  # a pyproj CRS, as the plan's
     object.__setattr__(s, "like", like)
 
 
