@@ -48,7 +48,7 @@ MAX_CELLS = 400_000_000
 not imported here: ``jaxgeo --help`` does not load jax)."""
 OPTIONS = {"res_m": "--res", "max_cells": "--max-cells", "max_hole_m": "--max-hole",
            "band_rows": "--band-rows", "heights": "--heights", "roi": "--roi", "keep": "--keep",
-           "tile_px": "--tile", "triangulation": "--triangulation", "like": "--like"}  # fmt: skip
+           "tile_px": "--tile", "triangulation": "--triangulation"}  # fmt: skip
 """The option of each :class:`jaxgeo.stereo.DSMSettings` field a command-line user sets."""
 
 
@@ -175,8 +175,8 @@ def run(args: argparse.Namespace) -> int:
                              progress=not args.quiet, plan=args.plan)  # fmt: skip
         report = make_dsm(images, args.out, settings, tiles, dem=open_dem(args),
                           orientation=orientation, overwrite=args.overwrite)  # fmt: skip
-    except DSMSettingsError as err:
-        raise CommandError(_named(err)) from None
+    except DSMSettingsError as err:  # (a --like path is not rewritten: it may hold "res_m")
+        raise CommandError(f"--{err}" if err.field == "like" else _named(err)) from None
     except (KeyboardInterrupt, TileError):
         tiles_kept(args, "dsm")
         raise

@@ -149,7 +149,7 @@ def run(args: argparse.Namespace) -> int:
 def _settings(args: argparse.Namespace):
     """The product's :class:`~jaxgeo.ortho.OrthoSettings` and the tiles'
     :class:`~jaxgeo.tiles.TileSettings` from the arguments."""
-    from jaxgeo.ortho import MAX_PIXELS, OrthoSettings
+    from jaxgeo.ortho import MAX_PIXELS, OrthoError, OrthoSettings
     from jaxgeo.tiles import TileSettings
 
     from . import CommandError
@@ -161,12 +161,15 @@ def _settings(args: argparse.Namespace):
         if given:
             raise CommandError(f"--like {args.like} gives the output grid (CRS, transform, "
                                f"shape): {', '.join(given)} cannot be given with it")  # fmt: skip
-    settings = OrthoSettings(
-        crs=args.crs, res_m=args.res, bounds=args.bounds, resampling=args.resampling,
-        occlusion=args.occlusion, tile_px=args.tile or OrthoSettings.tile_px,
-        max_pixels=MAX_PIXELS if args.max_pixels is None else args.max_pixels,
-        compress=args.compress, tap=not args.no_tap, like=args.like,
-    )  # fmt: skip
+    try:
+        settings = OrthoSettings(
+            crs=args.crs, res_m=args.res, bounds=args.bounds, resampling=args.resampling,
+            occlusion=args.occlusion, tile_px=args.tile or OrthoSettings.tile_px,
+            max_pixels=MAX_PIXELS if args.max_pixels is None else args.max_pixels,
+            compress=args.compress, tap=not args.no_tap, like=args.like,
+        )  # fmt: skip
+    except OrthoError as err:  # --like's raster, named as the option
+        raise CommandError(f"--{err}" if str(err).startswith("like: ") else str(err)) from None
     tiles = TileSettings(workers=args.workers, scheduler=args.scheduler, retries=args.retries,
                          resume=args.resume, progress=not args.quiet)  # fmt: skip
     return settings, tiles

@@ -265,19 +265,26 @@ def test_like_refusals_of_the_command(ventoux_orthos, real_data, tmp_path, capsy
     shutil.copy(ventoux_orthos / "left.tif", kept)
     before = kept.read_bytes()
     cases = [  # --like a satellite image (no map grid), the output onto the --like raster
-        (["--like", str(image)], tmp_path / "o.tif", "has no CRS"),
+        (["--like", str(image)], tmp_path / "o.tif", f"--like: {image}: this raster has no CRS"),
         (["--like", str(kept), "--overwrite"], kept, "is an input"),
     ]
     for extra, out, message in cases:
         assert _ortho(real_data, "right", out, *extra) == 2
         err = capsys.readouterr().err
         assert message in err and "Traceback" not in err and err.count("\n") == 1, err
+        assert err.startswith("jaxgeo ortho: error: ")
     assert sorted(tmp_path.iterdir()) == [kept] and kept.read_bytes() == before
     # the DSM's: --like with --res
     args = ["dsm", str(image), str(image), "--like", str(ventoux_orthos / "left.tif"), "--res",
             "1", "-o", str(tmp_path / "dsm.tif"), "--quiet"]  # fmt: skip
     assert main(args) == 2
     assert "--res cannot be given with it" in capsys.readouterr().err
+    # and a raster whose grid a DSM cannot have (degrees), named as the option
+    geo = _write(tmp_path / "geo.tif", "EPSG:4326", Affine(1e-5, 0, 5.1, 0, -1e-5, 44.3))
+    args[args.index("--like") + 1 : args.index("--like") + 4] = [str(geo)]
+    assert main(args) == 2
+    err = capsys.readouterr().err
+    assert f"jaxgeo dsm: error: --like: {geo}: its CRS (WGS 84) is not a projected" in err, err
 
 
 def test_dsm_grid_is_target_aligned_or_like(ventoux_orthos, real_data):
