@@ -1,7 +1,8 @@
 """``jaxgeo dsm``: a digital surface model from two or more images and their sensor models.
 
     jaxgeo dsm IMG1 IMG2 [IMG3 ...] [--model IMG=FILE ...] [--image-origin IMG=COL,ROW ...]
-               [--roi X Y W H] [--res M] [--crs EPSG:n] [--triangulation {intersect,los_midpoint}]
+               [--roi X Y W H] [--res M] [--crs EPSG:n] [--like RASTER] [--no-tap]
+               [--triangulation {intersect,los_midpoint}]
                [--no-register] [--band-rows N] [--orientation adjusted_models.json]
                [--keep DIR] [--quiet] [--json] -o dsm.tif [--overwrite]
 
@@ -14,7 +15,10 @@ adjusted RPCs are the images' models), the adjusted models' posterior uncertaint
 through the intersection; without it the models' orientation error is not in the sigma (vendor
 RPCs carry a few pixels of bias that no sigma here describes). ``--roi`` in pixels of IMG1
 (default: all of it); ``--res`` metres (default 0.5); CRS default the local UTM zone (a
-projected CRS in metres; a geographic CRS is refused). ``--keep DIR`` writes each pair's
+projected CRS in metres; a geographic CRS is refused); the grid's edges are multiples of --res
+(target-aligned cells, as the orthos': the products of one job share a grid; ``--no-tap``: from
+the footprint's corner); ``--like RASTER`` takes another raster's grid (CRS, transform, shape;
+not with --res, --crs, --no-tap). ``--keep DIR`` writes each pair's
 intermediate products. Dense matching runs over bands of ``--band-rows`` epipolar rows (default
 512), so its memory follows the band, not the image.
 Everything given is checked before any computation: the images and
@@ -55,8 +59,14 @@ def register(sub) -> None:
     add_image_options(parser)
     arg("--roi", type=int, nargs=4, metavar=("X", "Y", "W", "H"),
         help="region of the reference image, pixels (default: the whole image)")  # fmt: skip
-    arg("--res", type=float, default=0.5, help="cell size, m (default 0.5)")
+    arg("--res", type=float, default=None, help="cell size, m (default 0.5)")
     arg("--crs", help="output CRS, a projected CRS in metres, e.g. EPSG:32631 (default: local UTM)")
+    arg("--like", metavar="RASTER",
+        help="the DSM takes this raster's CRS, transform and shape (an ortho or DSM of the same "
+        "job; not with --res, --crs, --no-tap)")  # fmt: skip
+    arg("--no-tap", action="store_true",
+        help="start the grid at the footprint's west and north edges (default: its edges are "
+        "multiples of --res, as gdalwarp -tap)")  # fmt: skip
     arg("--triangulation", choices=("intersect", "los_midpoint"), default="intersect",
         help="least-squares intersection (default) or the midpoint of the two lines of "
         "sight")  # fmt: skip
@@ -126,9 +136,16 @@ def run(args: argparse.Namespace) -> int:
 
     if len(args.images) < 2:
         raise CommandError("give at least two images (the reference first)")
+    if args.like is not None:  # its grid, whole: no option of the grid with it
+        given = [o for o, v in (("--res", args.res), ("--crs", args.crs),
+                                ("--no-tap", args.no_tap or None)) if v is not None]  # fmt: skip
+        if given:
+            raise CommandError(f"--like {args.like} gives the DSM's grid (CRS, transform, "
+                               f"shape): {', '.join(given)} cannot be given with it")  # fmt: skip
     try:
         settings = DSMSettings(
-            res_m=args.res, band_rows=args.band_rows, max_hole_m=args.max_hole,
+            res_m=0.5 if args.res is None else args.res, tap=not args.no_tap, like=args.like,
+            band_rows=args.band_rows, max_hole_m=args.max_hole,
             triangulation=args.triangulation, register=not args.no_register, keep=args.keep,
             heights=tuple(args.heights) if args.heights else None, tile_px=args.tile,
             max_cells=args.max_cells,
@@ -137,6 +154,7 @@ def run(args: argparse.Namespace) -> int:
         settings = dataclasses.replace(settings, epsg=output_epsg(args.crs))
         images = open_images(args.images, args)
         inputs = [p for im in images for p in im.inputs] + dem_inputs(args)
+        inputs += [args.like] if args.like else []
         orientation = None
         if args.orientation is not None:
             from ..stereo import OrientationError
@@ -157,8 +175,8 @@ def run(args: argparse.Namespace) -> int:
                              progress=not args.quiet, plan=args.plan)  # fmt: skip
         report = make_dsm(images, args.out, settings, tiles, dem=open_dem(args),
                           orientation=orientation, overwrite=args.overwrite)  # fmt: skip
-    except DSMSettingsError as err:
-        raise CommandError(_named(err)) from None
+    except DSMSettingsError as err:  # (a --like path is not rewritten: it may hold "res_m")
+        raise CommandError(f"--{err}" if err.field == "like" else _named(err)) from None
     except (KeyboardInterrupt, TileError):
         tiles_kept(args, "dsm")
         raise
@@ -169,7 +187,7 @@ def run(args: argparse.Namespace) -> int:
                         "height": plan.height, "tile_px": plan.tile_px})  # fmt: skip
         else:
             print(f"wrote {args.plan}: {len(plan)} tiles of {plan.tile_px} cells over "
-                  f"{plan.width} x {plan.height} cells of {args.res:g} m "
+                  f"{plan.width} x {plan.height} cells of {report.res_m:g} m "
                   f"(EPSG:{report.epsg}); nothing computed")  # fmt: skip
         return 0
     result = report.as_dict()

@@ -3,7 +3,11 @@
 Orthorectify IMAGE on DEM into a tiled, compressed COG. The model is the image's own RPC (GeoTIFF
 tags, .RPB/_RPC.TXT sidecar) unless --model names a model file; a crop's pixel-space geotransform
 gives its origin in the model's frame (--image-origin COL,ROW otherwise). Default CRS: the local
-UTM zone; default resolution: the image's GSD. Every option is checked before any computation.
+UTM zone; default resolution: the image's GSD rounded to a common value (0.497 or 0.532 m: 0.5 m);
+the grid's edges are multiples of the resolution (target-aligned pixels; --no-tap: from the
+footprint's or --bounds' corner), so the orthos and DSMs of one job at one --res share a grid.
+--like RASTER takes the CRS, transform and shape of another raster exactly (not with --crs,
+--res, --bounds, --no-tap). Every option is checked before any computation.
 
 The product is made tile by tile: a small one in this process, a large one on worker processes,
 one per core (--workers), or on an existing dask cluster (--scheduler ADDRESS: start one with
@@ -73,6 +77,20 @@ def register(sub) -> None:
         help="output bounds in the output CRS (needs --crs; default: the footprint on the DEM)",
     )
     parser.add_argument(
+        "--no-tap",
+        action="store_true",
+        help="start the grid at the footprint's (or --bounds') west and north edges (default: "
+        "its edges are multiples of the resolution, as gdalwarp -tap: products of one job "
+        "share a grid)",
+    )
+    parser.add_argument(
+        "--like",
+        default=None,
+        metavar="RASTER",
+        help="the output takes this raster's CRS, transform and shape (an ortho or DSM of the "
+        "same job; not with --crs, --res, --bounds, --no-tap)",
+    )
+    parser.add_argument(
         "--resampling",
         choices=("nearest", "bilinear", "cubic"),
         default="bilinear",
@@ -104,8 +122,8 @@ def register(sub) -> None:
     parser.set_defaults(func=run)
 
 
-def _inputs(image, dem) -> list[pathlib.Path]:
-    return [*image.inputs, *dem.inputs]
+def _inputs(image, dem, like) -> list[pathlib.Path]:
+    return [*image.inputs, *dem.inputs] + ([pathlib.Path(like)] if like else [])
 
 
 def run(args: argparse.Namespace) -> int:
@@ -129,15 +147,27 @@ def run(args: argparse.Namespace) -> int:
 def _settings(args: argparse.Namespace):
     """The product's :class:`~jaxgeo.ortho.OrthoSettings` and the tiles'
     :class:`~jaxgeo.tiles.TileSettings` from the arguments."""
-    from jaxgeo.ortho import MAX_PIXELS, OrthoSettings
+    from jaxgeo.ortho import MAX_PIXELS, OrthoError, OrthoSettings
     from jaxgeo.tiles import TileSettings
 
-    settings = OrthoSettings(
-        crs=args.crs, res_m=args.res, bounds=args.bounds, resampling=args.resampling,
-        occlusion=args.occlusion, tile_px=args.tile or OrthoSettings.tile_px,
-        max_pixels=MAX_PIXELS if args.max_pixels is None else args.max_pixels,
-        compress=args.compress,
-    )  # fmt: skip
+    from . import CommandError
+
+    if args.like is not None:  # its grid, whole: no option of the grid with it
+        given = [opt for opt, v in (("--crs", args.crs), ("--res", args.res),
+                                    ("--bounds", args.bounds), ("--no-tap", args.no_tap or None))
+                 if v is not None]  # fmt: skip
+        if given:
+            raise CommandError(f"--like {args.like} gives the output grid (CRS, transform, "
+                               f"shape): {', '.join(given)} cannot be given with it")  # fmt: skip
+    try:
+        settings = OrthoSettings(
+            crs=args.crs, res_m=args.res, bounds=args.bounds, resampling=args.resampling,
+            occlusion=args.occlusion, tile_px=args.tile or OrthoSettings.tile_px,
+            max_pixels=MAX_PIXELS if args.max_pixels is None else args.max_pixels,
+            compress=args.compress, tap=not args.no_tap, like=args.like,
+        )  # fmt: skip
+    except OrthoError as err:  # --like's raster, named as the option
+        raise CommandError(f"--{err}" if str(err).startswith("like: ") else str(err)) from None
     tiles = TileSettings(workers=args.workers, scheduler=args.scheduler, retries=args.retries,
                          resume=args.resume, progress=not args.quiet)  # fmt: skip
     return settings, tiles
@@ -153,7 +183,7 @@ def _run(args: argparse.Namespace) -> int:
 
     (image,) = open_images([args.image], args)
     dem = open_dem(args)  # its height reference noted
-    check_tile_options(args, _inputs(image, dem), 64)
+    check_tile_options(args, _inputs(image, dem, args.like), 64)
     settings, tiles = _settings(args)
     if args.plan:
         setup = plan_ortho(image, dem, args.out, settings, overwrite=True)
@@ -184,6 +214,9 @@ def _run(args: argparse.Namespace) -> int:
           f"{report.grid_error_px:.2g} px ({100 * report.refined_fraction:.1f}% of blocks "
           f"projected in full); {report.tiles} tiles ({report.empty_tiles} without data, "
           f"{report.reused_tiles} reused) on {where}; {report.seconds:.1f} s")  # fmt: skip
+    if args.res is None and args.like is None:
+        print(f"resolution {report.res_m:g}: the image's GSD {report.gsd:.4g} rounded to a common "
+              "value (--res to choose another)")  # fmt: skip
     if report.occluded_fraction is not None:
         print(f"occluded: {100 * report.occluded_fraction:.2f}% of the output")
     return 0

@@ -8,9 +8,15 @@ report = orthorectify("scene.tif", read_dem("dem.tif", geoid="egm96"), "ortho.ti
 the tiles of a large product run on dask workers as :class:`jaxgeo.tiles.TileSettings` says;
 :func:`plan_ortho` takes the same arguments, checks them and plans the tiles without computing
 any.
+
+The products of one job share a grid: by default the resolution is the image's GSD rounded to a
+common value (:func:`common_resolution`) and the grid's edges are multiples of it
+(target-aligned pixels, ``tap``); ``OrthoSettings(like="other.tif")`` takes another raster's
+grid exactly.
 """
 
 from ._grid import OutputGrid as OutputGrid
+from ._grid import common_resolution as common_resolution
 from ._job import DEMSource as DEMSource
 from ._job import OrthoJob as OrthoJob
 from ._pipeline import OrthoReport as OrthoReport

@@ -1,8 +1,8 @@
-"""The ground footprint of an image on a DEM and the output grid of its orthoimage."""
+"""The ground footprint of an image on a DEM and the output grid of its orthoimage (its default
+resolution: :func:`common_resolution`; its cells: :meth:`jaxgeo.tiles.OutputGrid.covering`)."""
 
 from __future__ import annotations
 
-import dataclasses
 import math
 import warnings
 
@@ -12,6 +12,7 @@ from .._runtime.kept import kept, kept_points
 from ..errors import JaxgeoWarning
 from ..geodesy import utm_epsg, utm_zone
 from ..io.internal import dem_coverage
+from ..tiles import OutputGrid
 
 BATCH = 64
 """Host-side localisations on the DEM run in chunks of ``BATCH`` points (the last one padded):
@@ -20,6 +21,11 @@ ON_DEM_STEPS = 24
 """Regula falsi (Illinois) steps of :func:`on_dem`."""
 ON_DEM_TOL_M = 0.01
 """A point of :func:`on_dem` is kept when ``|DEM(ground) - h|`` ends below this (m)."""
+COMMON_STEPS = (1.0, 1.2, 1.5, 2.0, 2.5, 3.0, 4.0, 5.0, 6.0, 8.0)
+"""The default resolution of an orthoimage is the image's GSD rounded to the nearest (in ratio)
+of these times a power of ten: within 16 % of the GSD, and the same for the views of one
+scene whose GSDs differ by a few percent (0.497, 0.521, 0.532 m on a Pleiades triplet: 0.5 m),
+so that their orthoimages share a grid (with target-aligned pixels) at default settings."""
 
 
 @kept
@@ -88,25 +94,6 @@ def on_dem(model, xy: np.ndarray, grid) -> tuple[np.ndarray, np.ndarray]:
     g, res = _on_dem_bracketed(model, grid, *bracket, xy)
     ok = np.isfinite(res) & (res < ON_DEM_TOL_M) & np.all(np.isfinite(g), axis=-1)
     return g, ok
-
-
-@dataclasses.dataclass(frozen=True)
-class OutputGrid:
-    """A north-up output raster: ``crs`` (pyproj CRS), ``res_m``, ``west``/``north`` (outer
-    corner, CRS units), ``width``/``height`` pixels."""
-
-    crs: object
-    res_m: float
-    west: float
-    north: float
-    width: int
-    height: int
-
-    @property
-    def transform(self):
-        from affine import Affine
-
-        return Affine(self.res_m, 0.0, self.west, 0.0, -self.res_m, self.north)
 
 
 def border_pixels(width: int, height: int, n: int = 16) -> np.ndarray:
@@ -239,21 +226,26 @@ def ground_sample_distance(model, grid, crs, width: int, height: int) -> float:
     return float(math.sqrt(abs(np.linalg.det(a))))
 
 
-def output_grid(ground: np.ndarray, crs, res_m: float, bounds=None) -> OutputGrid:
-    """The grid covering ``ground`` lon/lat points (or ``bounds`` W S E N in ``crs``)."""
+def common_resolution(gsd: float) -> float:
+    """``gsd`` (CRS units, > 0) rounded to the nearest of :data:`COMMON_STEPS` times a power of
+    ten, the nearest in ratio (``0.532 -> 0.5``, ``0.56 -> 0.6``, ``2.2 -> 2``, ``0.31 -> 0.3``);
+    ``float(repr)``-clean (``0.5``, not ``0.5000000000000001``)."""
+    if not (math.isfinite(gsd) and gsd > 0):
+        raise ValueError(f"a GSD must be a positive number, got {gsd}")
+    exp = math.floor(math.log10(gsd))
+    steps = [*COMMON_STEPS, 10.0]
+    mantissa = gsd / 10.0**exp
+    best = min(steps, key=lambda m: abs(math.log(mantissa / m)))
+    return float(f"{best}e{exp}")
+
+
+def output_grid(ground: np.ndarray, crs, res_m: float, bounds=None, tap: bool = True) -> OutputGrid:
+    """The grid of ``res_m`` pixels covering ``ground`` lon/lat points (or ``bounds`` W S E N in
+    ``crs``); ``tap``: its edges on multiples of ``res_m`` (:meth:`OutputGrid.covering`)."""
     import pyproj
 
     if bounds is None:
         tr = pyproj.Transformer.from_crs(4326, crs, always_xy=True)
         x, y = tr.transform(ground[:, 0], ground[:, 1])
         bounds = (np.min(x), np.min(y), np.max(x), np.max(y))
-    w, s, e, n = (float(v) for v in bounds)
-    if not (e > w and n > s):
-        raise ValueError(f"empty output bounds {bounds}")
-    if not res_m > 0:
-        raise ValueError(f"the output resolution must be > 0, got {res_m}")
-    west = math.floor(w / res_m) * res_m
-    north = math.ceil(n / res_m) * res_m
-    width = int(math.ceil((e - west) / res_m))
-    height = int(math.ceil((north - s) / res_m))
-    return OutputGrid(crs, float(res_m), west, north, max(width, 1), max(height, 1))
+    return OutputGrid.covering(bounds, crs, res_m, tap)

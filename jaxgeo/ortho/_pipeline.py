@@ -31,7 +31,9 @@ class OrthoReport:
     exact); ``refined_fraction``: share of blocks projected in full; ``valid_fraction``: share
     of output pixels with data; ``occluded_fraction``: share of pixels hidden from the sensor
     (``None`` when occlusion was off); ``tiles``, ``empty_tiles`` (no data), ``reused_tiles``
-    (from ``resume``); ``workers`` (0: in this process) and ``scheduler`` (dask address).
+    (from ``resume``); ``workers`` (0: in this process) and ``scheduler`` (dask address);
+    ``gsd``: the image's ground sample distance at its centre (CRS units), of which ``res_m``
+    is the rounded value unless a resolution or a grid (``like``) was given.
     """
 
     path: pathlib.Path
@@ -50,6 +52,7 @@ class OrthoReport:
     reused_tiles: int = 0
     workers: int = 0
     scheduler: str | None = None
+    gsd: float | None = None
 
 
 def orthorectify(
@@ -112,5 +115,5 @@ def orthorectify(
         occluded_fraction=total.occluded_px / cells if settings.occlusion != "off" else None,
         seconds=time.perf_counter() - t_start, tiles=product.tiles,
         empty_tiles=product.empty_tiles, reused_tiles=product.reused_tiles,
-        workers=product.workers, scheduler=product.scheduler,
+        workers=product.workers, scheduler=product.scheduler, gsd=setup.gsd,
     )  # fmt: skip

@@ -25,7 +25,7 @@ from ..io import DEM, SensorImage, open_image, read_dem
 from ..io.internal import open_raster, refuse_existing
 from ..tiles import RasterSpec, TilePlan, plan_tiles
 from ..tiles.internal import overview_factors
-from ._grid import default_crs, dem_for_image, footprint, ground_sample_distance
+from ._grid import common_resolution, default_crs, dem_for_image, footprint, ground_sample_distance
 from ._grid import output_grid as make_output_grid
 from ._job import DEMSource, OrthoJob
 from ._settings import OrthoSettings
@@ -46,7 +46,8 @@ gets smaller tiles, so memory per tile stays bounded whatever the resolution."""
 @dataclasses.dataclass(frozen=True)
 class OrthoSetup:
     """An orthoimage ready to run: the per-tile ``job``, the tile ``plan``, the ``image`` and
-    the output ``out``; ``crs`` (pyproj) and ``bounds`` of the output grid."""
+    the output ``out``; ``crs`` (pyproj) and ``bounds`` of the output grid; ``gsd``: the image's
+    ground sample distance at its centre (CRS units)."""
 
     job: OrthoJob
     plan: TilePlan
@@ -54,6 +55,7 @@ class OrthoSetup:
     out: pathlib.Path
     crs: object
     bounds: tuple[float, float, float, float]
+    gsd: float = math.nan
 
 
 def _model_digest(model) -> str:
@@ -89,7 +91,7 @@ def _tile_inputs(plan_tiles_list, grid, crs, model, h_range, img_size, margin_de
     xs, ys = [], []
     for tile in plan_tiles_list:
         xs.append(grid.west + (tile.col + outline[:, 0] * tile.cols) * grid.res_m)
-        ys.append(grid.north - (tile.row + outline[:, 1] * tile.rows) * grid.res_m)
+        ys.append(grid.north - (tile.row + outline[:, 1] * tile.rows) * grid.res_y)
     lon, lat = to_ll.transform(np.concatenate(xs), np.concatenate(ys))
     ll = np.stack([lon, lat], -1).reshape(len(plan_tiles_list), len(outline), 2)
     ground = np.concatenate([np.concatenate([ll, np.full(ll.shape[:2] + (1,), h)], -1)
@@ -147,8 +149,13 @@ def plan_ortho(
         if out.resolve() == p.resolve():
             raise OrthoError(f"{out}: this output is an input (image, model or DEM); name another")
     s = settings  # checked when made (crs, res_m, bounds: the degrees once the GSD is known)
+    like = s.like  # an OutputGrid (a raster's, read when the settings were made)
+    if like is not None and like.source is not None:
+        if out.resolve() == pathlib.Path(like.source).resolve():
+            raise OrthoError(f"{out}: this output is the raster whose grid it takes (like); "
+                             "name another")  # fmt: skip
     resampling, occlusion, step_px, tol_px = s.resampling, s.occlusion, s.step_px, s.tol_px
-    out_crs = check_crs(s.crs) if s.crs is not None else None
+    out_crs = like.crs if like is not None else check_crs(s.crs) if s.crs is not None else None
     box = s.bounds
 
     width, height = sensor.size
@@ -166,20 +173,28 @@ def plan_ortho(
     out_crs = out_crs if out_crs is not None else default_crs(ground)
     gsd = ground_sample_distance(model, dem_grid, out_crs, width, height)
     gsd_m = gsd * M_PER_DEG if out_crs.is_geographic else gsd
-    res = check_res(s.res_m if s.res_m is not None else gsd, out_crs, gsd_m)
     import pyproj
 
     tr = pyproj.Transformer.from_crs(4326, out_crs, always_xy=True)
     fx, fy = tr.transform(ground[:, 0], ground[:, 1])
     poly = np.stack([fx, fy], -1)
-    if box is not None:
-        check_bounds_cover(box, poly, str(sensor.path))
-    grid = make_output_grid(ground, out_crs, res, box)
-    check_size(grid.width, grid.height, res, s.max_pixels, gsd)
+    if like is not None:  # its grid exactly; a product with data, and not over the limit
+        what = f"the grid of {like.source}" if like.source else "the grid given (like)"
+        check_bounds_cover(like.bounds, poly, str(sensor.path), what)
+        grid = like
+        check_size(grid.width, grid.height, grid.res_m, s.max_pixels, gsd, min_side=1)
+    else:
+        res = check_res(s.res_m if s.res_m is not None else common_resolution(gsd), out_crs, gsd_m)
+        if box is not None:
+            check_bounds_cover(box, poly, str(sensor.path))
+        grid = make_output_grid(ground, out_crs, res, box, s.tap)
+        check_size(grid.width, grid.height, res, s.max_pixels, gsd)
+    res = max(grid.res_m, grid.res_y)  # the coarser side sizes the tiles and the occlusion test
 
     # tiles: the image window of a tile stays near WINDOW_MAX_PX whatever the resolution
+    # (20 % over: the common resolution, up to 16 % coarser than the GSD, keeps full tiles)
     scale = res / gsd
-    tile = min(int(s.tile_px), max(int(WINDOW_MAX_PX / 2 / max(scale, 1e-9)), 4 * step_px))
+    tile = min(int(s.tile_px), max(int(1.2 * WINDOW_MAX_PX / 2 / max(scale, 1e-9)), 4 * step_px))
     if tile < s.tile_px:  # a power of two: the tiles' overviews align with the product's
         tile = 2 ** int(math.log2(tile))
     tile = max(tile // step_px * step_px, 4 * step_px)
@@ -258,7 +273,7 @@ def plan_ortho(
         "dem": {**dataclasses.asdict(source), **_file_id(dem.path)},
         "crs": out_crs.to_string(),
         "crs_wkt": out_crs.to_wkt(),
-        "res": res,
+        "res": [grid.res_m, grid.res_y],
         "transform": list(spec.transform),
         "width": grid.width,
         "height": grid.height,
@@ -279,6 +294,4 @@ def plan_ortho(
     }
     plan = plan_tiles("ortho", grid.width, grid.height, tile, 0, job=job_dict,
                       inputs=lambda t: per_tile[t.id])  # fmt: skip
-    bounds_out = (grid.west, grid.north - grid.height * grid.res_m,
-                  grid.west + grid.width * grid.res_m, grid.north)  # fmt: skip
-    return OrthoSetup(job, plan, sensor, out, out_crs, bounds_out)
+    return OrthoSetup(job, plan, sensor, out, out_crs, grid.bounds, gsd)

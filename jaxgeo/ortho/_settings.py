@@ -6,8 +6,10 @@ from __future__ import annotations
 import dataclasses
 import math
 import numbers
+import os
 from collections.abc import Sequence
 
+from ..tiles import OutputGrid
 from ..tiles.internal import COMPRESSIONS
 from ._kernel import RESAMPLINGS
 from ._validate import MAX_PIXELS, OrthoError, check_bounds, check_crs, check_res
@@ -24,9 +26,18 @@ class OrthoSettings:
         crs: output CRS (anything pyproj takes: ``"EPSG:32631"``, ``32631``, a
             ``pyproj.CRS``); ``None``: the local UTM zone of the footprint.
         res_m: output pixel size in CRS units (metres; degrees in a geographic CRS); ``None``:
-            the image's GSD at its centre.
+            the image's GSD at its centre rounded to a common value
+            (:func:`~jaxgeo.ortho.common_resolution`: 0.497 and 0.532 m give 0.5 m), so that
+            the orthoimages of one scene's views share a grid.
         bounds: ``(W, S, E, N)`` in ``crs`` (which must then be given; kept as a tuple of
             floats); ``None``: the footprint on the DEM.
+        tap: target-aligned pixels (``gdalwarp -tap``): the grid's edges are multiples of
+            ``res_m`` in ``crs`` (the smallest such grid holding the footprint or ``bounds``),
+            so that all products of one job at one resolution and CRS share their pixels;
+            ``False``: the grid starts at the footprint's (or ``bounds``') west and north edges.
+        like: the grid of another raster (a path, read when the settings are made, or a
+            :class:`jaxgeo.tiles.OutputGrid`): its CRS, transform and shape, exactly (``rio warp
+            --like``); ``crs``, ``res_m``, ``bounds`` and ``tap=False`` cannot be given with it.
         resampling: ``nearest``, ``bilinear`` or ``cubic`` (Keys, a = -0.5).
         occlusion: ``off``; ``nodata`` (pixels hidden from the sensor by terrain are nodata);
             ``band`` (an extra last band, 1 = hidden, 0 = seen).
@@ -51,8 +62,14 @@ class OrthoSettings:
     tol_px: float = 0.01
     max_pixels: float | None = MAX_PIXELS
     compress: str = "deflate"
+    tap: bool = True
+    like: str | os.PathLike | OutputGrid | None = None
 
     def __post_init__(self):
+        if not isinstance(self.tap, bool):
+            raise OrthoError(f"tap must be True or False, got {self.tap!r}")
+        if self.like is not None:
+            _take_like(self)
         if self.resampling not in RESAMPLINGS:
             raise OrthoError(f"unknown resampling {self.resampling!r}; expected one of "
                              f"{RESAMPLINGS}")  # fmt: skip
@@ -88,6 +105,26 @@ class OrthoSettings:
             object.__setattr__(self, "bounds", check_bounds(self.bounds))
             if self.crs is None:
                 raise OrthoError("bounds need the output CRS they are in (crs=, --crs)")
+
+
+def _take_like(s: OrthoSettings) -> None:
+    """``s.like`` as an :class:`OutputGrid` (a raster's read); the grid options it excludes."""
+    given = [name for name, v in (("crs", s.crs), ("res_m", s.res_m), ("bounds", s.bounds))
+             if v is not None] + ([] if s.tap else ["tap=False"])  # fmt: skip
+    if given:
+        raise OrthoError(f"like gives the output grid (CRS, transform, shape): "
+                         f"{', '.join(given)} cannot be given with it")  # fmt: skip
+    like = s.like
+    if isinstance(like, str | os.PathLike):
+        try:
+            like = OutputGrid.of_raster(like)
+        except ValueError as err:
+            raise OrthoError(f"like: {err}") from None
+    if not isinstance(like, OutputGrid):
+        raise OrthoError(f"like must be a raster path or a jaxgeo.tiles.OutputGrid, got "
+                         f"{type(like).__name__}")  # fmt: skip
+    like = dataclasses.replace(like, crs=check_crs(like.crs))  # a pyproj CRS, as the plan's
+    object.__setattr__(s, "like", like)
 
 
 def _number(value) -> bool:

@@ -109,26 +109,29 @@ def polygon_area(poly: np.ndarray) -> float:
     return 0.5 * abs(float(np.dot(x, np.roll(y, -1)) - np.dot(y, np.roll(x, -1))))
 
 
-def check_bounds_cover(bounds, footprint_xy: np.ndarray, source: str) -> float:
+def check_bounds_cover(bounds, footprint_xy: np.ndarray, source: str, what: str = "") -> float:
     """Fraction of ``bounds`` covered by the image footprint polygon ``footprint_xy`` (output
-    CRS); an :class:`OrthoError` when it is zero (the product would hold no data)."""
+    CRS); an :class:`OrthoError` when it is zero (the product would hold no data). ``what``:
+    where the bounds come from (default: the bounds given)."""
     w, s, e, n = bounds
     inside = polygon_area(clip_polygon(footprint_xy, bounds))
     fraction = inside / ((e - w) * (n - s))
     if fraction <= 0:
         lo, hi = footprint_xy.min(0), footprint_xy.max(0)
         raise OrthoError(
-            f"bounds W S E N = {w:g} {s:g} {e:g} {n:g} lie outside the footprint of {source} "
+            f"{what or 'bounds'} W S E N = {w:.10g} {s:.10g} {e:.10g} {n:.10g} "
+            f"{'lies' if what else 'lie'} outside the footprint of {source} "
             f"(it spans {lo[0]:.6g}..{hi[0]:.6g}, {lo[1]:.6g}..{hi[1]:.6g} in the output CRS): "
             "the product would hold no data"
         )
     return fraction
 
 
-def check_size(width: int, height: int, res: float, max_pixels: float | None, gsd: float):
+def check_size(width: int, height: int, res: float, max_pixels: float | None, gsd: float,
+               min_side: int = MIN_SIDE_PX):  # fmt: skip
     """Refuse a ``width`` x ``height`` product over ``max_pixels`` (``None`` or 0: no limit) or
-    with a side under :data:`MIN_SIDE_PX`."""
-    if min(width, height) < MIN_SIDE_PX:
+    with a side under ``min_side`` px (a grid taken from another raster: its own shape)."""
+    if min(width, height) < min_side:
         raise OrthoError(
             f"the product would be {width} x {height} px at resolution {res:g}: far coarser "
             f"than the footprint allows (the image's GSD is {gsd:.3g} in CRS units); check "

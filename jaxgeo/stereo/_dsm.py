@@ -29,6 +29,8 @@ import numpy as np
 
 from ..geodesy import utm_epsg, utm_zone
 from ..io.internal import atomic_output, raster_writer
+from ..tiles import OutputGrid
+from ._triangulation import StereoError
 from ._uncertainty import cell_sigma
 
 MAX_HOLE_M = 4.0
@@ -343,3 +345,28 @@ def write_dsm(dsm: DSMGrid, path: str | os.PathLike, overwrite: bool = False):
             dst.update_tags(i, meaning=DSM_BANDS[name][1])
         dst.update_tags(heights="ellipsoidal (WGS84), m")
     return path
+
+
+def dsm_grid(ground, epsg: int, settings, reference) -> tuple[float, float, int, int]:
+    """The DSM's grid ``(x0, y0, cols, rows)`` (upper-left corner, map m; cells of
+    ``settings.res_m`` in EPSG ``epsg``): ``settings.like``'s, else the grid over the ground
+    points ``ground`` (lon, lat, h), its edges on multiples of ``res_m`` unless
+    ``settings.tap`` is off (:meth:`jaxgeo.tiles.OutputGrid.covering`). A ``like`` grid that
+    misses the footprint of ``reference`` is a :class:`StereoError` (a DSM with no cell)."""
+    xyh = to_map(ground, epsg)
+    lo, hi = xyh[:, :2].min(axis=0), xyh[:, :2].max(axis=0)
+    like = settings.like
+    if like is None:
+        grid = OutputGrid.covering((lo[0], lo[1], hi[0], hi[1]), epsg, settings.res_m,
+                                   settings.tap)  # fmt: skip
+    else:
+        w, s, e, n = like.bounds
+        if not (w < hi[0] and e > lo[0] and s < hi[1] and n > lo[1]):
+            raise StereoError(
+                f"dsm: the grid of {like.source or 'like'} (W S E N = {w:.10g} {s:.10g} "
+                f"{e:.10g} {n:.10g}, EPSG:{epsg}) misses the footprint of {reference} "
+                f"({lo[0]:.10g}..{hi[0]:.10g}, {lo[1]:.10g}..{hi[1]:.10g}): the DSM would have "
+                "no height"
+            )
+        grid = like
+    return float(grid.west), float(grid.north), int(grid.width), int(grid.height)

@@ -75,6 +75,8 @@ def _check(images: Sequence[SensorImage], settings: DSMSettings) -> None:
                 "need X, Y >= 0, W, H > 0, X + W <= width, Y + H <= height)",
             )  # fmt: skip
     rows, cols = footprint_cells(ref, settings)
+    if settings.like is not None:  # its grid, whole
+        rows, cols = float(settings.like.height), float(settings.like.width)
     res = settings.res_m
     if settings.max_cells is not None and math.isfinite(rows) and rows * cols > settings.max_cells:
         raise DSMSettingsError(

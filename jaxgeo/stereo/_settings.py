@@ -9,6 +9,7 @@ import math
 import os
 
 from ..errors import JaxgeoError
+from ..tiles import OutputGrid
 from ._dense import DEFAULT_SGM, SGMSettings
 from ._dsm import MAX_HOLE_M
 
@@ -54,6 +55,15 @@ class DSMSettings:
         max_cells: refuse a larger DSM (cells; ``None``: no limit).
         epi_step: step (px) of the epipolar grids.
         epipolar_tol_px: how far from the models' epipolar curves tie points may lie (px).
+        tap: target-aligned cells (``gdalwarp -tap``): the grid's edges are multiples of
+            ``res_m`` in the CRS, so that the DSMs and orthoimages of one job at one resolution
+            share their cells; ``False``: the grid starts at the footprint's west and north
+            edges.
+        like: the grid of another raster (a path, read when the settings are made, or a
+            :class:`jaxgeo.tiles.OutputGrid`): its CRS (projected, in metres, with an EPSG
+            code), transform (square cells) and shape exactly; it sets ``res_m`` and ``epsg``
+            (another ``epsg``, a ``res_m`` other than the default and the grid's, or
+            ``tap=False`` are refused).
     """
 
     res_m: float = 0.5
@@ -70,8 +80,12 @@ class DSMSettings:
     max_cells: float | None = MAX_CELLS
     epi_step: int = 30
     epipolar_tol_px: float = 10.0
+    tap: bool = True
+    like: str | os.PathLike | OutputGrid | None = None
 
     def __post_init__(self):
+        if self.like is not None:
+            _take_like(self)
         if self.band_rows is not None and self.band_rows < 1:
             raise DSMSettingsError(
                 "band_rows", f"band_rows {self.band_rows}: expected a positive number of rows"
@@ -112,6 +126,43 @@ class DSMSettings:
         if not (math.isfinite(self.epipolar_tol_px) and self.epipolar_tol_px > 0):
             raise DSMSettingsError("epipolar_tol_px", f"epipolar_tol_px "
                                    f"{self.epipolar_tol_px:g}: must be > 0")  # fmt: skip
+
+
+def _take_like(s: DSMSettings) -> None:
+    """``s.like`` as an :class:`OutputGrid` (a raster's, read) whose CRS and cells a DSM can
+    have; ``res_m`` and ``epsg`` set from it."""
+    import pyproj
+
+    like = s.like
+    if isinstance(like, str | os.PathLike):
+        try:
+            like = OutputGrid.of_raster(like)
+        except ValueError as err:
+            raise DSMSettingsError("like", f"like: {err}") from None
+    if not isinstance(like, OutputGrid):
+        raise DSMSettingsError("like", "like must be a raster path or a jaxgeo.tiles.OutputGrid, "
+                               f"got {type(like).__name__}")  # fmt: skip
+    name = like.source or "the grid given (like)"
+    crs = pyproj.CRS.from_user_input(like.crs)
+    unit = crs.axis_info[0].unit_name if crs.axis_info else ""
+    code = crs.to_epsg()
+    if not crs.is_projected or unit not in ("metre", "meter") or code is None:
+        raise DSMSettingsError("like", f"like: {name}: its CRS ({crs.name}) is not a projected "
+                               "CRS in metres with an EPSG code, as a DSM's is")  # fmt: skip
+    if abs(like.res_y - like.res_m) > 1e-9 * like.res_m:
+        raise DSMSettingsError("like", f"like: {name}: its cells are {like.res_m:g} x "
+                               f"{like.res_y:g} m; a DSM's cells are square")  # fmt: skip
+    default = DSMSettings.__dataclass_fields__["res_m"].default
+    given = ([f"res_m {s.res_m:g}"] if s.res_m not in (default, like.res_m) else []) + (
+        [f"epsg {s.epsg}"] if s.epsg not in (None, code) else []) + (
+        [] if s.tap else ["tap=False"])  # fmt: skip
+    if given:
+        raise DSMSettingsError("like", f"like: {name} gives the grid (EPSG:{code}, "
+                               f"{like.res_m:g} m cells): {', '.join(given)} cannot be given "
+                               "with it")  # fmt: skip
+    object.__setattr__(s, "like", like)
+    object.__setattr__(s, "res_m", float(like.res_m))
+    object.__setattr__(s, "epsg", int(code))
 
 
 DEFAULT_DSM = DSMSettings()

@@ -36,7 +36,7 @@ import numpy as np
 from ..models import AbstractSensorModel
 from ..tiles import RasterSpec, Tile, TilePlan, plan_tiles
 from ..tiles.internal import NoData, cores, overview_factors, write_tile
-from ._dsm import DSM_BANDS, local_utm_epsg, rasterize, to_map
+from ._dsm import DSM_BANDS, dsm_grid, local_utm_epsg, rasterize, to_map
 from ._pipeline import _height_offsets, _spacing, dsm_from_images, image_size, stereo_pair
 from ._settings import DEFAULT_DSM, DSMSettings
 from ._ties import MatchSettings, TieError, footprint_dem_heights, tie_points, validity_heights
@@ -390,11 +390,7 @@ def plan_dsm(
     epsg = settings.epsg
     if epsg is None:
         epsg = local_utm_epsg(float(np.median(ground[:, 0])), float(np.median(ground[:, 1])))
-    xyh = to_map(ground, epsg)
-    x0 = float(np.floor(xyh[:, 0].min() / res_m) * res_m)
-    y0 = float(np.ceil(xyh[:, 1].max() / res_m) * res_m)
-    cols = int(np.ceil((xyh[:, 0].max() - x0) / res_m))
-    rows = int(np.ceil((y0 - xyh[:, 1].min()) / res_m))
+    x0, y0, cols, rows = dsm_grid(ground, epsg, settings, paths[0])
     tile = int(tile_px) if tiled else max(rows, cols, 1)
     factors = overview_factors(cols, rows)
     if factors and tile % factors[-1]:

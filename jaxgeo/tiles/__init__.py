@@ -14,6 +14,7 @@ processes, one per core, and a small product's in this process; ``scheduler=`` n
 existing dask cluster (:mod:`._runner` says how to start one).
 """
 
+from ._grid import OutputGrid as OutputGrid
 from ._mosaic import RasterSpec as RasterSpec
 from ._plan import PlanError as PlanError
 from ._plan import Tile as Tile
