@@ -98,11 +98,11 @@ def _check_tolerance(args, images) -> None:
     if not sized:
         return
     image = min(sized, key=lambda im: min(im.size))
-    most = min(image.size) / 4
+    most = min(image.size) // 4
     if args.tolerance > most:
         raise CommandError(f"{args.tolerance_option} {args.tolerance:g}: at most {most:g} px for "
                            f"{image.path} ({image.size[0]} x {image.size[1]} px): a quarter of "
-                           "its shorter side: a wider band constrains nothing)")  # fmt: skip
+                           "its shorter side: a wider band constrains nothing")  # fmt: skip
 
 
 @contextlib.contextmanager

@@ -111,9 +111,21 @@ def command_run(name: str, argv: list[str], args: argparse.Namespace) -> Iterato
             one = " ".join(str(message).split())
             print(f"{name}: warning: {one}", file=sys.stderr, flush=True)
 
-        warnings.showwarning = line
+        if _displayed():  # (a caller recording warnings, pytest.warns, keeps them)
+            warnings.showwarning = line
         try:
             yield run
         finally:
             run.release()
             CommandRun.current = previous
+
+
+def _displayed() -> bool:
+    """Whether warnings are displayed (Python's own display in effect), not recorded by a caller
+    (``warnings.catch_warnings(record=True)`` replaces the display's implementation)."""
+    import warnings
+
+    impl = getattr(warnings, "_showwarnmsg_impl", None)
+    return warnings.showwarning is getattr(warnings, "_showwarning_orig", None) and (
+        getattr(impl, "__module__", "warnings") == "warnings"
+    )
