@@ -208,9 +208,10 @@ def _vector_width() -> None:
         os.environ["XLA_FLAGS"] = f"{flags} {VECTOR_FLAG}".strip()
 
 
-def configure() -> None:
+def configure(warning: type[Warning] = UserWarning) -> None:
     """float64 on; 512-bit vectors for XLA's CPU code; one CPU device per usable core; the
-    persistent compilation cache on (unless off or set by the user)."""
+    persistent compilation cache on (unless off or set by the user; a directory that cannot be
+    one is said as a ``warning``, except in the ``jaxgeo`` command, which says it itself)."""
     _vector_width()
     jax = sys.modules.get("jax")
     _cpu_devices(jax)
@@ -225,9 +226,7 @@ def configure() -> None:
         if problem and not _the_command():
             import warnings
 
-            from ..errors import JaxgeoWarning
-
-            warnings.warn(problem, JaxgeoWarning, stacklevel=3)
+            warnings.warn(problem, warning, stacklevel=3)
         return
     if jax is None:
         if "JAX_COMPILATION_CACHE_DIR" in os.environ:

@@ -171,13 +171,13 @@ class Parser(argparse.ArgumentParser):
 
 def parse(parser: argparse.ArgumentParser, argv: list[str]) -> argparse.Namespace:
     """``argv`` parsed; a usage error (exit 2) with ``--json`` also prints its JSON object."""
-    from ._run import CommandRun
-
     Parser.last_error = None
     try:
         return parser.parse_args(argv)
     except SystemExit as end:
         if end.code and "--json" in argv:
+            from ._run import CommandRun
+
             run = CommandRun("jaxgeo", argv, json=True)
             run.error = Parser.last_error or "usage error"
             run.finish(EXIT_INPUT)
