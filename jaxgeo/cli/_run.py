@@ -46,11 +46,14 @@ class CommandRun:
         problem = cache_problem()
         if problem:
             note(f"{self.name}: warning: {problem}")
-
         names = ["plan" if getattr(args, "plan", None) else "out", *OUTPUT_OPTIONS[1:]]
         paths = [p for p in (getattr(args, n, None) for n in names) if p]
         overwrite = bool(getattr(args, "overwrite", False))
+        seen = set()
         for path in paths:
+            if os.path.abspath(path) in seen:  # (--keep DIR naming -o's path: claimed once)
+                continue
+            seen.add(os.path.abspath(path))
             claim = claim_output(path, self.command, overwrite=overwrite)
             self.claims.append(claim)
             if claim.note:
