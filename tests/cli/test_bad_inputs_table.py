@@ -185,7 +185,7 @@ def test_two_jaxgeo_processes_writing_one_new_output(tmp_path, capsys):
     out = tmp_path / "scene"
     env = {**os.environ, "PYTHONPATH": str(REPO)}
     first = subprocess.Popen([sys.executable, "-m", "jaxgeo.cli", "simulate", "cartosat1", "-o",
-                              str(out), "--quiet"], env=env, stdout=subprocess.PIPE,
+                              str(out), "--quiet", "--json"], env=env, stdout=subprocess.PIPE,
                              stderr=subprocess.PIPE, text=True)  # fmt: skip
     claim = tmp_path / ("scene" + CLAIM_SUFFIX)
     deadline = time.monotonic() + 120
@@ -198,6 +198,9 @@ def test_two_jaxgeo_processes_writing_one_new_output(tmp_path, capsys):
     stdout, stderr = first.communicate(timeout=300)
     assert first.returncode == 0, stderr
     assert (out / "observations.csv").is_file() and not claim.exists()
+    reply = _reply(stdout)  # success: the result with ok and exit_code
+    assert reply["ok"] is True and reply["exit_code"] == 0 and "error" not in reply
+    assert reply["kind"] == "cartosat1" and "observations.csv" in reply["files"]
 
 
 def test_uncaught_library_warnings_are_lines_of_the_command(workspace):
