@@ -131,27 +131,6 @@ def _restore_handlers(previous: dict) -> None:
         signal.signal(signum, handler)
 
 
-def _report_error(name: str, err: Exception, run) -> int:
-    """Print ``err`` as one line (``run``: :class:`._run.CommandRun`); its exit status (bad
-    input, or a bug)."""
-    import os
-
-    from ._common import EXIT_INPUT, EXIT_INTERNAL
-
-    if isinstance(err, (JaxgeoError, ValueError, FileNotFoundError, FileExistsError, KeyError)):
-        run.say_error(f"{name}: error: {_one_line(err)}")
-        return EXIT_INPUT
-    if isinstance(err, OSError):  # permissions, a full disk, a folder where a file is expected
-        where = f"{err.filename}: " if getattr(err, "filename", None) else ""
-        run.say_error(f"{name}: error: {where}{err.strerror or _one_line(err)}")
-        return EXIT_INPUT
-    if os.environ.get("JAXGEO_TRACEBACK"):
-        raise err
-    run.say_error(f"{name}: internal error ({type(err).__name__}: {_one_line(err)}); this is a "
-                  "bug: please report it (JAXGEO_TRACEBACK=1 shows the traceback)")  # fmt: skip
-    return EXIT_INTERNAL
-
-
 def _ignore_signals() -> None:
     import signal
 
@@ -206,7 +185,7 @@ def _run_command(args: argparse.Namespace, run, restore_handlers: bool) -> int:
         if _interrupt.requested():  # a library turned the interruption into its own error
             run.say_error(interrupted)
             return EXIT_INTERRUPTED
-        return _report_error(name, err, run)
+        return run.report(err, _one_line)
     finally:
         _exported.own_process(owned)
         if restore_handlers:

@@ -69,6 +69,28 @@ class CommandRun:
         print(line, file=sys.stderr, flush=True)
         self.error = line.removeprefix(f"{self.name}: error: ")
 
+    def report(self, err: Exception, one_line) -> int:
+        """Print ``err`` as one line (``one_line``: its text); its exit status (bad input, or a
+        bug: re-raised with ``JAXGEO_TRACEBACK=1``)."""
+        from ..errors import JaxgeoError
+        from ._common import EXIT_INTERNAL
+
+        name = self.name
+        if isinstance(err, (JaxgeoError, ValueError, FileNotFoundError, FileExistsError, KeyError)):
+            self.say_error(f"{name}: error: {one_line(err)}")
+            return EXIT_INPUT
+        if isinstance(err, OSError):  # permissions, a full disk, a folder where a file is expected
+            where = f"{err.filename}: " if getattr(err, "filename", None) else ""
+            self.say_error(f"{name}: error: {where}{err.strerror or one_line(err)}")
+            return EXIT_INPUT
+        if os.environ.get("JAXGEO_TRACEBACK"):
+            raise err
+        self.say_error(
+            f"{name}: internal error ({type(err).__name__}: {one_line(err)}); this is a bug: "
+            "please report it (JAXGEO_TRACEBACK=1 shows the traceback)"
+        )
+        return EXIT_INTERNAL
+
     def finish(self, code: int) -> int:
         """With ``--json``: the one JSON object on stdout, the result's (if the command got one)
         with ``ok``, ``exit_code`` and, unless it succeeded, ``error``. The exit status (2 if
