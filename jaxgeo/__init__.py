@@ -11,10 +11,11 @@ import importlib
 import importlib.metadata
 
 from ._runtime.jaxconfig import configure as _configure_jax
+from .errors import JaxgeoWarning as _JaxgeoWarning
 
 # float64 everywhere and the persistent compilation cache, before any submodule imports jax
 # (environment variables jax reads when it starts; jax.config if it already has)
-_configure_jax()
+_configure_jax(_JaxgeoWarning)
 
 try:
     __version__ = importlib.metadata.version("jaxgeo")

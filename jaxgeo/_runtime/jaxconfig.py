@@ -10,7 +10,11 @@ small programs, each below jax's default thresholds (1 s of compile time), so th
 lowered to cache them all. Location: ``$JAXGEO_CACHE_DIR``, else ``$XDG_CACHE_HOME/jaxgeo/jax``
 (``~/.cache/jaxgeo/jax``; ``~/Library/Caches`` on macOS, ``%LOCALAPPDATA%`` on Windows);
 ``JAXGEO_CACHE_DIR=off`` turns it off. A user's own ``JAX_COMPILATION_CACHE_DIR`` (or a
-``jax_compilation_cache_dir`` set before jaxgeo is imported) is left as it is.
+``jax_compilation_cache_dir`` set before jaxgeo is imported) is left as it is. A directory that
+cannot be one (a file, under a file, not writable) turns the cache off, said once
+(:func:`cache_problem`): a :class:`~jaxgeo.errors.JaxgeoWarning` when jaxgeo is imported, or
+in the ``jaxgeo`` command a ``warning:`` line of its own (jax would warn at every program it
+failed to cache, with a raw ``UserWarning``).
 
 Several processes may share the cache: jax writes an entry with a plain ``write_bytes`` (a reader
 could see half of it), so the size limit is set, which makes jax take a file lock
@@ -124,11 +128,49 @@ def default_cache_dir() -> Path:
 
 
 def cache_dir() -> Path | None:
-    """The cache directory in effect for jaxgeo, ``None`` when ``JAXGEO_CACHE_DIR=off``."""
+    """The cache directory in effect for jaxgeo, ``None`` when ``JAXGEO_CACHE_DIR=off`` or when
+    the directory cannot be one (:func:`cache_problem`)."""
     value = os.environ.get(CACHE_ENV, "").strip()
     if value.lower() in ("off", "0", "none", "false", "no"):
         return None
-    return Path(value).expanduser() if value else default_cache_dir()
+    path = Path(value).expanduser() if value else default_cache_dir()
+    return None if _unusable(path) else path
+
+
+def _unusable(path: Path) -> str | None:
+    """Why ``path`` cannot be the cache directory (``None``: it can; made when first used)."""
+    if path.exists():
+        if not path.is_dir():
+            return "is not a folder"
+        return None if os.access(path, os.W_OK | os.X_OK) else "is not writable"
+    parent = path.parent
+    while not parent.exists() and parent != parent.parent:
+        parent = parent.parent
+    if not parent.is_dir():
+        return f"cannot be made: {parent} is not a folder"
+    return None if os.access(parent, os.W_OK | os.X_OK) else f"cannot be made in {parent}"
+
+
+def cache_problem() -> str | None:
+    """Why the compilation cache is off although it was asked for (a sentence naming the
+    directory and :data:`CACHE_ENV`), or ``None``."""
+    value = os.environ.get(CACHE_ENV, "").strip()
+    if value.lower() in ("off", "0", "none", "false", "no"):
+        return None
+    path = Path(value).expanduser() if value else default_cache_dir()
+    why = _unusable(path)
+    if why is None:
+        return None
+    named = f"{CACHE_ENV}={value}" if value else f"the compilation cache {path}"
+    return (f"{named}: {why}; compiled programs are not cached (set {CACHE_ENV} to a writable "
+            "folder, or to off)")  # fmt: skip
+
+
+def _the_command() -> bool:
+    """Whether this process is the ``jaxgeo`` command (which says a cache problem as its own
+    line): its script, or ``python -m jaxgeo.cli`` (``-m`` while the package is imported)."""
+    first = sys.argv[0] if sys.argv else ""
+    return first == "-m" or os.path.basename(first) in ("jaxgeo", "jaxgeo.exe")
 
 
 def _settings(path: Path) -> dict[str, object]:
@@ -166,9 +208,10 @@ def _vector_width() -> None:
         os.environ["XLA_FLAGS"] = f"{flags} {VECTOR_FLAG}".strip()
 
 
-def configure() -> None:
+def configure(warning: type[Warning] = UserWarning) -> None:
     """float64 on; 512-bit vectors for XLA's CPU code; one CPU device per usable core; the
-    persistent compilation cache on (unless off or set by the user)."""
+    persistent compilation cache on (unless off or set by the user; a directory that cannot be
+    one is said as a ``warning``, except in the ``jaxgeo`` command, which says it itself)."""
     _vector_width()
     jax = sys.modules.get("jax")
     _cpu_devices(jax)
@@ -179,6 +222,11 @@ def configure() -> None:
         jax.config.update("jax_enable_x64", True)
     path = cache_dir()
     if path is None:
+        problem = cache_problem()
+        if problem and not _the_command():
+            import warnings
+
+            warnings.warn(problem, warning, stacklevel=3)
         return
     if jax is None:
         if "JAX_COMPILATION_CACHE_DIR" in os.environ:

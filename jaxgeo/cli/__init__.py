@@ -44,9 +44,9 @@ def version() -> str:
 def build_parser(command: str | None = None) -> argparse.ArgumentParser:
     """The parser; only ``command``'s module is imported (the others get a placeholder that
     shows their help line)."""
-    from ._common import SEE_CONVENTIONS
+    from ._common import SEE_CONVENTIONS, Parser
 
-    parser = argparse.ArgumentParser(
+    parser = Parser(
         prog="jaxgeo",
         description="Differentiable orientation of high-resolution satellite images.",
         epilog="'jaxgeo COMMAND --help' describes a command, its options and its exit status.\n"
@@ -131,26 +131,6 @@ def _restore_handlers(previous: dict) -> None:
         signal.signal(signum, handler)
 
 
-def _report_error(name: str, err: Exception) -> int:
-    """Print ``err`` as one line; its exit status (bad input, or a bug)."""
-    import os
-
-    from ._common import EXIT_INPUT, EXIT_INTERNAL
-
-    if isinstance(err, (JaxgeoError, ValueError, FileNotFoundError, FileExistsError, KeyError)):
-        print(f"{name}: error: {_one_line(err)}", file=sys.stderr)
-        return EXIT_INPUT
-    if isinstance(err, OSError):  # permissions, a full disk, a folder where a file is expected
-        where = f"{err.filename}: " if getattr(err, "filename", None) else ""
-        print(f"{name}: error: {where}{err.strerror or _one_line(err)}", file=sys.stderr)
-        return EXIT_INPUT
-    if os.environ.get("JAXGEO_TRACEBACK"):
-        raise err
-    print(f"{name}: internal error ({type(err).__name__}: {_one_line(err)}); this is a bug: "
-          "please report it (JAXGEO_TRACEBACK=1 shows the traceback)", file=sys.stderr)  # fmt: skip
-    return EXIT_INTERNAL
-
-
 def _ignore_signals() -> None:
     import signal
 
@@ -167,34 +147,45 @@ def main(argv: list[str] | None = None) -> int:
 
 
 def _main(argv: list[str] | None, restore_handlers: bool) -> int:
-    from ._common import EXIT_INTERRUPTED
+    from ._common import parse
 
     argv = sys.argv[1:] if argv is None else list(argv)
     # top-level options take no values: the first word that is not an option is the command
     command = next((a for a in argv if not a.startswith("-")), None)
     parser = build_parser(command if command in COMMANDS else None)
-    args = parser.parse_args(argv)
+    args = parse(parser, argv)
+    from ._run import command_run
+
+    with command_run(f"jaxgeo {args.command}", argv, args) as run:
+        code = _run_command(args, run, restore_handlers)
+    return run.finish(code)  # (--json: the one JSON object, once every claim is released)
+
+
+def _run_command(args: argparse.Namespace, run, restore_handlers: bool) -> int:
+    """The command of ``args``, its outputs claimed first; its exit status."""
     # jax: every command computes (help and usage errors are above)
     from .._runtime import exported as _exported
+    from ._common import EXIT_INTERRUPTED
 
     owned = _exported.own_process()  # restored below (tests run commands in their process)
-    name = f"jaxgeo {args.command}"
+    name = run.name
     interrupted = f"{name}: interrupted; no output was written"
     previous = _install_interrupt_handlers()
     try:
+        run.start(args)  # outputs claimed before any file is read
         code = int(args.func(args) or 0)
         if _interrupt.requested():  # its exception was lost after the last output was written
-            print(f"{name}: interrupted after its outputs were written", file=sys.stderr)
+            run.say_error(f"{name}: interrupted after its outputs were written")
             return EXIT_INTERRUPTED
         return code
     except KeyboardInterrupt:
-        print(interrupted, file=sys.stderr)
+        run.say_error(interrupted)
         return EXIT_INTERRUPTED
     except Exception as err:
         if _interrupt.requested():  # a library turned the interruption into its own error
-            print(interrupted, file=sys.stderr)
+            run.say_error(interrupted)
             return EXIT_INTERRUPTED
-        return _report_error(name, err)
+        return run.report(err, _one_line)
     finally:
         _exported.own_process(owned)
         if restore_handlers:

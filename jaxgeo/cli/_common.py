@@ -3,7 +3,10 @@
 One convention across commands: ``-o/--out`` names the output (a file, or a folder where a
 command writes several), ``--overwrite`` allows replacing an earlier output (never an input),
 ``--quiet`` silences progress, ``--json`` prints the result as one JSON object on stdout instead
-of the human summary. Images are given as rasters (their RPC inside or beside them) with
+of the human summary -- always exactly one, with ``ok``, ``exit_code`` and, when the command
+fails, ``error`` (:class:`._run.CommandRun`). Every output is claimed when the command starts
+(:func:`jaxgeo.io.internal.claim_output`): a second run writing the same path is refused at
+once. Images are given as rasters (their RPC inside or beside them) with
 ``--model IMG=FILE`` for a separate model file and ``--image-origin IMG=COL,ROW`` for a crop
 whose pixel frame the raster does not carry (:func:`jaxgeo.io.open_image`). The whole
 convention, for users, is :data:`CONVENTIONS_PAGE` (named at the end of every ``--help``).
@@ -65,6 +68,27 @@ def add_out(parser: argparse.ArgumentParser, metavar: str, help: str) -> None:
         action="store_true",
         help="replace an existing output (an input is never replaced)",
     )
+
+
+def in_range(option: str, value: float | None, low: float | None = None,
+             high: float | None = None, unit: str = "", *, above: bool = False,
+             why: str = "") -> None:  # fmt: skip
+    """Refuse ``value`` of ``option`` outside ``[low, high]`` (``above``: ``> low``), NaN and
+    infinities, naming the option and the valid range (``why``: what the bound means); ``None``
+    (the option not given) passes. A value that cannot make sense (a negative size, a zero
+    resolution, a window wider than any image) never reaches the work."""
+    from . import CommandError
+
+    if value is None:
+        return
+    low_ok = low is None or (value > low if above else value >= low)
+    if value == value and abs(value) != float("inf") and low_ok and (high is None or value <= high):
+        return
+    lo = "" if low is None else f"> {low:g}" if above else f">= {low:g}"
+    hi = "" if high is None else f"<= {high:g}"
+    rule = " and ".join(r for r in (lo, hi) if r)
+    unit = f" {unit}" if unit else ""
+    raise CommandError(f"{option} must be {rule}{unit}, got {value:g}{why}")
 
 
 def add_quiet(parser: argparse.ArgumentParser) -> None:
@@ -136,8 +160,40 @@ def name_options(message: str, options: dict[str, str], names: Iterable[str] | N
     return message
 
 
+class Parser(argparse.ArgumentParser):
+    """``argparse``'s parser that keeps its usage error's message for the JSON object of a
+    command run with ``--json`` (:class:`CommandRun`); sub-parsers are of the same class."""
+
+    last_error: str | None = None
+
+    def error(self, message):
+        Parser.last_error = f"{self.prog}: error: {message}"
+        super().error(message)
+
+
+def parse(parser: argparse.ArgumentParser, argv: list[str]) -> argparse.Namespace:
+    """``argv`` parsed; a usage error (exit 2) with ``--json`` also prints its JSON object."""
+    Parser.last_error = None
+    try:
+        return parser.parse_args(argv)
+    except SystemExit as end:
+        if end.code and "--json" in argv:
+            from ._run import CommandRun
+
+            run = CommandRun("jaxgeo", argv, json=True)
+            run.error = Parser.last_error or "usage error"
+            run.finish(EXIT_INPUT)
+        raise
+
+
 def print_json(result: dict) -> None:
-    """``result`` as one JSON line on stdout (numpy values converted)."""
+    """``result`` as one JSON line on stdout (numpy values converted); inside a command run, the
+    result of its JSON object, printed at its end (:meth:`._run.CommandRun.finish`)."""
+    from ._run import CommandRun
+
+    if CommandRun.current is not None and CommandRun.current.json:
+        CommandRun.current.result = result
+        return
     print(json.dumps(result, default=_jsonable))
 
 

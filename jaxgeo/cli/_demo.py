@@ -36,12 +36,12 @@ def register(sub) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
-    import json
     import time
 
     from ..bundle import adjust_files
     from ..bundle.internal import format_reports
     from ..simulate import demo_dir
+    from ._common import print_json
 
     folder = demo_dir()
     t0 = time.perf_counter()
@@ -57,7 +57,7 @@ def run(args: argparse.Namespace) -> int:
     if args.json:
         data = run.summary()
         data["seconds"] = seconds
-        print(json.dumps(data, indent=1))
+        print_json(data)
         return 0 if result.converged else 1
     roles = result.point_role
     n_gcp, n_chk = roles.count("gcp"), roles.count("check")

@@ -32,6 +32,13 @@ from ._inputs import (
     open_images,
 )
 
+MAX_TOLERANCE_PX = 200.0
+"""Largest ``--tolerance``: the candidates of each keypoint grow with the band's width, and so
+do time and memory (s2p's 1024 px pair on 2 cores: 8 s at 10 px, 31 s at 100 px, over 12 min
+and 4 GB at 400 px). A relative bias larger than this is the models' to fix first (``jaxgeo
+adjust`` with a few GCPs). It is also at most a quarter of the smallest image's shorter side:
+a wider band no longer constrains the matches."""
+
 
 class _Spelled(argparse.Action):
     """Store the value and the option as typed (``--tolerance`` or ``--tol``): errors name it."""
@@ -56,7 +63,8 @@ def register(sub) -> None:
                         "height, px)")  # fmt: skip
     parser.add_argument("--tolerance", "--tol", type=float, default=10.0, metavar="PX",
                         action=_Spelled, help="how far from the models' epipolar curves a match "
-                        "may lie (the models' relative bias), px (default 10)")  # fmt: skip
+                        "may lie (the models' relative bias), px (default 10; at most "
+                        f"{MAX_TOLERANCE_PX:g} and a quarter of the images' size)")  # fmt: skip
     parser.add_argument("--sigma", type=float, default=0.5, metavar="PX",
                         help="a priori sigma of the tie points written to the CSV, px "
                         "(default 0.5)")  # fmt: skip
@@ -74,7 +82,27 @@ def _check_options(args) -> None:
     for option, value in ((args.tolerance_option, args.tolerance), ("--sigma", args.sigma)):
         if not (math.isfinite(value) and value > 0):
             raise CommandError(f"{option} {value:g}: must be a number > 0 (px)")
+    if args.tolerance > MAX_TOLERANCE_PX:
+        raise CommandError(f"{args.tolerance_option} {args.tolerance:g}: at most "
+                           f"{MAX_TOLERANCE_PX:g} px (the models' relative bias; matching time "
+                           "and memory grow with it: fix a larger bias first, jaxgeo adjust "
+                           "with a few GCPs)")  # fmt: skip
     check_dem_options(args)
+
+
+def _check_tolerance(args, images) -> None:
+    """``--tolerance`` within a quarter of the smallest image's shorter side."""
+    from . import CommandError
+
+    sized = [im for im in images if im.size]
+    if not sized:
+        return
+    image = min(sized, key=lambda im: min(im.size))
+    most = min(image.size) // 4
+    if args.tolerance > most:
+        raise CommandError(f"{args.tolerance_option} {args.tolerance:g}: at most {most:g} px for "
+                           f"{image.path} ({image.size[0]} x {image.size[1]} px): a quarter of "
+                           "its shorter side: a wider band constrains nothing")  # fmt: skip
 
 
 @contextlib.contextmanager
@@ -109,6 +137,7 @@ def run(args: argparse.Namespace) -> int:
 
     _check_options(args)
     images = open_images(args.images, args)
+    _check_tolerance(args, images)
     inputs = [p for im in images for p in im.inputs] + dem_inputs(args)
     out = guard_outputs([args.out], inputs, args.overwrite)[0]  # before any work
     if args.roi is not None:

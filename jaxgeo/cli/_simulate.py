@@ -105,6 +105,7 @@ def run(args: argparse.Namespace) -> int:
     out = pathlib.Path(args.out)
     if out.exists() and not out.is_dir():
         raise CommandError(f"--out {out}: exists and is not a directory")
+    _check_sizes(args)
     start = time.perf_counter()
     try:
         summary, lines = _simulate(args, out, note)
@@ -188,3 +189,27 @@ def _simulate(args: argparse.Namespace, out, note) -> tuple[dict, list[str]]:
               f"true model {vs[n]['nojitter_px']['rms']:.2g} px RMS, minus the jittered one "
               f"{vs[n]['jittered_px']['rms']:.2g} px RMS (truth points)" for n in fit]  # fmt: skip
     return summary, lines
+
+
+MAX_SCENES = 1000
+"""``--scenes`` at most: twelve times the 80 sub-scenes of 003_'s strip."""
+SCENE_BYTES_PER_PX = 50
+"""Memory of ``stereo-scene`` per image pixel, measured: 470 MB at 512 px, 510 MB at 1024 px."""
+
+
+def _check_sizes(args: argparse.Namespace) -> None:
+    """A strip or a scene this machine cannot hold refused before any work (named by option)."""
+    import os
+
+    from ._common import in_range
+
+    if args.kind == "carto2s-strip":
+        in_range("--scenes", args.scenes, 1, MAX_SCENES)
+    if args.kind == "stereo-scene":
+        try:
+            ram = os.sysconf("SC_PAGE_SIZE") * os.sysconf("SC_PHYS_PAGES")
+        except (ValueError, OSError, AttributeError):  # no sysconf (Windows): no bound
+            return
+        side = int((ram / SCENE_BYTES_PER_PX) ** 0.5)
+        why = f" (about {SCENE_BYTES_PER_PX} bytes per pixel; this machine has {ram / 1e9:.0f} GB)"
+        in_range("--size", args.size, None, side, "px", why=why)

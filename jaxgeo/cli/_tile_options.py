@@ -8,21 +8,28 @@ import argparse
 import pathlib
 from collections.abc import Sequence
 
-from ._common import guard_outputs, note
+from ._common import guard_outputs, in_range, note
+
+MIN_TILE, MAX_TILE = 64, 8192
+"""``--tile`` range: smaller tiles are all margin; a larger one holds some 0.5 GB per band of
+float64 output (and a DSM tile's matching several times that) in one worker."""
 
 
 def add_tile_options(parser: argparse.ArgumentParser, tile: int, unit: str) -> None:
     """``--tile``, ``--workers``, ``--scheduler``, ``--retries``, ``--resume``, ``--plan``: how a
-    product made tile by tile (:mod:`jaxgeo.tiles`) runs."""
+    product made tile by tile (:mod:`jaxgeo.tiles`) runs (ranges: :func:`check_tile_options`)."""
+    from ..tiles.internal import MAX_RETRIES
+
     parser.add_argument("--tile", type=int, default=None, metavar="N",
-                        help=f"tile size in {unit} (default {tile})")  # fmt: skip
+                        help=f"tile size in {unit} (default {tile}; <= {MAX_TILE})")  # fmt: skip
     parser.add_argument(
         "--workers",
         type=int,
         default=None,
         metavar="N",
         help="worker processes (default: one per core for a large product, none "
-        "for a small one or on 1-2 cores; 0: all tiles in this process)",
+        "for a small one or on 1-2 cores; 0: all tiles in this process; at most one per "
+        "core, more on a cluster with --scheduler)",
     )
     parser.add_argument(
         "--scheduler",
@@ -36,7 +43,8 @@ def add_tile_options(parser: argparse.ArgumentParser, tile: int, unit: str) -> N
         type=int,
         default=2,
         metavar="N",
-        help="retries of a failing tile or of a tile whose worker died (default: 2)",
+        help=f"retries of a failing tile or of a tile whose worker died (default: 2; at most "
+        f"{MAX_RETRIES})",
     )
     parser.add_argument(
         "--resume",
@@ -57,12 +65,16 @@ def check_tile_options(args: argparse.Namespace, inputs: Sequence[pathlib.Path],
                        min_tile: int) -> None:  # fmt: skip
     """The tile options in range; ``--resume`` a folder that is not an input; the outputs (the
     product, or the plan only: the product is then only named) guarded (:func:`guard_outputs`)."""
+    from ..tiles.internal import MAX_RETRIES, max_local_workers
     from . import CommandError
 
-    for name, value, low in (("--workers", args.workers, 0), ("--retries", args.retries, 0),
-                             ("--tile", args.tile, min_tile)):  # fmt: skip
-        if value is not None and value < low:
-            raise CommandError(f"{name} must be >= {low}, got {value}")
+    in_range("--tile", args.tile, min_tile, MAX_TILE)
+    in_range("--retries", args.retries, 0, MAX_RETRIES)
+    in_range("--workers", args.workers, 0, max_local_workers(),
+             why=" (one per core of this machine; more on a cluster: --scheduler)")  # fmt: skip
+    if args.workers is not None and args.scheduler:
+        raise CommandError(f"--workers {args.workers} with --scheduler: the cluster's workers run "
+                           "the tiles (start more there); give one of them")  # fmt: skip
     if args.plan:  # the plan is written; the product is only named (never an input)
         guard_outputs([args.plan], inputs, args.overwrite)
         guard_outputs([args.out], inputs, overwrite=True)

@@ -160,7 +160,7 @@ def read_ground(
 def read_observations(
     path: str | os.PathLike, default_sigma_px: float = DEFAULT_IMAGE_SIGMA_PX
 ) -> Observations:
-    """Read an OBS.csv table (see the module docstring)."""
+    """Read an OBS.csv table (see the module docstring); one without rows is refused."""
     path = pathlib.Path(path)
     pids: list[str] = []
     same: dict[str, str] = {}  # point id -> its first string: one string per point, not per row
@@ -180,6 +180,9 @@ def read_observations(
         images.append(code.setdefault(image, len(code)))
         values.extend((x, y, s))
         lines.append(lineno)
+    if not pids:  # (an adjustment without measurements fails deep inside, naming nothing)
+        raise TableError(f"{path}: no measurements: the table has a header but no rows "
+                         "(id,image,x,y[,sigma_px])")  # fmt: skip
     names = list(code)
     image_no = np.frombuffer(images, dtype=np.int64)
     _refuse_repeats(path, pids, image_no, np.frombuffer(lines, dtype=np.int64), names)

@@ -4,6 +4,7 @@ may change without notice); a user imports from ``jaxgeo.io``."""
 from ._adjusted import JITTER_STATICS as JITTER_STATICS
 from ._atomic import atomic_output as atomic_output
 from ._atomic import atomic_write_text as atomic_write_text
+from ._atomic import claim_output as claim_output
 from ._atomic import refuse_existing as refuse_existing
 from ._atomic import write_bytes as write_bytes
 from ._atomic import write_csv as write_csv

@@ -220,6 +220,7 @@ class OrthoJob:
         values, valid = np.asarray(values), np.asarray(valid)
         rows, cols = tile.rows, tile.cols
         values, valid = values[:, :rows, :cols], valid[:rows, :cols]
+        values = away_from_nodata(values, valid, nodata)
         n_occ = 0
         if self.occlusion != "off":
             occ = occluded_pixels(self.model, dem, xy_abs[:rows, :cols],
@@ -239,3 +240,17 @@ class OrthoJob:
         write_tile(path, self.spec, tile.row, tile.col, values)
         return {"valid_px": n_valid, "occluded_px": n_occ, "grid_error_px": error_left,
                 "refined_blocks": refined, "blocks": int(err.size)}  # fmt: skip
+
+
+def away_from_nodata(values: np.ndarray, valid: np.ndarray, nodata) -> np.ndarray:
+    """An integer product's valid pixels that equal ``nodata`` moved one step away from it (a
+    real 0 of a uint16 image becomes 1 where nodata is 0, the vendors' convention): otherwise a
+    reader takes them for pixels the model does not see. Float products (NaN nodata) are
+    returned as they are. ``values`` ``(bands, rows, cols)``, ``valid`` ``(rows, cols)``."""
+    if not np.issubdtype(values.dtype, np.integer) or nodata is None or nodata != nodata:
+        return values
+    step = 1 if nodata < np.iinfo(values.dtype).max else -1
+    clash = valid[None] & (values == nodata)
+    if not clash.any():
+        return values
+    return np.where(clash, np.asarray(nodata + step, values.dtype), values)

@@ -41,7 +41,8 @@ class OrthoSettings:
         resampling: ``nearest``, ``bilinear`` or ``cubic`` (Keys, a = -0.5).
         occlusion: ``off``; ``nodata`` (pixels hidden from the sensor by terrain are nodata);
             ``band`` (an extra last band, 1 = hidden, 0 = seen).
-        nodata: output nodata value; ``None``: NaN for float images, 0 for integer ones.
+        nodata: output nodata value; ``None``: NaN for float images, 0 for integer ones (a
+            valid pixel equal to it is stored one step away from it: never nodata).
         tile_px: output tile size (px a side; smaller where the resolution is coarser than the
             GSD, so a tile's image window stays bounded).
         step_px: coarse-grid step (output px, even) at which the model is projected exactly.

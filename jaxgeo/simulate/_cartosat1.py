@@ -208,6 +208,9 @@ class Cartosat1Settings:
         layouts = (None, "quarter", "grid")
         sc.require(self.layout in layouts, "layout", "be 'quarter' or 'grid'", self.layout)
         sc.check_int(self, "n_gcps", 0)
+        points = self.n_points if self.n_points is not None else SITES[self.site]["n_points"]
+        sc.require(self.n_gcps <= points, "n_gcps", f"be at most the site's {points} points",
+                   self.n_gcps)  # fmt: skip
         sc.check_non_negative(self, "image_noise_px", "ground_noise_m", "attitude_wobble_rad")
         sc.check_positive(self, "image_sigma_px", "ground_sigma_m", "altitude_m",
                           "focal_length_m", "pixel_size_m", "line_time_s")  # fmt: skip

@@ -8,3 +8,5 @@ from ._product import DEFAULT_TILES as DEFAULT_TILES
 from ._runner import NoData as NoData
 from ._runner import WorkerPool as WorkerPool
 from ._runner import cores as cores
+from ._settings import MAX_RETRIES as MAX_RETRIES
+from ._settings import max_local_workers as max_local_workers
