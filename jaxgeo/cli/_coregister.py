@@ -1,8 +1,9 @@
 """``jaxgeo coregister``: align a DSM onto a reference DEM (Nuth and Kääb 2011).
 
     jaxgeo coregister DSM REF -o OUT [--diff DH] [--dem-height {ellipsoidal,orthometric}]
-                      [--geoid G] [--mask MASK] [--tilt] [--min-slope DEG] [--max-slope DEG] [--nmad-k K]
-                      [--max-iterations N] [--tolerance M] [--json] [--quiet] [--overwrite]
+                      [--geoid G] [--mask MASK] [--tilt] [--min-slope DEG] [--max-slope DEG]
+                      [--nmad-k K] [--max-iterations N] [--tolerance M] [--json] [--quiet]
+                      [--overwrite]
 
 Parse -> :func:`jaxgeo.coreg.coregister` -> print (the human summary, or ``--json``); what
 it does is ``DESCRIPTION`` (the ``--help`` text) and docs/coregister.md. The reference DEM is

@@ -60,3 +60,15 @@ def test_terrain_without_changes_reads_back_and_bad_changes_are_named():
         StereoSceneSettings(view_angle_deg=0.0)
     with pytest.raises(SimulationError, match="^site_seed must"):
         StereoSceneSettings(site_seed=-1)
+
+
+def test_cli_names_the_option_of_a_bad_change(tmp_path, capsys):
+    from jaxgeo.cli import main
+
+    argv = ["simulate", "stereo-scene", "--size", "64", "--out", str(tmp_path / "s")]
+    assert main([*argv, "--change", "-5", "0", "0", "0"]) == 2
+    err = capsys.readouterr().err
+    assert "--change must be > 0 (m), got 0.0" in err and err.count("\n") == 1
+    assert main([*argv, "--view-angle", "45"]) == 2
+    assert "--view-angle must be in [1, 30]" in capsys.readouterr().err
+    assert not (tmp_path / "s").exists()
