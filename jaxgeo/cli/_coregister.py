@@ -1,8 +1,9 @@
 """``jaxgeo coregister``: align a DSM onto a reference DEM (Nuth and Kääb 2011).
 
-    jaxgeo coregister DSM REF -o OUT [--dem-height {ellipsoidal,orthometric}] [--geoid G]
-                      [--mask MASK] [--min-slope DEG] [--max-slope DEG] [--nmad-k K]
-                      [--max-iterations N] [--tolerance M] [--json] [--quiet] [--overwrite]
+    jaxgeo coregister DSM REF -o OUT [--diff DH] [--dem-height {ellipsoidal,orthometric}]
+                      [--geoid G] [--mask MASK] [--tilt] [--min-slope DEG] [--max-slope DEG]
+                      [--nmad-k K] [--max-iterations N] [--tolerance M] [--json] [--quiet]
+                      [--overwrite]
 
 Parse -> :func:`jaxgeo.coreg.coregister` -> print (the human summary, or ``--json``); what
 it does is ``DESCRIPTION`` (the ``--help`` text) and docs/coregister.md. The reference DEM is
@@ -23,7 +24,10 @@ DESCRIPTION = (
     "90th percentile of |dh|, cells used; metres) and write the shifted DSM to OUT on the DSM's "
     "own grid. shift_m = (dx east, dy north, dz up) is what was added to the DSM. The DSM must "
     "be in a projected CRS in metres; REF and MASK may be in any CRS and resolution (REF is "
-    "resampled onto the DSM grid, bilinear). OUT is never one of the inputs."
+    "resampled onto the DSM grid, bilinear). --diff DH writes the height difference after the "
+    "alignment (shifted DSM - REF, on the DSM's grid, NaN where either has no height: change "
+    "between two dates) with its statistics before and after, over all its cells, in the output "
+    "and its tags. OUT and DH are never one of the inputs."
 )
 EXTRA_CODES = {1: "the iterations did not converge (OUT written with the last shift, reported)"}
 OPTIONS = {
@@ -32,6 +36,7 @@ OPTIONS = {
     "min_slope_deg": "--min-slope",
     "max_slope_deg": "--max-slope",
     "nmad_k": "--nmad-k",
+    "tilt": "--tilt",
 }
 """The option of each :class:`jaxgeo.coreg.NuthKaab` field (a refused value is named by it)."""
 
@@ -50,6 +55,10 @@ def register(sub) -> None:
     parser.add_argument("dsm", metavar="DSM", help="DSM to align (band 1; projected CRS, m)")
     parser.add_argument("ref", metavar="REF", help="reference DEM (band 1; any CRS, heights m)")
     add_out(parser, "OUT", "the shifted DSM (GeoTIFF, float32, on the DSM's grid)")
+    parser.add_argument("--diff", metavar="DH",
+                        help="also write the height difference after the alignment, shifted "
+                        "DSM - REF (GeoTIFF, float32, m, on the DSM's grid, NaN where either "
+                        "has no height), its statistics in its tags")  # fmt: skip
     add_height_options(parser, "REF", "its values as they are, in the DSM's vertical datum; "
                        "with either option REF's heights are made ellipsoidal, like a jaxgeo "
                        "DSM's")  # fmt: skip
@@ -65,6 +74,10 @@ def register(sub) -> None:
     parser.add_argument("--nmad-k", type=float, default=3.0, metavar="K",
                         help="cells with |dh - median| > K NMAD are outliers, left out of the "
                         "fit (default 3)")  # fmt: skip
+    parser.add_argument("--tilt", action="store_true",
+                        help="also fit and remove a tilt (a plane) of DSM - REF, as between "
+                        "DSMs of two relative orientations (default: a constant dz "
+                        "only)")  # fmt: skip
     parser.add_argument("--max-iterations", type=int, default=20, metavar="N",
                         help="at most N iterations (default 20)")  # fmt: skip
     parser.add_argument("--tolerance", type=float, default=0.01, metavar="M",
@@ -76,11 +89,13 @@ def register(sub) -> None:
 
 
 def _table(result) -> str:
-    head = f"{'':8}{'cells':>10}{'mean':>9}{'median':>9}{'NMAD':>9}{'RMSE':>9}{'LE90':>9}  (m)"
+    head = (f"{'':8}{'cells':>10}{'mean':>9}{'median':>9}{'NMAD':>9}{'std':>9}{'RMSE':>9}"
+            f"{'LE90':>9}  (m)")  # fmt: skip
     lines = [head]
     for name, s in (("before", result.before), ("after", result.after)):
         lines.append(f"{name:8}{s.cells:>10d}{s.mean_m:>9.3f}{s.median_m:>9.3f}"
-                     f"{s.nmad_m:>9.3f}{s.rmse_m:>9.3f}{s.le90_m:>9.3f}")  # fmt: skip
+                     f"{s.nmad_m:>9.3f}{s.std_m:>9.3f}{s.rmse_m:>9.3f}"
+                     f"{s.le90_m:>9.3f}")  # fmt: skip
     return "\n".join(lines)
 
 
@@ -103,7 +118,7 @@ def run(args: argparse.Namespace) -> int:
 
     check_height_options(args)
     inputs = [args.dsm, args.ref] + ([args.mask] if args.mask else [])
-    guard_outputs([args.out], inputs, args.overwrite)
+    guard_outputs([args.out] + ([args.diff] if args.diff else []), inputs, args.overwrite)
     try:
         settings = NuthKaab(
             max_iterations=args.max_iterations,
@@ -111,6 +126,7 @@ def run(args: argparse.Namespace) -> int:
             min_slope_deg=args.min_slope,
             max_slope_deg=args.max_slope,
             nmad_k=args.nmad_k,
+            tilt=args.tilt,
         )
     except CoregistrationError as err:
         raise CommandError(name_options(str(err), OPTIONS, err.settings)) from None
@@ -126,7 +142,7 @@ def run(args: argparse.Namespace) -> int:
             ref = read_dem(args.ref, height=args.dem_height, geoid=args.geoid)
             note(f"REF {ref.describe().removeprefix('DEM ')}", args.quiet)
         result = coregister(
-            args.dsm, ref, args.out, mask=args.mask, settings=settings,
+            args.dsm, ref, args.out, diff=args.diff, mask=args.mask, settings=settings,
             overwrite=args.overwrite, callback=progress,
         )  # fmt: skip
     for w in ours(caught):
@@ -139,8 +155,19 @@ def run(args: argparse.Namespace) -> int:
         print(f"shift added to the DSM: dx {dx:+.3f} m (east), dy {dy:+.3f} m (north), "
               f"dz {dz:+.3f} m (up); {result.iterations} iterations, {state}; "
               f"{result.fit_cells} cells in the last fit")  # fmt: skip
+        if result.tilt_origin_m is not None:
+            gx, gy = (100.0 * g for g in result.tilt_m_per_m)
+            x0, y0 = result.tilt_origin_m
+            print(f"tilt added to the DSM: {gx:+.3f} m per 100 m east, {gy:+.3f} m per 100 m "
+                  f"north (zero at {x0:.1f}, {y0:.1f})")  # fmt: skip
         if result.grid_step > 1:
             print(f"estimated on the DSM grid decimated by {result.grid_step}")
         print(_table(result))
+        if result.diff is not None:
+            step = result.diff.grid_step
+            where = "every cell" if step == 1 else f"every {step}th row and column"
+            print(f"height difference DSM - REF over {where} with both (no mask):")
+            print(_table(result.diff))
+            print(f"wrote {result.diff.output}")
         print(f"wrote {result.output}")
     return EXIT_OK if result.converged else EXIT_NOT_CONVERGED

@@ -3,7 +3,8 @@
     jaxgeo simulate cartosat1 --seed S --out DIR [--site hobart|warsaw] [--gcps N] [--noise-px A]
     jaxgeo simulate carto2s-strip --scenes N --seed S --out DIR [--gcp-every K] [--noise-px A]
     jaxgeo simulate stereo-scene --size N --seed S [--jitter-px A] [--jitter-period-lines P]
-                                 [--exact-rpc] [--relief-m M] --out DIR
+                                 [--exact-rpc] [--relief-m M] [--site-seed S2]
+                                 [--view-angle DEG] [--change DH EAST NORTH SIGMA] --out DIR
     (each also [--overwrite] [--quiet] [--json])
 
 Existing files in DIR are never replaced unless ``--overwrite`` is given (checked before any
@@ -28,6 +29,10 @@ streamed to disk block by block (memory independent of N), into DIR:
 The RPCs are fitted without the jitter (as a vendor's would be), to a copy of the truth
 with a few pixels of pointing error, or to the exact models with --exact-rpc (then they
 reproject truth points to the true pixel to ~1e-5 px). Deterministic in the seed.
+Another date of the same site: --site-seed S2 (the ground of the scene of seed S2, seen by
+this seed's images), --view-angle DEG (along-track view angle, default 11.3) and --change
+DH EAST NORTH SIGMA (a Gaussian height change of DH m at EAST, NORTH m from the site's
+centre, sigma SIGMA m: a landslide's bowl, a deposit).
 """
 
 from __future__ import annotations
@@ -40,7 +45,9 @@ OPTIONS = {
     "seed": "--seed", "n_gcps": "--gcps", "site": "--site", "image_noise_px": "--noise-px",
     "n_scenes": "--scenes", "gcp_every": "--gcp-every", "size": "--size",
     "jitter_px": "--jitter-px", "jitter_period_lines": "--jitter-period-lines",
-    "exact_rpc": "--exact-rpc", "relief_m": "--relief-m",
+    "exact_rpc": "--exact-rpc", "relief_m": "--relief-m", "site_seed": "--site-seed",
+    "view_angle_deg": "--view-angle", "height_m": "--change", "east_m": "--change",
+    "north_m": "--change", "sigma_m": "--change",
 }  # fmt: skip
 """The option of each setting the command sets (errors name the option, not the field)."""
 CARTOSAT1 = ("Write a simulated Cartosat-1 fore/aft pair (000_, 002_) into DIR: fore.txt, "
@@ -92,6 +99,16 @@ def register(sub) -> None:
     p.add_argument("--relief-m", type=float, metavar="M",
                    help="terrain relief in metres (default: a tenth of the footprint, "
                    "30..300 m)")  # fmt: skip
+    p.add_argument("--site-seed", type=int, metavar="S2",
+                   help="another date of a site: the terrain and texture of the scene of seed "
+                   "S2 (same --size and --relief-m), seen by the images of --seed")  # fmt: skip
+    p.add_argument("--view-angle", type=float, default=11.3, metavar="DEG",
+                   help="along-track view angle of the pair, left +DEG, right -DEG (default "
+                   "11.3: base/height 0.45)")  # fmt: skip
+    p.add_argument("--change", type=float, nargs=4, metavar=("DH", "EAST", "NORTH", "SIGMA"),
+                   help="a height change of the ground on this date: a Gaussian bump of DH m "
+                   "(< 0: a bowl) at EAST, NORTH m from the site's centre, sigma SIGMA "
+                   "m")  # fmt: skip
 
 
 def run(args: argparse.Namespace) -> int:
@@ -156,9 +173,12 @@ def _simulate(args: argparse.Namespace, out, note) -> tuple[dict, list[str]]:
                    "vendor_rms_px": {"min": acc["rms_min"], "max": acc["rms_max"]}}  # fmt: skip
         return summary, [f"vendor RPC direct georeferencing: {acc['rms_min']:.1f} .. "
                          f"{acc['rms_max']:.1f} px RMS per sub-scene"]  # fmt: skip
+    change = None if args.change is None else sim.TerrainChange(*args.change)
     settings = sim.StereoSceneSettings(jitter_px=args.jitter_px, exact_rpc=args.exact_rpc,
                                        jitter_period_lines=args.jitter_period_lines,
-                                       relief_m=args.relief_m)  # fmt: skip
+                                       relief_m=args.relief_m, site_seed=args.site_seed,
+                                       view_angle_deg=args.view_angle,
+                                       change=change)  # fmt: skip
     note(f"simulating a {args.size} x {args.size} px stereo scene (seed {args.seed})", args.quiet)
     scene = sim.stereo_scene(out, args.size, args.seed, settings, overwrite=args.overwrite,
                              progress=not args.quiet)  # fmt: skip
@@ -173,6 +193,9 @@ def _simulate(args: argparse.Namespace, out, note) -> tuple[dict, list[str]]:
         "base_to_height": info["base_to_height"],
         "relief_m": info["params"]["relief_m"],
         "jitter_px": args.jitter_px,
+        "site_seed": args.site_seed,
+        "view_angle_deg": args.view_angle,
+        "change": info["params"].get("change"),
         "rpc_fit_check_max_px": fit,
         "rpc_vs_truth_rms_px": {n: v["nojitter_px"]["rms"] for n, v in vs.items()},
         "rpc_vs_jittered_truth_rms_px": {n: v["jittered_px"]["rms"] for n, v in vs.items()},

@@ -8,13 +8,15 @@ REF's values are used as they are, unless REF is given as a :class:`~jaxgeo.io.D
 (:func:`jaxgeo.io.read_dem` with its ``height=`` / ``geoid=``), whose heights are then made
 ellipsoidal (geoid undulation and offset added on the DSM grid), like a jaxgeo DSM's; a REF
 file used as it is while it declares a vertical CRS gets a :class:`CoregistrationWarning`.
-The estimate is made on the DSM grid when it has at most ``max_cells`` cells, else on a grid
-decimated by an integer step (DSM averaged, REF warped onto it); the output is always written
-on the full DSM grid, by bands of rows, so its memory does not grow with the raster.
+The estimate is made on the DSM grid when it has at most ``NuthKaab.max_cells`` cells, else on
+a grid decimated by an integer step (DSM averaged, REF warped onto it); the outputs (the
+shifted DSM, the height difference) are always written on the full DSM grid, by bands of rows,
+so their memory does not grow with the raster.
 """
 
 from __future__ import annotations
 
+import contextlib
 import math
 import os
 import pathlib
@@ -30,13 +32,13 @@ from ._nuth_kaab import (
     Coregistration,
     CoregistrationError,
     CoregistrationWarning,
+    HeightDifference,
     NuthKaab,
     nuth_kaab,
     shift_heights,
 )
+from ._stats import dh_stats
 
-MAX_CELLS = 8_000_000
-"""Cells of the grid the shift is estimated on (more: the DSM grid decimated by a step)."""
 WRITE_ROWS = 256
 
 
@@ -214,36 +216,104 @@ def _read_rows(ds, start: int, stop: int, nodata) -> np.ndarray:
     return out
 
 
-def _write_shifted(dsm_path, ds, out, shift_m, overwrite, ref_name) -> None:
-    """The DSM moved by ``shift_m`` on its own grid, float32, written band of rows by band."""
+def _profile(ds, nodata: float) -> dict:
+    return dict(
+        driver="GTiff", width=ds.width, height=ds.height, count=1, dtype="float32",
+        crs=ds.crs, transform=ds.transform, nodata=nodata, tiled=True, blockxsize=256,
+        blockysize=256, compress="deflate", predictor=3, BIGTIFF="IF_SAFER",
+    )  # fmt: skip
+
+
+def _ref_rows(ref, ref_dem, ds, start: int, stop: int) -> np.ndarray:
+    """REF on rows ``start:stop`` of the DSM grid (bilinear, NaN = no data), its heights made
+    ellipsoidal when it is a DEM: the values the estimate compares with, cell for cell."""
+    from affine import Affine
+
+    g = ds.transform  # north-up (checked): the band's grid starts ``start`` rows down
+    t = Affine(g.a, 0.0, g.c, 0.0, g.e, g.f + g.e * start)
+    shape = (stop - start, ds.width)
+    z = _warp_onto(ref, shape, t, ds.crs, "bilinear", np.nan, np.float64)
+    if ref_dem is not None:
+        z += _to_ellipsoidal(ref_dem, ds.crs, t, shape)
+    return z
+
+
+def _write_outputs(dsm_path, ds, ref, ref_dem, result, targets, overwrite, ref_name):
+    """The DSM moved by ``result.shift_m`` on its own grid (``targets[0]``) and its difference
+    with REF (``targets[1]``), float32, written band of rows by band of rows; returns the
+    :class:`HeightDifference` (``None`` without ``targets[1]``)."""
     import rasterio
 
+    out, diff = targets
     t = ds.transform
     step_m = (t.a, t.e)
-    margin = int(abs(math.floor(-shift_m[1] / t.e))) + 2
+    margin = int(abs(math.floor(-result.shift_m[1] / t.e))) + 2
     nodata = ds.nodata
     fill = np.nan if nodata is None or not np.isfinite(nodata) else float(nodata)
-    profile = dict(
-        driver="GTiff", width=ds.width, height=ds.height, count=1, dtype="float32",
-        crs=ds.crs, transform=t, nodata=fill, tiled=True, blockxsize=256, blockysize=256,
-        compress="deflate", predictor=3, BIGTIFF="IF_SAFER",
+    dx, dy, dz = result.shift_m
+    tags = dict(
+        COREGISTRATION_SHIFT_M=f"{dx:.4f} {dy:.4f} {dz:.4f}",
+        COREGISTRATION_METHOD="Nuth and Kaab (2011), jaxgeo",
+        COREGISTRATION_REFERENCE=ref_name,
+        COREGISTRATION_SOURCE=pathlib.Path(dsm_path).name,
     )  # fmt: skip
-    dx, dy, dz = shift_m
-    sink = atomic_output(out, overwrite=overwrite, suffix=".tif", leftovers=(".aux.xml",))
-    with sink as tmp, raster_writer(tmp, profile) as dst:
+    if result.tilt_origin_m is not None:
+        tags["COREGISTRATION_TILT_M_PER_M"] = "{:.7f} {:.7f}".format(*result.tilt_m_per_m)
+        tags["COREGISTRATION_TILT_ORIGIN_M"] = "{:.3f} {:.3f}".format(*result.tilt_origin_m)
+    step = result.grid_step  # statistics of the difference on the estimate's sampling
+    samples: dict[str, list[np.ndarray]] = {"before": [], "after": []}
+    with contextlib.ExitStack() as stack:
+        sinks = []
+        for path, nd in ((out, fill), (diff, np.nan)):
+            if path is None:
+                sinks.append(None)
+                continue
+            sink = atomic_output(path, overwrite=overwrite, suffix=".tif", leftovers=(".aux.xml",))
+            sinks.append(stack.enter_context(raster_writer(stack.enter_context(sink),
+                                                           _profile(ds, nd))))  # fmt: skip
+        aligned_dst, diff_dst = sinks
         for start in range(0, ds.height, WRITE_ROWS):
             stop = min(start + WRITE_ROWS, ds.height)
+            window = rasterio.windows.Window(0, start, ds.width, stop - start)
             block = _read_rows(ds, start - margin, stop + margin, nodata)
-            z = shift_heights(block, shift_m, step_m)[margin : margin + stop - start]
-            z = np.where(np.isfinite(z), z, fill).astype(np.float32)
-            dst.write(z, 1, window=rasterio.windows.Window(0, start, ds.width, stop - start))
-        dst.set_band_description(1, f"height (m), co-registered onto {ref_name}")
-        dst.update_tags(
-            COREGISTRATION_SHIFT_M=f"{dx:.4f} {dy:.4f} {dz:.4f}",
-            COREGISTRATION_METHOD="Nuth and Kaab (2011), jaxgeo",
-            COREGISTRATION_REFERENCE=ref_name,
-            COREGISTRATION_SOURCE=pathlib.Path(dsm_path).name,
+            z = shift_heights(block, result.shift_m, step_m)[margin : margin + stop - start]
+            if result.tilt_origin_m is not None:  # the plane, zero at the estimate's centre
+                x0, y0 = result.tilt_origin_m
+                east = t.c + t.a * (np.arange(ds.width) + 0.5) - x0
+                north = t.f + t.e * (np.arange(start, stop) + 0.5) - y0
+                gx, gy = result.tilt_m_per_m
+                z = z + gx * east[None, :] + gy * north[:, None]
+            if aligned_dst is not None:
+                aligned_dst.write(np.where(np.isfinite(z), z, fill).astype(np.float32), 1,
+                                  window=window)  # fmt: skip
+            if diff_dst is not None:
+                zref = _ref_rows(ref, ref_dem, ds, start, stop)
+                dh = (z - zref).astype(np.float32)  # NaN where either has no height
+                diff_dst.write(dh, 1, window=window)
+                keep = (np.arange(start, stop) % step == 0, slice(None, None, step))
+                unmoved = block[margin : margin + stop - start] - zref
+                samples["before"].append(unmoved[keep[0]][:, keep[1]].ravel())
+                samples["after"].append(dh.astype(np.float64)[keep[0]][:, keep[1]].ravel())
+        if aligned_dst is not None:
+            aligned_dst.set_band_description(1, f"height (m), co-registered onto {ref_name}")
+            aligned_dst.update_tags(**tags)
+        if diff_dst is None:
+            return None
+        before, after = (dh_stats(np.concatenate(samples[k])) for k in ("before", "after"))
+        diff_dst.set_band_description(
+            1, f"height difference (m): DSM co-registered onto {ref_name} minus it"
         )
+        stats = {f"DH_{k.upper()}_{name.upper()}": f"{v:.4f}" if isinstance(v, float) else str(v)
+                 for k, st in (("before", before), ("after", after))
+                 for name, v in st.as_dict().items()}  # fmt: skip
+        diff_dst.update_tags(
+            DH_DEFINITION="DSM shifted by COREGISTRATION_SHIFT_M minus REF resampled onto the "
+            "DSM's grid (bilinear), metres; NaN where either has no height",
+            DH_STATISTICS_GRID_STEP=str(step),
+            **tags,
+            **stats,
+        )
+    return HeightDifference(str(diff), before, after, step)
 
 
 def coregister(
@@ -251,10 +321,10 @@ def coregister(
     ref: str | os.PathLike | DEM,
     out: str | os.PathLike | None = None,
     *,
+    diff: str | os.PathLike | None = None,
     mask: str | os.PathLike | None = None,
     settings: NuthKaab | None = None,
     overwrite: bool = False,
-    max_cells: int = MAX_CELLS,
     callback: Callable[..., object] | None = None,
 ) -> Coregistration:
     """Co-register the DSM file ``dsm`` onto the reference DEM ``ref`` (Nuth and Kääb).
@@ -264,8 +334,12 @@ def coregister(
     heights are made ellipsoidal first, like a jaxgeo DSM's (e.g. an orthometric reference:
     ``read_dem("srtm.tif", geoid="egm96")``). ``mask``: a raster of stable terrain (non-zero =
     stable, any CRS); ``settings``: the method's (default ``NuthKaab()``). ``out``: where the
-    shifted DSM goes (GeoTIFF, float32, same grid as ``dsm``; atomic; an existing file only
-    with ``overwrite``; never one of the inputs). Returns :class:`Coregistration` (``shift_m``
+    shifted DSM goes (GeoTIFF, float32, same grid as ``dsm``). ``diff``: where the height
+    difference after the alignment goes, ``DSM shifted - REF`` (m; GeoTIFF, float32, on the
+    DSM's grid with REF resampled bilinearly onto it, NaN where either has no height; its
+    statistics before and after the alignment in ``result.diff`` and in the file's tags
+    ``DH_BEFORE_*``, ``DH_AFTER_*``). Both outputs are written atomically, an existing file only
+    with ``overwrite``, never one of the inputs. Returns :class:`Coregistration` (``shift_m``
     is what was added to the DSM). Bad input raises :class:`CoregistrationError` (a
     ``ValueError``) naming the file.
     """
@@ -274,20 +348,23 @@ def coregister(
     dsm_path = pathlib.Path(dsm)
     ref_path = pathlib.Path(ref_dem.path if ref_dem is not None else ref)
     mask_path = None if mask is None else pathlib.Path(mask)
-    if out is not None:
-        out = pathlib.Path(out)
+    targets = tuple(None if t is None else pathlib.Path(t) for t in (out, diff))
+    if all(t is not None for t in targets) and _same_file(*targets):
+        raise CoregistrationError(f"{targets[0]}: given for both the aligned DSM and the "
+                                  "difference")  # fmt: skip
+    for target in targets:
+        if target is None:
+            continue
         for name, given in (("DSM", dsm_path), ("REF", ref_path), ("mask", mask_path)):
-            if given is not None and _same_file(out, given):
-                raise CoregistrationError(f"{out}: is the input {name}; write elsewhere")
-        refuse_existing(out, overwrite)
-    if max_cells < 1000:
-        raise CoregistrationError(f"max_cells {max_cells}: expected >= 1000")
+            if given is not None and _same_file(target, given):
+                raise CoregistrationError(f"{target}: is the input {name}; write elsewhere")
+        refuse_existing(target, overwrite)
     with _open(dsm_path, "DSM") as d, _open(ref_path, "reference DEM") as r:
         _check_dsm_grid(dsm_path, d)
         _check_overlap(dsm_path, ref_path, d, r)
         if ref_dem is None:
             _warn_vertical_as_read(ref_path, r)
-        z, transform, step = _read_estimation_grid(d, max_cells)
+        z, transform, step = _read_estimation_grid(d, settings.max_cells)
         zref = _warp_onto(r, z.shape, transform, d.crs, "bilinear", np.nan, np.float64)
         if ref_dem is not None:
             zref += _to_ellipsoidal(ref_dem, d.crs, transform, z.shape)
@@ -301,8 +378,12 @@ def coregister(
             result = nuth_kaab(z, zref, (transform.a, transform.e), stable, settings, callback)
         except CoregistrationError as err:
             raise CoregistrationError(f"{dsm_path} vs {ref_path}: {err}") from None
-        result = replace(result, grid_step=step)
-        if out is not None:
-            _write_shifted(dsm_path, d, out, result.shift_m, overwrite, ref_path.name)
-            result = replace(result, output=str(out))
+        rows, cols = z.shape  # the plane of tilt=True is zero at the estimate grid's centre
+        centre = (transform.c + transform.a * cols / 2.0, transform.f + transform.e * rows / 2.0)
+        result = replace(result, grid_step=step, tilt_origin_m=centre if settings.tilt else None)
+        if any(t is not None for t in targets):
+            written = _write_outputs(dsm_path, d, r, ref_dem, result, targets, overwrite,
+                                     ref_path.name)  # fmt: skip
+            result = replace(result, output=None if out is None else str(targets[0]),
+                             diff=written)  # fmt: skip
     return result

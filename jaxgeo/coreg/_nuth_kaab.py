@@ -64,7 +64,14 @@ class NuthKaab:
     ``min_cells`` usable cells is an error. ``pyramid``: the grids averaged over blocks of these
     factors are co-registered first, coarse to fine, each starting the next (texture shorter than
     the block no longer hides a shift of many cells; ``()``: the full grid only, which then
-    converges slowly for shifts of several cells over rough terrain).
+    converges slowly for shifts of several cells over rough terrain). ``max_cells`` (file-level
+    :func:`~jaxgeo.coreg.coregister` only): rasters with more cells are estimated on the DSM
+    grid decimated by the smallest integer step that leaves at most that many. ``tilt``: also
+    fit a plane to the difference (a vertical offset varying linearly east and north, as
+    between DSMs of two relative orientations; xDEM's ``Deramp`` of order 1), removed before
+    each horizontal fit (a tilt left in ``dh`` correlates with the aspects of a small scene and
+    would be taken for a shift) and added to the aligned DSM; off by default (a plane can also
+    absorb a real trend of change).
     """
 
     max_iterations: int = 20
@@ -76,6 +83,8 @@ class NuthKaab:
     min_bin_cells: int = 10
     min_cells: int = 500
     pyramid: tuple[int, ...] = (4, 2)
+    max_cells: int = 8_000_000
+    tilt: bool = False
 
     def __post_init__(self):
         def refuse(message: str, *fields: str):
@@ -93,9 +102,32 @@ class NuthKaab:
             refuse(f"nmad_k {self.nmad_k}: expected > 0", "nmad_k")
         if any(f < 2 for f in self.pyramid):
             refuse(f"pyramid {self.pyramid}: expected factors >= 2", "pyramid")
+        if not isinstance(self.tilt, bool):
+            refuse(f"tilt {self.tilt!r}: expected True or False", "tilt")
+        if self.max_cells < 1000:
+            refuse(f"max_cells {self.max_cells}: expected >= 1000", "max_cells")
         if self.aspect_bins < 8 or self.min_bin_cells < 1 or self.min_cells < 10:
             refuse("aspect_bins >= 8, min_bin_cells >= 1 and min_cells >= 10 expected",
                    "aspect_bins", "min_bin_cells", "min_cells")  # fmt: skip
+
+
+@dataclass(frozen=True)
+class HeightDifference:
+    """The height difference a co-registration wrote (``coregister(..., diff=)``): ``output``
+    the raster (``DSM - REF`` after the alignment, on the DSM's grid), ``before`` / ``after``
+    the statistics of ``DSM - REF`` before and after the alignment over all its cells with
+    heights in both (the change included: no mask, no outlier filter), or over every
+    ``grid_step``-th row and column of it when the DSM is decimated for the estimate."""
+
+    output: str
+    before: DHStats
+    after: DHStats
+    grid_step: int = 1
+
+    def as_dict(self) -> dict:
+        """JSON-ready dict: ``output``, ``before``, ``after``, ``grid_step``."""
+        return {"output": self.output, "before": self.before.as_dict(),
+                "after": self.after.as_dict(), "grid_step": self.grid_step}  # fmt: skip
 
 
 @dataclass(frozen=True)
@@ -108,8 +140,12 @@ class Coregistration:
     filter). ``iterations``: all iterations run, at every level of the pyramid; ``increments_m``:
     the horizontal increments applied (those of a coarse level are dropped when its result does
     not bring the full grids closer); ``fit_cells``: cells in the last fit. File-level calls
-    add ``output`` (the path written, if any) and ``grid_step`` (1, or the decimation of the
-    grid the estimate was made on).
+    add ``output`` (the path written, if any), ``grid_step`` (1, or the decimation of the
+    grid the estimate was made on) and ``diff`` (the :class:`HeightDifference` written, if any).
+    ``tilt_m_per_m = (east, north)``: the gradient of the plane also added to the DSM
+    (``NuthKaab(tilt=True)``; zero otherwise), zero at the centre of the grid: for arrays,
+    ``tilt_origin_m`` is None and the plane is ``east (col - (cols-1)/2) a + north (row -
+    (rows-1)/2) e``; file-level calls give that centre in map coordinates.
     """
 
     shift_m: tuple[float, float, float]
@@ -121,6 +157,9 @@ class Coregistration:
     increments_m: tuple[tuple[float, float], ...]
     output: str | None = None
     grid_step: int = 1
+    diff: HeightDifference | None = None
+    tilt_m_per_m: tuple[float, float] = (0.0, 0.0)
+    tilt_origin_m: tuple[float, float] | None = None
 
     def as_dict(self) -> dict:
         """JSON-ready dict: ``shift_m``, ``before``, ``after`` and the other fields."""
@@ -134,6 +173,9 @@ class Coregistration:
             "increments_m": [list(i) for i in self.increments_m],
             "output": self.output,
             "grid_step": self.grid_step,
+            "diff": None if self.diff is None else self.diff.as_dict(),
+            "tilt_m_per_m": list(self.tilt_m_per_m),
+            "tilt_origin_m": None if self.tilt_origin_m is None else list(self.tilt_origin_m),
         }
 
 
@@ -227,12 +269,47 @@ def _block_mean(z: np.ndarray, factor: int) -> np.ndarray:
     return np.where(2 * count >= factor * factor, total / np.maximum(count, 1), np.nan)
 
 
-def _spread(dsm, ref, stable, shift, step_m) -> float:
-    """NMAD of ``DSM - REF`` over the stable cells with the DSM moved by ``shift`` (east, north);
-    infinite where fewer than 10 cells are left."""
+def _spread(dsm, ref, stable, shift, step_m, settings) -> float:
+    """NMAD of ``DSM - REF`` (less its plane with ``settings.tilt``) over the stable cells with
+    the DSM moved by ``shift`` (east, north); infinite where fewer than 10 cells are left."""
     dh = shift_heights(dsm, (shift[0], shift[1], 0.0), step_m) - ref
-    dh = dh[stable & np.isfinite(dh)]
-    return nmad(dh) if dh.size >= 10 else math.inf
+    cells = stable & np.isfinite(dh)
+    if int(cells.sum()) < 10:
+        return math.inf
+    return nmad(_detrended(dh, cells, step_m, settings)[0][cells])
+
+
+def tilt_plane(shape, step_m: tuple[float, float], tilt_m_per_m) -> np.ndarray:
+    """The plane ``east_gradient * east + north_gradient * north`` (m) on a grid of ``shape``
+    and signed steps ``step_m``, east and north measured from the grid's centre."""
+    rows, cols = shape
+    east = (np.arange(cols) - (cols - 1) / 2.0) * step_m[0]
+    north = (np.arange(rows) - (rows - 1) / 2.0) * step_m[1]
+    return tilt_m_per_m[0] * east[None, :] + tilt_m_per_m[1] * north[:, None]
+
+
+def _fit_tilt(dh: np.ndarray, cells: np.ndarray, step_m, nmad_k: float) -> tuple[float, float]:
+    """Gradient (east, north; m/m) of the plane fitted to ``dh`` over ``cells``, refitted
+    twice on the cells within ``nmad_k`` NMAD of the last plane (changes, blunders)."""
+    rows, cols = np.nonzero(cells)
+    east = (cols - (dh.shape[1] - 1) / 2.0) * step_m[0]
+    north = (rows - (dh.shape[0] - 1) / 2.0) * step_m[1]
+    values = dh[rows, cols]
+    a = np.stack([east, north, np.ones_like(east)], axis=1)
+    use = np.ones(values.size, bool)
+    for _ in range(3):
+        sol, *_ = np.linalg.lstsq(a[use], values[use], rcond=None)
+        r = values - a @ sol
+        use = np.abs(r - np.median(r[use])) <= nmad_k * nmad(r[use]) + 1e-9
+    return float(sol[0]), float(sol[1])
+
+
+def _detrended(dh, usable, step_m, settings) -> tuple[np.ndarray, tuple[float, float]]:
+    """``dh`` less its plane (``settings.tilt``; else as it is), and the plane's gradient."""
+    if not settings.tilt:
+        return dh, (0.0, 0.0)
+    g = _fit_tilt(dh, usable, step_m, settings.nmad_k)
+    return dh - tilt_plane(dh.shape, step_m, g), g
 
 
 def _iterate(grids, step_m, settings, shift, tolerance_m, callback):
@@ -255,6 +332,7 @@ def _iterate(grids, step_m, settings, shift, tolerance_m, callback):
                 f"only {int(usable.sum())} stable cells left after shifting the DSM by "
                 f"({shift[0]:.2f}, {shift[1]:.2f}) m (need >= {settings.min_cells})"
             )
+        dh, _ = _detrended(dh, usable, step_m, settings)
         inlier, med = _inliers(dh, usable, settings.nmad_k)
         fit = inlier & sloped
         fit_cells = int(fit.sum())
@@ -330,7 +408,8 @@ def nuth_kaab(
             continue
         ran += len(steps)
         # kept only if it brings the full grids closer (a coarse level cannot lead astray)
-        if _spread(dsm, ref, stable, start, step_m) <= _spread(dsm, ref, stable, shift, step_m):
+        spreads = (_spread(dsm, ref, stable, v, step_m, settings) for v in (start, shift))
+        if next(spreads) <= next(spreads):
             shift = start
             increments += steps
     shift, steps, converged, fit_cells = _iterate(
@@ -341,6 +420,7 @@ def nuth_kaab(
 
     dh = shift_heights(dsm, (shift[0], shift[1], 0.0), step_m) - ref
     usable = stable & np.isfinite(dh)
+    dh, gradient = _detrended(dh, usable, step_m, settings)
     inlier, _ = _inliers(dh, usable, settings.nmad_k)
     dz = -float(np.median(dh[inlier]))
     after = dh_stats(dh[usable] + dz)
@@ -352,6 +432,7 @@ def nuth_kaab(
         converged=converged,
         fit_cells=fit_cells,
         increments_m=tuple(increments),
+        tilt_m_per_m=(-gradient[0], -gradient[1]),
     )
     if not converged:
         last = math.hypot(*increments[-1])

@@ -16,8 +16,8 @@ class DHStats:
     """Statistics of height differences ``dh`` (m) over ``cells`` finite values.
 
     ``nmad_m`` = 1.4826 median(|dh - median(dh)|); ``rmse_m`` = sqrt(mean(dh^2)) (the bias
-    included); ``le90_m`` = the 90th percentile of |dh| (linear interpolation, numpy's default).
-    All NaN when ``cells`` is 0.
+    included); ``le90_m`` = the 90th percentile of |dh| (linear interpolation, numpy's default);
+    ``std_m`` = the standard deviation (about the mean, ``ddof=0``). All NaN when ``cells`` is 0.
     """
 
     mean_m: float
@@ -26,6 +26,7 @@ class DHStats:
     rmse_m: float
     le90_m: float
     cells: int
+    std_m: float = float("nan")
 
     def as_dict(self) -> dict[str, float | int]:
         """The fields as a dict (keys as the field names), for JSON."""
@@ -47,7 +48,7 @@ def dh_stats(dh: np.ndarray) -> DHStats:
     dh = dh[np.isfinite(dh)]
     if dh.size == 0:
         nan = float("nan")
-        return DHStats(nan, nan, nan, nan, nan, 0)
+        return DHStats(nan, nan, nan, nan, nan, 0, nan)
     median = float(np.median(dh))
     return DHStats(
         mean_m=float(np.mean(dh)),
@@ -56,4 +57,5 @@ def dh_stats(dh: np.ndarray) -> DHStats:
         rmse_m=float(np.sqrt(np.mean(dh * dh))),
         le90_m=float(np.percentile(np.abs(dh), 90.0)),
         cells=int(dh.size),
+        std_m=float(np.std(dh)),
     )

@@ -35,3 +35,4 @@ from ._stereo_scene import stereo_scene_truth as stereo_scene_truth
 from ._stereo_scene import write_stereo_scene as write_stereo_scene
 from ._stereo_scene_models import JitteredModel as JitteredModel
 from ._terrain import Terrain as Terrain
+from ._terrain import TerrainChange as TerrainChange

@@ -258,8 +258,10 @@ def intersect_terrain(
 
 
 def terrain_bracket(terrain: Terrain, margin_m: float = 20.0) -> tuple[float, float]:
-    """Heights below and above every terrain height (m)."""
-    return float(terrain.h_min_m) - margin_m, float(terrain.h_max_m) + margin_m
+    """Heights below and above every terrain height (m), its changes included."""
+    dh = np.asarray(terrain.changes)[:, 3]
+    down, up = float(np.sum(np.minimum(dh, 0.0))), float(np.sum(np.maximum(dh, 0.0)))
+    return float(terrain.h_min_m) + down - margin_m, float(terrain.h_max_m) + up + margin_m
 
 
 def localize_on_terrain(

@@ -58,11 +58,14 @@ from ..io import to_rasterio_rpc
 from ..io.internal import atomic_output, raster_writer
 from ..models import RPC, AbstractSensorModel, EphemerisModel
 from . import _scene as sc
+from ._render import terrain_bracket
 from ._scene import SimulationError
 from ._stereo_scene_models import (
     JITTER_ALONG_RATIO,
     NAMES,
+    PleiadesSettings,
     base_to_height,
+    draw_ground,
     jitter_phases,
     localize_on_terrain_exact,
     pixel_size_on_ground_m,
@@ -80,7 +83,7 @@ from ._stereo_scene_render import (
     write_blocks,
 )
 from ._stereo_scene_texture import ProceduralTexture
-from ._terrain import Terrain
+from ._terrain import Terrain, TerrainChange
 
 FILES = ("left.tif", "right.tif", "truth_dsm.tif", "truth.json")
 SITE = (5.27, 44.17, 300.0)
@@ -183,13 +186,22 @@ class StereoSceneSettings:
     models instead of a perturbed copy; ``relief_m``: terrain relief (default
     :func:`default_relief_m`); ``render``: how the images are formed
     (:class:`RenderSettings`). Checked when made: a bad value raises :class:`SimulationError`
-    naming the field."""
+    naming the field.
+
+    Several dates of one site: ``site_seed`` gives the scene the ground (terrain and texture)
+    of the scene of that seed (same size and relief), seen by this seed's images (attitude
+    wobble, vendor errors, jitter phases); ``view_angle_deg`` the pair's along-track view angle
+    (``left`` ``+``, ``right`` ``-``; default 11.3: base/height 0.45); ``change`` a height change
+    of the ground on this date (:class:`TerrainChange`), in the images and the truth DSM."""
 
     jitter_px: float = 0.0
     jitter_period_lines: float = 1000.0
     exact_rpc: bool = False
     relief_m: float | None = None
     render: RenderSettings = RenderSettings()
+    site_seed: int | None = None
+    view_angle_deg: float = PleiadesSettings().view_angle_deg
+    change: TerrainChange | None = None
 
     def __post_init__(self):
         a, p = self.jitter_px, self.jitter_period_lines
@@ -208,6 +220,14 @@ class StereoSceneSettings:
                  self.exact_rpc)  # fmt: skip
         sc.require(isinstance(self.render, RenderSettings), "render", "be a RenderSettings",
                  self.render)  # fmt: skip
+        seed = self.site_seed
+        ok = seed is None or (sc.is_int(seed) and seed >= 0)
+        sc.require(ok, "site_seed", "be an integer >= 0 or None", seed)
+        v = self.view_angle_deg
+        ok = sc.is_real(v) and 1.0 <= v <= 30.0
+        sc.require(ok, "view_angle_deg", "be in [1, 30] (degrees)", v)
+        ok = self.change is None or isinstance(self.change, TerrainChange)
+        sc.require(ok, "change", "be a TerrainChange or None", self.change)
 
 
 def _check_size_seed(size, seed) -> None:
@@ -244,20 +264,25 @@ def stereo_scene_truth(
                   jitter_period_lines=float(jitter_period_lines), exact_rpc=bool(exact_rpc),
                   relief_m=relief, site_lon_deg=SITE[0], site_lat_deg=SITE[1],
                   h_min_m=SITE[2])  # fmt: skip
+    if s.site_seed is not None or s.view_angle_deg != PleiadesSettings().view_angle_deg:
+        params.update(site_seed=s.site_seed, view_angle_deg=float(s.view_angle_deg))
+    params.update({} if s.change is None else {"change": dataclasses.asdict(s.change)})
     rng = np.random.default_rng(seed)
     h_range = (SITE[2], SITE[2] + relief)
     h_mid = 0.5 * (h_range[0] + h_range[1])
-    base = pleiades_pair(rng, size, SITE[0], SITE[1], h_mid)
-    corners = np.array([[0, 0], [size - 1, 0], [0, size - 1], [size - 1, size - 1]], float)
-    foot = np.concatenate([sc.localize(m, corners, h_mid)[:, :2] for m in base.values()])
-    footprint_m = size * 0.67
-    wavelengths = (max(footprint_m / 5.0, 100.0), max(3.0 * footprint_m, 1000.0))
-    terrain = Terrain.random(rng, foot, h_range, n_waves=8, wavelength_range_m=wavelengths)
-    texture = ProceduralTexture(SITE[0], SITE[1], int(rng.integers(0, 2**32)))
+    base = pleiades_pair(rng, size, SITE[0], SITE[1], h_mid,
+                         PleiadesSettings(view_angle_deg=float(s.view_angle_deg)))  # fmt: skip
+    terrain, texture = draw_ground(rng, base, size, h_range, SITE[:2])
+    if s.site_seed is not None:  # the ground of the scene of site_seed, drawn as it draws it
+        site_rng = np.random.default_rng(int(s.site_seed))
+        site_pair = pleiades_pair(site_rng, size, SITE[0], SITE[1], h_mid)
+        terrain, texture = draw_ground(site_rng, site_pair, size, h_range, SITE[:2])
+    if s.change is not None:
+        terrain = terrain.with_changes(s.change)
     phi = rng.uniform(0.0, 2.0 * np.pi, 2)
     phases = {n: sc.round_sig(p) for n, p in jitter_phases(base, jitter_period_lines, phi).items()}
     truth = true_models(base, float(jitter_px), float(jitter_period_lines), phases)
-    lo, hi = float(terrain.h_min_m), float(terrain.h_max_m)
+    lo, hi = terrain_bracket(terrain, margin_m=0.0)
     pad = 0.1 * (hi - lo) + 50.0
     vendor, rpcs, reports = vendor_rpcs(rng, base, (lo - pad, hi + pad), bool(exact_rpc))
 

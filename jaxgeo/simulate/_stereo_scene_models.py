@@ -48,6 +48,7 @@ from ._orbit import (
     sun_synchronous_inclination_deg,
 )
 from ._render import _intersect_chunk, terrain_bracket
+from ._stereo_scene_texture import ProceduralTexture
 from ._terrain import Terrain
 
 NAMES = ("left", "right")
@@ -214,6 +215,22 @@ def pleiades_pair(
         model = eqx.tree_at(lambda m: m.principal_col_px, model, model.principal_col_px + shift)
         out[name] = sc.quantize_model(model)
     return out
+
+
+def draw_ground(
+    rng: np.random.Generator, pair: dict[str, EphemerisModel], size: int, h_range_m, site_lonlat
+) -> tuple[Terrain, ProceduralTexture]:
+    """The terrain over the footprint of ``pair`` (``size`` px images; heights ``h_range_m``)
+    and its texture about ``site_lonlat`` (deg): the draws a stereo scene makes from its ``rng``
+    after its pair's."""
+    h_mid = 0.5 * (h_range_m[0] + h_range_m[1])
+    lon, lat = (float(v) for v in site_lonlat)
+    corners = np.array([[0, 0], [size - 1, 0], [0, size - 1], [size - 1, size - 1]], float)
+    foot = np.concatenate([sc.localize(m, corners, h_mid)[:, :2] for m in pair.values()])
+    footprint_m = size * 0.67
+    wavelengths = (max(footprint_m / 5.0, 100.0), max(3.0 * footprint_m, 1000.0))
+    terrain = Terrain.random(rng, foot, h_range_m, n_waves=8, wavelength_range_m=wavelengths)
+    return terrain, ProceduralTexture(lon, lat, int(rng.integers(0, 2**32)))
 
 
 def jitter_phases(models: dict[str, EphemerisModel], period_lines: float, phi_xy) -> dict:

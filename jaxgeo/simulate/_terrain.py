@@ -5,6 +5,10 @@
 the centre. ``raw_min / raw_max`` are taken on a dense grid over the area the terrain was made for,
 so heights there lie in ``[h_min, h_max]`` (to a few metres between grid nodes). Heights are
 ellipsoidal (WGS84), in metres.
+
+A terrain may carry height *changes* (:class:`TerrainChange`: another date of the same site, a
+landslide bowl or a deposit): Gaussian bumps ``dh exp(-r^2 / (2 sigma^2))`` added to ``h`` (so
+heights there may leave ``[h_min, h_max]`` by up to ``|dh|``).
 """
 
 from __future__ import annotations
@@ -17,6 +21,33 @@ import numpy as np
 from jaxtyping import Array, ArrayLike, Float
 
 from .. import geodesy
+
+
+@dataclasses.dataclass(frozen=True)
+class TerrainChange:
+    """A height change of the terrain (another date of the site): the Gaussian bump
+    ``height_m * exp(-r^2 / (2 sigma_m^2))`` centred ``east_m, north_m`` (m) from the terrain's
+    centre (``height_m < 0``: a bowl, e.g. a landslide's scar; ``> 0``: a deposit). The change
+    is ``height_m`` at the centre, half of it at ``r = 1.18 sigma_m``, under 1 % beyond
+    ``r = 3.03 sigma_m``."""
+
+    height_m: float = -20.0
+    east_m: float = 0.0
+    north_m: float = 0.0
+    sigma_m: float = 40.0
+
+    def __post_init__(self):
+        from ._scene import is_real, require
+
+        for name in ("height_m", "east_m", "north_m", "sigma_m"):
+            v = getattr(self, name)
+            require(is_real(v) and np.isfinite(v), name, "be a finite number (m)", v)
+        require(self.sigma_m > 0, "sigma_m", "be > 0 (m)", self.sigma_m)
+
+    def as_row(self) -> list[float]:
+        """``[east_m, north_m, sigma_m, height_m]``: a row of :attr:`Terrain.changes`."""
+        return [float(self.east_m), float(self.north_m), float(self.sigma_m),
+                float(self.height_m)]  # fmt: skip
 
 
 class Terrain(eqx.Module):
@@ -34,9 +65,10 @@ class Terrain(eqx.Module):
     raw_max: np.ndarray
     h_min_m: np.ndarray
     h_max_m: np.ndarray
+    changes: np.ndarray  # (c, 4) east_m, north_m, sigma_m, height_m (TerrainChange.as_row)
 
     def __init__(self, centre_lon_deg, centre_lat_deg, wavevectors_rad_m, amplitudes, phases_rad,
-                 raw_min, raw_max, h_min_m, h_max_m):  # fmt: skip
+                 raw_min, raw_max, h_min_m, h_max_m, changes=()):  # fmt: skip
         # every field an array, so jitted code traces them (no recompilation per terrain)
         self.centre_lon_deg = np.asarray(centre_lon_deg, dtype=float)
         self.centre_lat_deg = np.asarray(centre_lat_deg, dtype=float)
@@ -47,11 +79,16 @@ class Terrain(eqx.Module):
         self.raw_max = np.asarray(raw_max, dtype=float)
         self.h_min_m = np.asarray(h_min_m, dtype=float)
         self.h_max_m = np.asarray(h_max_m, dtype=float)
+        self.changes = np.asarray(changes, dtype=float).reshape(-1, 4)
 
-    def _raw(self, lon, lat, xp):
+    def _local(self, lon, lat, xp):
+        """Local equirectangular ``(east, north)`` metres about the centre."""
         r = geodesy.EARTH_MEAN_RADIUS_M
         e = r * xp.cos(xp.deg2rad(self.centre_lat_deg)) * xp.deg2rad(lon - self.centre_lon_deg)
-        n = r * xp.deg2rad(lat - self.centre_lat_deg)
+        return e, r * xp.deg2rad(lat - self.centre_lat_deg)
+
+    def _raw(self, lon, lat, xp):
+        e, n = self._local(lon, lat, xp)
         arg = (
             e[..., None] * self.wavevectors_rad_m[:, 0]
             + n[..., None] * self.wavevectors_rad_m[:, 1]
@@ -63,12 +100,30 @@ class Terrain(eqx.Module):
         """Ellipsoidal height (m) at ``(lon_deg, lat_deg)`` (jax or numpy input; jnp out)."""
         lonlat = jnp.asarray(lonlat, dtype=float)
         raw = self._raw(lonlat[..., 0], lonlat[..., 1], jnp)
-        return self._scale(raw)
+        return self._scale(raw) + self._change(lonlat[..., 0], lonlat[..., 1], jnp)
 
     def height_np(self, lonlat: ArrayLike) -> np.ndarray:
         """:meth:`height` in numpy (for deterministic point generation)."""
         lonlat = np.asarray(lonlat, dtype=float)
-        return self._scale(self._raw(lonlat[..., 0], lonlat[..., 1], np))
+        lon, lat = lonlat[..., 0], lonlat[..., 1]
+        return self._scale(self._raw(lon, lat, np)) + self._change(lon, lat, np)
+
+    def change_np(self, lonlat: ArrayLike) -> np.ndarray:
+        """The height added by :attr:`changes` at ``(lon_deg, lat_deg)`` (m; 0 without any)."""
+        lonlat = np.asarray(lonlat, dtype=float)
+        return self._change(lonlat[..., 0], lonlat[..., 1], np)
+
+    def with_changes(self, *changes: TerrainChange) -> Terrain:
+        """This terrain with ``changes`` added to those it has (another date of the site)."""
+        rows = np.concatenate([self.changes, np.asarray([c.as_row() for c in changes],
+                                                        dtype=float).reshape(-1, 4)])  # fmt: skip
+        return dataclasses.replace(self, changes=rows)
+
+    def _change(self, lon, lat, xp):
+        e, n = self._local(lon, lat, xp)
+        c = self.changes
+        r2 = (e[..., None] - c[:, 0]) ** 2 + (n[..., None] - c[:, 1]) ** 2
+        return xp.sum(c[:, 3] * xp.exp(-r2 / (2.0 * c[:, 2] ** 2)), axis=-1)
 
     def _scale(self, raw):
         u = (raw - self.raw_min) / (self.raw_max - self.raw_min)

@@ -12,7 +12,7 @@ from affine import Affine
 from jaxgeo.cli import build_parser, main
 from tests.coreg.test_coregister import CELL_M, SHIFT, X0, Y0, shifted_pair, write_raster
 
-STAT_KEYS = {"mean_m", "median_m", "nmad_m", "rmse_m", "le90_m", "cells"}
+STAT_KEYS = {"mean_m", "median_m", "nmad_m", "rmse_m", "le90_m", "cells", "std_m"}
 
 
 @pytest.fixture(scope="module")
@@ -173,3 +173,28 @@ def test_a_declared_vertical_crs_used_as_read_names_the_options(tmp_path, capsys
     err = capsys.readouterr().err
     assert err.startswith("jaxgeo coregister: warning: ") and err.count("\n") == 1
     assert "'EGM96 height'" in err and "(--dem-height, --geoid)" in err and "read_dem" not in err
+
+
+def test_diff_written_with_its_statistics(pair, tmp_path, capsys):
+    """``--diff DH``: the height difference after the alignment, its statistics in the JSON,
+    the summary and the file's tags; an input as DH refused (exit 2, nothing written)."""
+    dsm, ref = pair
+    out, dh = tmp_path / "aligned.tif", tmp_path / "dh.tif"
+    argv = ["coregister", str(dsm), str(ref), "-o", str(out), "--diff", str(dh), "--quiet"]
+    assert main([*argv, "--json"]) == 0
+    report = json.loads(capsys.readouterr().out)["diff"]
+    assert report["output"] == str(dh) and report["grid_step"] == 1
+    assert set(report["before"]) == STAT_KEYS == set(report["after"])
+    assert abs(report["after"]["median_m"]) < 0.05 < report["before"]["nmad_m"] - 1.0
+    with rasterio.open(dh) as f:
+        assert float(f.tags()["DH_AFTER_NMAD_M"]) == pytest.approx(report["after"]["nmad_m"],
+                                                                   abs=1e-4)  # fmt: skip
+    assert main([*argv, "--overwrite"]) == 0
+    lines = capsys.readouterr().out.splitlines()
+    assert lines[4].startswith("height difference DSM - REF over every cell")
+    assert lines[6].startswith("before") and lines[7].startswith("after")
+    assert lines[-2:] == [f"wrote {dh}", f"wrote {out}"]
+    before = digest(ref)
+    assert main(["coregister", str(dsm), str(ref), "-o", str(tmp_path / "o2.tif"), "--diff",
+                 str(ref), "--overwrite"]) == 2  # fmt: skip
+    assert "input" in capsys.readouterr().err and digest(ref) == before

@@ -128,7 +128,9 @@ def test_statistics_are_numpy_s():
     assert s.nmad_m == pytest.approx(1.4826 * np.median(np.abs(v - 0.5)))
     assert s.rmse_m == pytest.approx(np.sqrt(np.mean(v**2)))
     assert s.le90_m == pytest.approx(np.percentile(np.abs(v), 90))
-    assert s.as_dict().keys() == {"mean_m", "median_m", "nmad_m", "rmse_m", "le90_m", "cells"}
+    assert s.std_m == pytest.approx(np.std(v))
+    assert s.as_dict().keys() == {"mean_m", "median_m", "nmad_m", "rmse_m", "le90_m", "cells",
+                                  "std_m"}  # fmt: skip
     assert dh_stats(np.full(3, np.nan)).cells == 0
     # nuth_kaab's "before" is exactly these statistics of DSM - REF
     dsm, ref = shifted_pair(seed=2)
@@ -196,7 +198,8 @@ def test_nodata_value_and_decimated_estimate(tmp_path):
         z = f.read(1)
     assert (z == -9999.0).mean() > 0.03 and np.nanmin(z[z != -9999.0]) > 0
     # on a grid decimated by 2 (max_cells), the estimate still holds
-    coarse = coregister(tmp_path / "dsm.tif", tmp_path / "ref.tif", max_cells=N * N // 3)
+    coarse = coregister(tmp_path / "dsm.tif", tmp_path / "ref.tif",
+                        settings=NuthKaab(max_cells=N * N // 3))  # fmt: skip
     print("decimated", coarse.shift_m, coarse.grid_step)
     assert coarse.grid_step == 2
     assert np.all(np.abs(np.subtract(coarse.shift_m, [-s for s in SHIFT])) < 0.3)
@@ -349,3 +352,86 @@ def test_a_reference_declaring_its_vertical_crs_used_as_read_is_named(tmp_path):
         warnings.simplefilter("error", CoregistrationWarning)
         converted = coregister(tmp_path / "dsm.tif", read_dem(declared, geoid=GEOID))
     assert abs(converted.shift_m[2] - plain.shift_m[2] - undulation.mean()) < 0.1
+
+
+def test_height_difference_after_alignment(tmp_path):
+    """``diff=``: the aligned DSM minus REF on the DSM's grid (NaN where either has no height),
+    a known change (a -6 m bowl on date 2) found with its size, the stable terrain near 0, its
+    statistics in the result and in the file's tags; never over an input or the other output."""
+    rng = np.random.default_rng(9)
+    e, n = grid_centres()
+    ref = terrain(e, n) + rng.normal(0, 0.1, e.shape)
+    ref[:20, :20] = np.nan  # REF's own hole: no difference there
+    bowl = -6.0 * np.exp(-((e - X0 - 220) ** 2 + (n - Y0 + 120) ** 2) / (2 * 15.0**2))
+    moved = (e - SHIFT[0], n - SHIFT[1])
+    dsm = terrain(*moved) + SHIFT[2] + rng.normal(0, 0.1, e.shape)
+    dsm += -6.0 * np.exp(-((moved[0] - X0 - 220) ** 2 + (moved[1] - Y0 + 120) ** 2) / 450.0)
+    write_raster(tmp_path / "dsm.tif", dsm)
+    write_raster(tmp_path / "ref.tif", ref)
+    dh_path = tmp_path / "dh.tif"
+    result = coregister(tmp_path / "dsm.tif", tmp_path / "ref.tif", tmp_path / "aligned.tif",
+                        diff=dh_path)  # fmt: skip
+    assert np.all(np.abs(np.subtract(result.shift_m, [-s for s in SHIFT])) < 0.05)
+    with rasterio.open(dh_path) as f, rasterio.open(tmp_path / "aligned.tif") as a:
+        assert (f.crs, f.transform, f.shape, f.dtypes[0]) == (a.crs, a.transform, a.shape,
+                                                               "float32")  # fmt: skip
+        dh, aligned, tags = f.read(1).astype(float), a.read(1).astype(float), f.tags()
+        assert np.isnan(f.nodata)
+    ref32 = ref.astype(np.float32).astype(float)
+    assert np.allclose(dh, aligned - ref32, atol=1e-3, equal_nan=True)  # REF on its own grid
+    assert np.isnan(dh[:20, :20]).all() and np.isnan(dh[np.isnan(aligned)]).all()
+    core, stable = bowl < -5.0, bowl > -0.01
+    print("bowl", np.nanmedian(dh[core] - bowl[core]), "stable", np.nanmedian(dh[stable]))
+    assert abs(np.nanmedian(dh[core] - bowl[core])) < 0.1
+    assert abs(np.nanmedian(dh[stable])) < 0.05 and nmad(dh[stable]) < 0.25
+    d = result.diff
+    assert d.output == str(dh_path) and d.grid_step == 1
+    assert d.after.as_dict() == pytest.approx(dh_stats(dh).as_dict())
+    assert d.before.nmad_m > 1.0 and d.after.cells == np.isfinite(dh).sum()
+    assert float(tags["DH_AFTER_MEDIAN_M"]) == pytest.approx(d.after.median_m, abs=1e-4)
+    assert int(tags["DH_BEFORE_CELLS"]) == d.before.cells
+    assert tags["COREGISTRATION_SHIFT_M"].split()[0] == f"{result.shift_m[0]:.4f}"
+    assert result.as_dict()["diff"]["after"]["std_m"] == d.after.std_m
+    # the difference alone, nothing else written; never an input nor the aligned DSM
+    only = coregister(tmp_path / "dsm.tif", tmp_path / "ref.tif", diff=tmp_path / "dh2.tif")
+    assert only.output is None and only.diff.after == d.after
+    for target in ("dsm.tif", "ref.tif"):
+        with pytest.raises(CoregistrationError, match=f"{target}: is the input"):
+            coregister(tmp_path / "dsm.tif", tmp_path / "ref.tif", diff=tmp_path / target,
+                       overwrite=True)  # fmt: skip
+    with pytest.raises(CoregistrationError, match="both the aligned DSM and the difference"):
+        coregister(tmp_path / "dsm.tif", tmp_path / "ref.tif", tmp_path / "x.tif",
+                   diff=tmp_path / "x.tif")  # fmt: skip
+    with pytest.raises(FileExistsError, match="dh.tif"):
+        coregister(tmp_path / "dsm.tif", tmp_path / "ref.tif", diff=dh_path)
+
+
+def test_tilt_removed_with_the_shift(tmp_path):
+    """``NuthKaab(tilt=True)``: a DSM moved by SHIFT and tilted by 0.5 m per 100 m east and
+    -0.3 m per 100 m north (two relative orientations) is aligned, the plane found and applied
+    to the output; without it the tilt stays in the aligned DSM and biases the shift (a little
+    on this rough terrain; by metres on the smooth one of docs/change-detection.md)."""
+    rng = np.random.default_rng(11)
+    e, n = grid_centres()
+    ref = terrain(e, n) + rng.normal(0, 0.1, e.shape)
+    plane = 0.005 * (e - e.mean()) - 0.003 * (n - n.mean())
+    dsm = terrain(e - SHIFT[0], n - SHIFT[1]) + SHIFT[2] + plane + rng.normal(0, 0.1, e.shape)
+    write_raster(tmp_path / "dsm.tif", dsm)
+    write_raster(tmp_path / "ref.tif", ref)
+    out = tmp_path / "aligned.tif"
+    tilted = coregister(tmp_path / "dsm.tif", tmp_path / "ref.tif", out,
+                        settings=NuthKaab(tilt=True))  # fmt: skip
+    plain = coregister(tmp_path / "dsm.tif", tmp_path / "ref.tif")
+    truth = np.array([-s for s in SHIFT])
+    print("tilt", tilted.shift_m, tilted.tilt_m_per_m, "plain", plain.shift_m)
+    assert np.all(np.abs(np.subtract(tilted.shift_m, truth)) < 0.05)
+    assert tilted.tilt_m_per_m == pytest.approx((-0.005, 0.003), abs=2e-4)
+    assert tilted.tilt_origin_m == pytest.approx((X0 + N / 2 * CELL_M, Y0 - N / 2 * CELL_M))
+    assert plain.tilt_m_per_m == (0.0, 0.0) and plain.tilt_origin_m is None
+    errors = [np.max(np.abs(np.subtract(r.shift_m[:2], truth[:2]))) for r in (tilted, plain)]
+    assert errors[1] > 2 * errors[0]
+    assert tilted.after.nmad_m < 0.2 < plain.after.nmad_m
+    with rasterio.open(out) as f:
+        aligned, tags = f.read(1).astype(float), f.tags()
+    assert nmad(aligned - terrain(e, n)) < 0.2 and abs(np.nanmedian(aligned - terrain(e, n))) < 0.05
+    assert tags["COREGISTRATION_TILT_M_PER_M"].split()[0] == f"{tilted.tilt_m_per_m[0]:.7f}"
