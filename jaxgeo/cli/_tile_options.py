@@ -28,8 +28,8 @@ def add_tile_options(parser: argparse.ArgumentParser, tile: int, unit: str) -> N
         default=None,
         metavar="N",
         help="worker processes (default: one per core for a large product, none "
-        "for a small one or on 1-2 cores; 0: all tiles in this process; at most one per "
-        "core, more on a cluster with --scheduler)",
+        "for a small one or on 1-2 cores; 0: all tiles in this process; at most two per "
+        "core (at least 4), more on a cluster with --scheduler)",
     )
     parser.add_argument(
         "--scheduler",
@@ -71,7 +71,7 @@ def check_tile_options(args: argparse.Namespace, inputs: Sequence[pathlib.Path],
     in_range("--tile", args.tile, min_tile, MAX_TILE)
     in_range("--retries", args.retries, 0, MAX_RETRIES)
     in_range("--workers", args.workers, 0, max_local_workers(),
-             why=" (one per core of this machine; more on a cluster: --scheduler)")  # fmt: skip
+             why=" (two per core of this machine, at least 4; more on a cluster: --scheduler)")  # fmt: skip
     if args.workers is not None and args.scheduler:
         raise CommandError(f"--workers {args.workers} with --scheduler: the cluster's workers run "
                            "the tiles (start more there); give one of them")  # fmt: skip

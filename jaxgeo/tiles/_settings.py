@@ -14,12 +14,13 @@ remove, and more would only delay the error."""
 
 
 def max_local_workers() -> int:
-    """The most local worker processes a product may start: one per core this process may use
-    (each worker's tile keeps a core busy; more only contend for the cores, and each holds its
-    own JAX runtime in memory). More workers run on a dask cluster (``scheduler``)."""
+    """The most local worker processes a product may start: two per core this process may use,
+    at least 4 (a worker's tile keeps a core busy most of the time; a few more overlap its
+    reads and writes, hundreds only contend for the cores and each holds its own JAX runtime
+    in memory). More workers run on a dask cluster (``scheduler``)."""
     from .._runtime.jaxconfig import usable_cores
 
-    return usable_cores()
+    return max(4, 2 * usable_cores())
 
 
 @dataclasses.dataclass(frozen=True)
@@ -28,7 +29,7 @@ class TileSettings:
 
     Attributes:
         workers: worker processes; ``None``: one per core for a large product, none for a small
-            one or on 1-2 cores; ``0``: every tile in this process; at most one per core
+            one or on 1-2 cores; ``0``: every tile in this process; at most two per core
             (:func:`max_local_workers`), and not with a ``scheduler``.
         scheduler: address of an existing dask scheduler (``tcp://host:8786``) to run the tiles
             on, instead of local workers.

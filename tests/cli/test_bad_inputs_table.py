@@ -77,7 +77,7 @@ CASES = [
     ("dsm: --retries 1000", ["dsm", *PAIR, "--retries", "1000", "-o", "{out}/d.tif"], 2,
      ["--retries must be >= 0 and <= 10"]),
     ("ortho: --workers 1000", [*ORTHO, "--workers", "1000", "-o", "{out}/o.tif"], 2,
-     ["--workers must be", "one per core"]),
+     ["--workers must be", "two per core"]),
     ("ortho: --tile 10", [*ORTHO, "--tile", "10", "-o", "{out}/o.tif"], 2,
      ["--tile must be >= 64"]),
     ("adjust: an observations table with its header only",
