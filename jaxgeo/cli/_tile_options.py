@@ -70,8 +70,8 @@ def check_tile_options(args: argparse.Namespace, inputs: Sequence[pathlib.Path],
 
     in_range("--tile", args.tile, min_tile, MAX_TILE)
     in_range("--retries", args.retries, 0, MAX_RETRIES)
-    in_range("--workers", args.workers, 0, max_local_workers(),
-             why=" (two per core of this machine, at least 4; more on a cluster: --scheduler)")  # fmt: skip
+    why = " (two per core of this machine, at least 4; more on a cluster: --scheduler)"
+    in_range("--workers", args.workers, 0, max_local_workers(), why=why)
     if args.workers is not None and args.scheduler:
         raise CommandError(f"--workers {args.workers} with --scheduler: the cluster's workers run "
                            "the tiles (start more there); give one of them")  # fmt: skip
