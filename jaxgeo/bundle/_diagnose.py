@@ -17,6 +17,7 @@ import numpy as np
 
 from ..lsq import Band, Problem, blocks_at, initial_unknowns, unit_scales
 from ..lsq.internal import reduced_system
+from ..models import AbstractSensorModel
 
 SINGULAR_RTOL = 1e-10
 """Eigenvalues below this fraction of the largest (after unit-diagonal scaling) are zero."""
@@ -220,7 +221,8 @@ def height_reasons(setup, ground: np.ndarray, removed=None) -> list[str]:
     models = setup.image_models(groups, tuple(g.theta0 for g in groups))
     bad, ranges = [], {}
     for k, name in enumerate(lay.names):
-        rpc = models[name].base_rpc() if hasattr(models[name], "base_rpc") else None
+        model = models[name]
+        rpc = model.base_rpc() if isinstance(model, AbstractSensorModel) else None
         mine = np.zeros(n_points, bool)
         mine[lay.point[keep & (lay.image == k)]] = True
         mine &= tie

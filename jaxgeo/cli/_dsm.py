@@ -13,8 +13,8 @@ with ``--orientation DIR/adjusted_models.json`` (written by ``jaxgeo adjust --ou
 adjusted RPCs are the images' models), the adjusted models' posterior uncertainty, propagated
 through the intersection; without it, the models' a priori orientation error (0.7 px per image
 and axis: same-pass vendor RPCs; the band's ``covers`` tag and the summary say which). ``--roi``
-in pixels of IMG1 (default: all of it); ``--res`` metres (default 0.5); CRS default the local UTM zone (a
-projected CRS in metres; a geographic CRS is refused). ``--keep DIR`` writes each pair's
+in pixels of IMG1 (default: all of it); ``--res`` metres (default 0.5); CRS default the local UTM
+zone (a projected CRS in metres; a geographic CRS is refused). ``--keep DIR`` writes each pair's
 intermediate products. Dense matching runs over bands of ``--band-rows`` epipolar rows (default
 512), so its memory follows the band, not the image.
 Everything given is checked before any computation: the images and

@@ -480,10 +480,8 @@ def tie_points(
 
 
 def _check_dem(dem, ground: np.ndarray, report: TieReport) -> None:
-    """Warn (:class:`TieWarning`) when ``dem``'s heights at the ties' ground points disagree
-    with theirs by tens of metres (:func:`jaxgeo.io.internal.dem_against_ties`: feet, another
-    datum, another place): it then also chose the height range searched, and the ties found
-    are the few that happen to lie in it (the count of those rejected outside it says so)."""
+    """Warn (:class:`TieWarning`) when ``dem``'s heights at the ties disagree with theirs
+    (:func:`jaxgeo.io.internal.dem_against_ties`): it also chose the range searched."""
     if len(ground) == 0:
         return
     try:

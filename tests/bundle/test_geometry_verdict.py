@@ -118,3 +118,35 @@ def test_with_gcps_the_fit_decides(s2p):
                           np.full((1, 3), 1.0))  # fmt: skip
     setup = prepare(models, obs, ground, settings=_settings(images), check_control=False)
     assert geometry_verdict(setup, None) == []
+
+
+def test_cli_swapped_rpcs_without_gcps_exit_3(shared_data, tmp_path, capsys):
+    """The README's chain without GCPs: ``jaxgeo adjust`` with the RPCs of img_01 and img_02
+    swapped (``--model``) ends with exit 3 and the warning naming both images; as given, 0."""
+    from jaxgeo.cli import main
+    from jaxgeo.io import write_observations
+
+    d = shared_data / "s2p_triplet"
+    images, obs = _s2p_for_cli(shared_data)
+    write_observations(obs, tmp_path / "ties.csv")
+    base = [str(d / "img_01.tif"), str(d / "img_02.tif"), "--observations",
+            str(tmp_path / "ties.csv"), "--quiet"]  # fmt: skip
+    swap = ["--model", f"img_01={d / 'img_02.tif'}", "--model", f"img_02={d / 'img_01.tif'}"]
+    assert main(["adjust", *base, "-o", str(tmp_path / "ok")]) == 0
+    capsys.readouterr()
+    assert main(["adjust", *base, *swap, "-o", str(tmp_path / "swapped")]) == 3
+    err = capsys.readouterr().err
+    assert "Traceback" not in err and "do not fit the geometry of the models" in err
+    assert "'img_01'" in err and "'img_02'" in err
+
+
+def _s2p_for_cli(shared_data):
+    d = shared_data / "s2p_triplet"
+    images = {n: open_image(d / f"{n}.tif") for n in ("img_01", "img_02")}
+    m = np.loadtxt(d / "matches_on_rpc_roi_img01_img02.txt")
+    ids = tuple(f"T{i:03d}" for i in range(len(m)))
+    obs = Observations(
+        ids * 2, ("img_01",) * len(m) + ("img_02",) * len(m),
+        np.concatenate([m[:, :2], m[:, 2:]]), np.full(2 * len(m), 0.5),
+    )  # fmt: skip
+    return images, obs
