@@ -15,6 +15,7 @@ import equinox as eqx
 import jax.numpy as jnp
 import numpy as np
 
+from ..io.internal import dem_against_ties
 from ..lsq import Band, Problem, blocks_at, initial_unknowns, unit_scales
 from ..lsq.internal import reduced_system
 from ..models import AbstractSensorModel
@@ -248,6 +249,12 @@ def height_reasons(setup, ground: np.ndarray, removed=None) -> list[str]:
         pts = np.asarray(setup.problem.ground.point)[dem_rows]
         dem_h = np.asarray(setup.problem.ground.lonlath)[dem_rows, 2]
         sel = tie[pts]
+        # before the adjustment (the ties intersected with the given models): a DEM in feet,
+        # another datum or place shows in its heights against the ties' own, named
+        start = np.asarray(setup.problem.origin, float)[pts[sel], 2]
+        why = dem_against_ties(start, dem_h[sel], "the DEM of the tie heights (--dem)")
+        if why is not None:
+            reasons.append(why)
         if sel.any():
             lo, hi = float(np.min(dem_h[sel])), float(np.max(dem_h[sel]))
             out = _outside(h[pts[sel]], lo, hi)
@@ -353,14 +360,20 @@ def geometry_verdict(setup, sol, removed=None) -> list[str]:
     ]
 
 
-def geometry_message(reasons: list[str]) -> str:
-    """The :class:`~._errors.PoorFitWarning` text of :func:`geometry_verdict`'s ``reasons``."""
+def geometry_message(reasons: list[str], dem: bool = False) -> str:
+    """The :class:`~._errors.PoorFitWarning` text of :func:`geometry_verdict`'s ``reasons``
+    (``dem``: the ties had heights from a DEM, which may be the cause)."""
+    also = (
+        ", or a DEM of tie heights that is not the terrain's (in feet, another datum or place)"
+        if dem
+        else ""
+    )
     return (
         "the tie points do not fit the geometry of the models (a block without GCPs): "
         + "; ".join(reasons)
         + ". Likely cause: a model that does not belong to its image (e.g. two RPC files "
-        "swapped, or a model of another scene); check the models of the images named (tie "
-        "points alone fit such models: s0 stays small)."
+        f"swapped, or a model of another scene){also}; check the models of the images named "
+        "(tie points alone fit such models: s0 stays small)."
     )
 
 
@@ -377,7 +390,8 @@ def checked_geometry(result, removed=None):
     reasons = geometry_verdict(result.setup, sol, removed)
     if not reasons:
         return result
-    text = geometry_message(reasons)
+    gw = np.asarray(result.setup.problem.ground.weight)
+    text = geometry_message(reasons, dem=bool(gw.size and np.any(gw[:, 2] > 0)))
     warnings.warn(text, PoorFitWarning, stacklevel=3)
     poor = f"{result.poor_fit} {text}" if result.poor_fit else text
     return dataclasses.replace(result, poor_fit=poor)

@@ -7,6 +7,8 @@ On s2p's 481 real matches between the Pleiades views img_01 and img_02 (valid he
 
 import warnings
 
+import equinox as eqx
+import jax.numpy as jnp
 import numpy as np
 import pytest
 
@@ -15,7 +17,6 @@ from jaxgeo.bundle._adjustment import bias_prior_sigma, with_bias
 from jaxgeo.bundle._diagnose import RAY_MISS_PX, geometry_verdict, ray_reasons
 from jaxgeo.bundle._prepare import prepare
 from jaxgeo.io import Observations, open_image
-from jaxgeo.models import Biased, ShiftBias
 
 
 @pytest.fixture(scope="module")
@@ -88,7 +89,10 @@ def test_ties_far_from_the_dem_heights(s2p):
 
     r, poor = _adjust(images, obs, models, tie_height=dem)
     assert len(poor) == 1
-    assert "outside the DEM's heights 1000..1000 m" in poor[0] or "far from the given" in poor[0]
+    assert "the DEM of the tie heights (--dem): its heights differ" in poor[0]
+    assert "a constant offset of +887 m" in poor[0]  # the ties' own heights: 90..142 m
+    assert "far from the given one" in poor[0]  # pulled up to it, the biases left their priors
+    assert "or a DEM of tie heights that is not the terrain's" in poor[0]
 
 
 def test_rays_that_do_not_meet(s2p):
@@ -97,7 +101,9 @@ def test_rays_that_do_not_meet(s2p):
     10 px priors would then also move the biases far beyond them)."""
     images, obs = s2p
     good = {n: images[n].model for n in ("img_01", "img_02")}
-    off = dict(good, img_02=Biased(good["img_02"], ShiftBias([400.0, 0.0])))
+    rpc = good["img_02"]  # an RPC: moved by its image offset, one group with img_01's
+    off = dict(good, img_02=eqx.tree_at(lambda m: m.image_offset, rpc,
+                                        rpc.image_offset + jnp.array([400.0, 0.0])))  # fmt: skip
     for models, expect in ((good, False), (off, True)):
         b = with_bias(models, "affine")
         setup = prepare(b, obs, prior_sigma=bias_prior_sigma(b, 10.0, 1e-4),
