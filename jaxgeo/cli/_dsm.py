@@ -25,8 +25,17 @@ from __future__ import annotations
 
 import argparse
 import re
+import sys
 
-from ._common import add_command, add_json, add_out, add_quiet, guard_outputs, print_json
+from ._common import (
+    add_command,
+    add_json,
+    add_out,
+    add_quiet,
+    guard_outputs,
+    ours,
+    print_json,
+)
 from ._inputs import (
     add_dem_options,
     add_heights,
@@ -119,6 +128,22 @@ def _named(err) -> str:
 
 
 def run(args: argparse.Namespace) -> int:
+    import warnings
+
+    caught = []
+    try:
+        with warnings.catch_warnings(record=True) as caught:
+            warnings.simplefilter("always")
+            return _run(args)
+    finally:  # jaxgeo's warnings (e.g. a DEM unlike the ties) once each, one line
+        shown = set()
+        for w in ours(caught):
+            if str(w.message) not in shown:
+                shown.add(str(w.message))
+                print(f"jaxgeo dsm: warning: {w.message}", file=sys.stderr)
+
+
+def _run(args: argparse.Namespace) -> int:
     import dataclasses
 
     from ..stereo import DSMSettings, DSMSettingsError, make_dsm

@@ -59,3 +59,18 @@ def test_dem_500_m_off_is_named(shared_data, dems):
     _, warned = _ties(shared_data, dems["off"])
     assert len(warned) == 1 and str(dems["off"]) in warned[0], warned
     assert "its heights differ from the tie points'" in warned[0]
+
+
+def test_dsm_command_names_the_dem(shared_data, dems, tmp_path, capsys):
+    """``jaxgeo dsm --dem`` with the DEM in feet: the warning is the command's own line naming
+    the file (here too few ties are left for a DSM: exit 2, nothing written)."""
+    from jaxgeo.cli import main
+
+    d = shared_data / "s2p_triplet"
+    out = tmp_path / "dsm.tif"
+    rc = main(["dsm", str(d / "img_02.tif"), str(d / "img_01.tif"), "--roi", "350", "350",
+               "200", "200", "--dem", str(dems["ft"]), "-o", str(out), "--quiet"])  # fmt: skip
+    err = capsys.readouterr().err
+    assert "Traceback" not in err and "TieWarning" not in err
+    assert f"jaxgeo dsm: warning: {dems['ft']}: its heights differ" in err
+    assert rc in (0, 2) and (rc == 0) == out.exists()
