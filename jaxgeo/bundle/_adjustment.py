@@ -26,6 +26,7 @@ from ..lsq import SolverConfig
 from ..lsq.internal import DEFAULT_SOLVER
 from ..models import AbstractBias, AbstractSensorModel, Biased, JitterBias
 from ..models.internal import BIAS_KINDS
+from ._diagnose import checked_geometry
 from ._prepare import prepare
 from ._result import AdjustResult, make_result
 from ._settings import DEFAULT_JITTER, DEFAULT_SETTINGS, AdjustSettings, JitterSettings
@@ -181,6 +182,7 @@ def adjust(
         check_control=s.check_control,
     )  # fmt: skip
     sol, rem_i, rem_g, rounds = snoop(setup, solver, progress=s.progress)
-    return make_result(
+    result = make_result(
         setup, sol, observations, ground, solver, (rem_i, rem_g), rounds, throw=throw
     )
+    return checked_geometry(result, (rem_i, rem_g))  # a block without GCPs: its geometry

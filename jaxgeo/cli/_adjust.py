@@ -39,8 +39,11 @@ priori sigmas (IRLS), then data snooping (Baarda's w-test, iterated) removes the
 observations and re-solves (``--keep-blunders``: flag only). Snooping removes at most
 max(1, 20 %) of the GCPs and of each image's observations: more "gross errors" than that are
 models that do not fit their images (swapped RPC files, a model of another image), which the
-command declares (warning, exit 3) rather than cut away. Check-point statistics are given for all
-check points and for those without a flagged observation.
+command declares (warning, exit 3) rather than cut away. Without GCPs, tie points fit almost any
+models; the block's geometry then decides (tie heights outside the models' validity range or the
+DEM's, rays that do not meet with the given models, biases far beyond their priors: warning,
+exit 3). Check-point statistics are given for all check points and for those without a flagged
+observation.
 
 The options shared with ``jaxgeo strip`` are defined once (:mod:`._adjustment_options`); the
 command parses, calls :func:`jaxgeo.bundle.adjust_files` and prints.
@@ -56,7 +59,9 @@ EXIT_CODES = {
     0: "adjusted (gross errors, if any, removed and listed)",
     1: "the solve did not converge (the last state is reported and written)",
     3: "the observations do not fit the models (s0 > 3, or more gross errors than snooping\n"
-    "       may remove; converged or not): the warning names the images (e.g. swapped RPCs)",
+    "       may remove; without GCPs, tie heights outside the models' or the DEM's range,\n"
+    "       rays that do not meet, biases far beyond their priors; converged or not): the\n"
+    "       warning names the images (e.g. swapped RPCs)",
     4: "the adjustment ran but -o/--out could not be written (the report is printed first)",
 }
 

@@ -12,13 +12,13 @@ WGS84 ellipsoid, count, spread, filled, height_sigma). ``height_sigma`` is the h
 standard deviation per cell (m): the matching's (from each disparity's correlation peak) and,
 with ``--orientation DIR/adjusted_models.json`` (written by ``jaxgeo adjust --out DIR``, whose
 adjusted RPCs are the images' models), the adjusted models' posterior uncertainty, propagated
-through the intersection; without it the models' orientation error is not in the sigma (vendor
-RPCs carry a few pixels of bias that no sigma here describes). ``--roi`` in pixels of IMG1
-(default: all of it); ``--res`` metres (default 0.5); CRS default the local UTM zone (a
-projected CRS in metres; a geographic CRS is refused); the grid's edges are multiples of --res
-(target-aligned cells, as the orthos': the products of one job share a grid; ``--no-tap``: from
-the footprint's corner); ``--like RASTER`` takes another raster's grid (CRS, transform, shape;
-not with --res, --crs, --no-tap). ``--keep DIR`` writes each pair's
+through the intersection; without it, the models' a priori orientation error (0.7 px per image
+and axis: same-pass vendor RPCs; the band's ``covers`` tag and the summary say which). ``--roi``
+in pixels of IMG1 (default: all of it); ``--res`` metres (default 0.5); CRS default the local UTM
+zone (a projected CRS in metres; a geographic CRS is refused); the grid's edges are multiples of
+--res (target-aligned cells, as the orthos': the products of one job share a grid; ``--no-tap``:
+from the footprint's corner); ``--like RASTER`` takes another raster's grid (CRS, transform,
+shape; not with --res, --crs, --no-tap). ``--keep DIR`` writes each pair's
 intermediate products. Dense matching runs over bands of ``--band-rows`` epipolar rows (default
 512), so its memory follows the band, not the image.
 Everything given is checked before any computation: the images and
@@ -29,8 +29,17 @@ from __future__ import annotations
 
 import argparse
 import re
+import sys
 
-from ._common import add_command, add_json, add_out, add_quiet, guard_outputs, print_json
+from ._common import (
+    add_command,
+    add_json,
+    add_out,
+    add_quiet,
+    guard_outputs,
+    ours,
+    print_json,
+)
 from ._inputs import (
     add_dem_options,
     add_heights,
@@ -78,7 +87,8 @@ def register(sub) -> None:
         "it)")  # fmt: skip
     arg("--orientation", metavar="JSON",
         help="adjusted_models.json of `jaxgeo adjust --out` for these images: their posterior "
-        "bias sigmas enter the height_sigma band (default: matching only)")  # fmt: skip
+        "bias sigmas enter the height_sigma band (default: the a priori 0.7 px per image; "
+        "the band's covers tag says which)")  # fmt: skip
     add_dem_options(parser, "its heights over the footprint, +-50 m, give the tie points' range")
     add_heights(parser)
     arg("--max-hole", type=float, default=4.0, metavar="M",
@@ -128,6 +138,22 @@ def _named(err) -> str:
 
 
 def run(args: argparse.Namespace) -> int:
+    import warnings
+
+    caught = []
+    try:
+        with warnings.catch_warnings(record=True) as caught:
+            warnings.simplefilter("always")
+            return _run(args)
+    finally:  # jaxgeo's warnings (e.g. a DEM unlike the ties) once each, one line
+        shown = set()
+        for w in ours(caught):
+            if str(w.message) not in shown:
+                shown.add(str(w.message))
+                print(f"jaxgeo dsm: warning: {w.message}", file=sys.stderr)
+
+
+def _run(args: argparse.Namespace) -> int:
     import dataclasses
 
     from ..stereo import DSMSettings, DSMSettingsError, make_dsm

@@ -2,9 +2,9 @@
 
 The window covering a WGS84 area is read on the host, nodata becomes NaN and orthometric
 heights get the geoid undulation of each cell centre, so the grid holds ellipsoidal heights.
-Rasters in geographic WGS84 and WGS84 UTM are kept on their own grid (the models layer samples
-both exactly); any other CRS is resampled (bilinear) onto a geographic grid of about the same
-cell size, on the host.
+Rasters in geographic WGS84 (or in the degrees of a datum PROJ takes as WGS84 there, e.g. NAD83)
+and WGS84 UTM are kept on their own grid (the models layer samples both exactly); any other CRS
+is resampled (bilinear) onto a geographic grid of about the same cell size, on the host.
 
 A DEM with a fill DEM (``read_dem(..., fill=)``) gives its grid over the whole area asked for,
 beyond its own raster where the fill reaches: the cells without a height of their own take the
@@ -69,6 +69,29 @@ def _utm_zone_of(crs) -> int:
     return 0
 
 
+def _wgs84_degrees(crs, bounds_lonlat) -> bool:
+    """Whether a geographic ``crs`` holds WGS84's own degrees over the box: its datum is one PROJ
+    takes as WGS84 there (NAD83, ETRS89... without a grid shift: a null transformation, as the
+    host-side :class:`~jaxgeo.io.DEM` reads it). Its grid is then kept as it is: a resampled
+    copy interpolates twice (0.5 m of height on shareloc's 30" MNT, 1.2e-6 deg on the ground
+    a line of sight meets it)."""
+    import pyproj
+
+    if not crs.is_geographic or any(
+        a.unit_name not in ("degree", "degrees") for a in crs.axis_info
+    ):
+        return False
+    w, s, e, n = bounds_lonlat
+    lon, lat = np.array([w, e, w, e, 0.5 * (w + e)]), np.array([s, s, n, n, 0.5 * (s + n)])
+    try:
+        x, y = pyproj.Transformer.from_crs(4326, crs, always_xy=True).transform(lon, lat)
+    except pyproj.exceptions.ProjError:
+        return False
+    return bool(
+        np.all(np.abs(np.asarray(x) - lon) < 1e-10) and np.all(np.abs(np.asarray(y) - lat) < 1e-10)
+    )
+
+
 def dem_grid(dem, bounds_lonlat, margin_cells: int = 2) -> DEMGrid:
     """Read the window of ``dem`` (an :class:`jaxgeo.io.DEM`) over ``bounds_lonlat``.
 
@@ -125,7 +148,7 @@ def dem_grid(dem, bounds_lonlat, margin_cells: int = 2) -> DEMGrid:
         src_crs = src.crs
     wgs84 = pyproj.CRS.from_epsg(4326)
     zone = _utm_zone_of(crs)
-    if crs.equals(wgs84, ignore_axis_order=True) or zone != 0:
+    if crs.equals(wgs84, ignore_axis_order=True) or zone != 0 or _wgs84_degrees(crs, (w, s, e, n)):
         if wt.b != 0 or wt.d != 0:
             zone, geographic = None, False  # rotated: resample below
         else:

@@ -52,6 +52,17 @@ DSM_BANDS = {
 a :class:`DSMGrid` field and an entry here."""
 
 
+def dsm_band_tags(sigma_covers: str = "") -> tuple[tuple[tuple[str, str], ...], ...]:
+    """Per band of :data:`DSM_BANDS` its tags: ``meaning``, and for ``height_sigma`` what it
+    covers (``covers``: :func:`~._uncertainty.sigma_covers`, e.g. the matching and the models'
+    a priori orientation error), when given."""
+    return tuple(
+        (("meaning", meaning),)
+        + ((("covers", sigma_covers),) if name == "height_sigma" and sigma_covers else ())
+        for name, (_, meaning) in DSM_BANDS.items()
+    )
+
+
 @dataclass(frozen=True)
 class DSMGrid:
     """A rasterised DSM: ``height`` (NaN: no data), ``count``, ``spread``, ``filled`` (1 where

@@ -24,6 +24,7 @@ import numpy as np
 from ..io import SensorImage, open_image
 from ..tiles import EmptyProduct, TileError, TileSettings, TileStats, make_product
 from ..tiles.internal import DEFAULT_TILES, WorkerPool
+from ._dsm import DSM_BANDS
 from ._report import DSMReport
 from ._settings import DEFAULT_DSM, DSMSettings, DSMSettingsError
 from ._tiled import TILED_MIN_PX, DSMSetup, dsm_workers, plan_dsm
@@ -150,8 +151,14 @@ def tiled_dsm(
         mosaic_s=product.mosaic_s, tiled=setup.tiled,
         pairs=() if setup.tiled else tuple(one.details.get("pairs", ())),
         median_height_sigma_m=None if setup.tiled else one.details.get("median_height_sigma_m"),
-        plan=plan, plan_path=product.plan_path,
+        plan=plan, plan_path=product.plan_path, height_sigma_covers=_covers(setup.job.spec),
     )  # fmt: skip
+
+
+def _covers(spec) -> str:
+    """The ``covers`` tag of the ``height_sigma`` band of a DSM's raster spec ("" if none)."""
+    tags = spec.band_tags[list(DSM_BANDS).index("height_sigma")] if spec.band_tags else ()
+    return dict(tags).get("covers", "")
 
 
 def make_dsm(

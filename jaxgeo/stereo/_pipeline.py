@@ -372,8 +372,10 @@ def dsm_from_images(
     ``orientation`` (the covariance of the models' remaining image shifts, px^2,
     :data:`~jaxgeo.stereo.Orientation`: from an adjustment,
     :func:`~jaxgeo.stereo.adjustment_covariance`; from its files,
-    :func:`~jaxgeo.stereo.orientation_covariances`),
-    through the intersection, combined per cell.
+    :func:`~jaxgeo.stereo.orientation_covariances`; ``None``: no orientation term, the
+    matching's sigma alone, as for exact models: :func:`~jaxgeo.stereo.make_dsm` gives models
+    that were not adjusted their a priori sigma instead), through the intersection, combined
+    per cell.
 
     ``settings.keep``: write each pair's intermediate
     products there (``pair_i.npz``: epipolar images, disparity, tie points, points).

@@ -45,6 +45,9 @@ class DSMReport:
     plan_path: pathlib.Path | None = None
     names: tuple[str, ...] = ()
     """The images' names (file stems), the reference first (for :meth:`as_dict`)."""
+    height_sigma_covers: str = ""
+    """What the ``height_sigma`` band covers (the band's ``covers`` tag): the matching, and the
+    orientation's a priori or adjusted uncertainty."""
 
     def empty(self) -> dict[str, str]:
         """Why each tile without data has none (tile id -> reason)."""
@@ -56,7 +59,8 @@ class DSMReport:
         tiled: the run (tiles, the empty ones' reasons, times, each tile's stats)."""
         out = {"output": str(self.path), "epsg": self.epsg, "res_m": self.res_m,
                "shape": [self.height, self.width], "filled": round(self.filled, 4),
-               "interpolated": round(self.interpolated, 4)}  # fmt: skip
+               "interpolated": round(self.interpolated, 4),
+               "height_sigma_covers": self.height_sigma_covers}  # fmt: skip
         if not self.tiled:
             ref = self.names[0] if self.names else ""
             pairs = [{"images": [ref, self.names[i + 1] if i + 1 < len(self.names) else ""],
@@ -81,7 +85,7 @@ class DSMReport:
                      f"'filled'); median height_sigma {sigma or float('nan'):.2f} m"]  # fmt: skip
             for pair in self.as_dict()["pairs"]:
                 lines.append(f"  {pair['images'][0]} - {pair['images'][1]}: " + _pair_line(pair))
-            return "\n".join(lines)
+            return "\n".join(lines + self._covers())
         empty = self.empty()
         where = (f"{self.workers} worker(s) at {self.scheduler}" if self.scheduler
                  else "this process")  # fmt: skip
@@ -91,7 +95,10 @@ class DSMReport:
                  f"tiles ({len(empty)} without data, {self.reused_tiles} reused) on {where}; "
                  f"{self.seconds:.1f} s"]  # fmt: skip
         lines += [f"  tile {k}: no data ({why[:160]})" for k, why in list(empty.items())[:5]]
-        return "\n".join(lines)
+        return "\n".join(lines + self._covers())
+
+    def _covers(self) -> list[str]:
+        return [f"  height_sigma: {self.height_sigma_covers}"] if self.height_sigma_covers else []
 
 
 def _pair_line(pair: dict) -> str:

@@ -38,7 +38,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from ..io.internal import open_raster
+from ..io.internal import dem_against_ties, open_raster
 from ..models import AbstractSensorModel
 from ._match_settings import MatchSettings, TieError, TieWarning
 from ._matching import Candidates, Features, epipolar_candidates, sift_features_raster
@@ -479,4 +479,27 @@ def tie_points(
         across_px=float(np.median(across)) if len(across) else np.nan,
         across_sigma_px=float(sigma),
     )
+    if source == "dem":  # the DEM gave the heights: do the ties' own agree with it?
+        _check_dem(dem, ground, report)
     return TiePoints(k1, k2, ground, across, report)
+
+
+def _check_dem(dem, ground: np.ndarray, report: TieReport) -> None:
+    """Warn (:class:`TieWarning`) when ``dem``'s heights at the ties disagree with theirs
+    (:func:`jaxgeo.io.internal.dem_against_ties`): it also chose the range searched."""
+    if len(ground) == 0:
+        return
+    try:
+        dem_h = np.asarray(dem(ground[:, :2]), dtype=float)
+    except ValueError:  # ties outside the DEM: its own message comes where it is used
+        return
+    why = dem_against_ties(ground[:, 2], dem_h, str(getattr(dem, "path", "the DEM")))
+    if why is not None:
+        out = report.rejected.get("height_range", 0)
+        warnings.warn(
+            f"{why}; only {report.n_kept} ties kept ({out} more rejected outside the height "
+            f"range {report.height_range_m[0]:.0f}..{report.height_range_m[1]:.0f} m it gave: "
+            "far fewer than the images support)",
+            TieWarning,
+            stacklevel=3,
+        )

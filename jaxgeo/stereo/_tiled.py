@@ -36,12 +36,12 @@ import numpy as np
 from ..models import AbstractSensorModel
 from ..tiles import RasterSpec, Tile, TilePlan, plan_tiles
 from ..tiles.internal import NoData, cores, overview_factors, write_tile
-from ._dsm import DSM_BANDS, dsm_grid, local_utm_epsg, rasterize, to_map
+from ._dsm import DSM_BANDS, dsm_band_tags, dsm_grid, local_utm_epsg, rasterize, to_map
 from ._pipeline import _height_offsets, _spacing, dsm_from_images, image_size, stereo_pair
 from ._settings import DEFAULT_DSM, DSMSettings
 from ._ties import MatchSettings, TieError, footprint_dem_heights, tie_points, validity_heights
 from ._triangulation import StereoError, los_heights
-from ._uncertainty import Orientation, pair_orientation
+from ._uncertainty import Orientation, pair_orientation, resolved_orientation, sigma_covers
 
 TILE_CELLS = 1024
 """Cells a side of a DSM tile (at 0.5 m cells on a 0.5 m GSD image: about 1 000 image px)."""
@@ -376,6 +376,8 @@ def plan_dsm(
     w, h = image_size(paths[0])
     col, row, rw, rh = settings.roi if settings.roi is not None else (0, 0, w, h)
     (lo, hi), source = dsm_heights(models, paths, settings, dem, tiled)
+    covers = sigma_covers(orientation, len(paths))  # None: not adjusted, the a priori sigma
+    orientation = resolved_orientation(orientation, len(paths))
     t = np.linspace(0.0, 1.0, 17)
     c, r, one = col - 0.5 + t * rw, row - 0.5 + t * rh, np.ones_like(t)
     edge = np.concatenate([np.stack(xy, -1) for xy in ((c, one * (row - 0.5)),
@@ -400,15 +402,13 @@ def plan_dsm(
                       (res_m, 0.0, x0, 0.0, -res_m, y0), factors, "average",
                       descriptions=tuple(names),
                       units=tuple(DSM_BANDS[n][0] for n in names),
-                      band_tags=tuple((("meaning", DSM_BANDS[n][1]),) for n in names),
+                      band_tags=dsm_band_tags(covers),
                       tags=(("heights", "ellipsoidal (WGS84), m"),))  # fmt: skip
     grid = dict(models=tuple(models), paths=tuple(str(p) for p in paths), epsg=int(epsg),
                 res_m=float(res_m), x0=x0, y0=y0, spec=spec)  # fmt: skip
     if tiled:
-        per_pair = None
-        if orientation is not None:
-            per_pair = tuple(pair_orientation(orientation, len(paths), 0, i)
-                             for i in range(1, len(paths)))  # fmt: skip
+        per_pair = tuple(pair_orientation(orientation, len(paths), 0, i)
+                         for i in range(1, len(paths)))  # fmt: skip
         tie = settings.heights if settings.heights is not None or dem is None else (lo, hi)
         job = DSMJob(**grid, heights=(float(lo), float(hi)),
                      margin_m=_margin_m(res_m, settings.max_hole_m),

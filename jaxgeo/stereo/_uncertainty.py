@@ -15,7 +15,12 @@ Then
   (:func:`adjustment_covariance`) or its ``adjusted_models.json``
   (:func:`orientation_covariances`: the joint covariance ``jaxgeo adjust`` writes; a file
   with per-image sigmas only overstates the sigma where the adjustment correlates the
-  images); zero when unknown.
+  images). Models that were not adjusted carry their vendor's pointing error, which no
+  matching sees: a DSM file (:func:`~jaxgeo.stereo.make_dsm`) then takes the a priori
+  :func:`a_priori_orientation` (:data:`A_PRIORI_SHIFT_PX` per image and axis, independent
+  images; :func:`resolved_orientation`) and says so in the band's ``covers`` tag and its
+  report (:func:`sigma_covers`). A zero matrix states exact models (simulations): the
+  matching's sigma alone.
 
 **Cells** (:func:`cell_sigma`). A cell's height is the median of its ``n`` points. The matching
 errors of neighbouring points are not independent (their correlation windows overlap by most
@@ -53,7 +58,9 @@ Orientation = np.ndarray | Sequence[np.ndarray | None] | None
 """The covariance (px^2) of the models' remaining image shifts ``(x_1, y_1, ..., x_N, y_N)``:
 one ``(2N, 2N)`` matrix (with the correlations between images: :func:`adjustment_covariance`,
 :func:`orientation_covariances`), or per model a ``2 x 2`` matrix or ``None`` (independent
-images), or ``None`` (unknown: no orientation term)."""
+images), or ``None``: for a pair's points and :func:`~jaxgeo.stereo.dsm_from_images` no
+orientation term (the matching alone); for :func:`~jaxgeo.stereo.make_dsm` (``jaxgeo dsm``)
+models that were not adjusted, with the a priori :func:`a_priori_orientation`."""
 
 
 def joint_covariance(orientation: Orientation, n_models: int) -> np.ndarray:
@@ -74,6 +81,47 @@ def joint_covariance(orientation: Orientation, n_models: int) -> np.ndarray:
         if cov is not None:
             out[2 * i : 2 * i + 2, 2 * i : 2 * i + 2] = np.asarray(cov, float)
     return out
+
+
+A_PRIORI_SHIFT_PX = 0.7
+"""A priori sigma (px, per image and axis, independent between images) of the image shift a
+model that was not adjusted leaves, for the DSM's ``height_sigma``: the relative pointing of
+the images of one pass of a current agile satellite. The s2p Pleiades triplet's relative
+orientation moves its biases by 0.2-0.6 px; on simulated Pleiades-like scenes (vendor RPCs:
+1-3 px of common pointing error, 0.5 px of mounting per image, 0.5 m of ephemeris, 1.5 px of
+jitter) the DSM's height offset over 8 seeds had an RMS of 1.4 m, 0.93 px of relative shift
+(0.66 px per image); measured on 6 other seeds in issue 53's closing note. Not the absolute
+error (several metres CE90): a shift common to the images moves the DSM in plan, not in
+height. Other sensors (Cartosat-1 fore/aft: tens of px) need their adjustment
+(``--orientation``)."""
+
+
+def a_priori_orientation(n_models: int, shift_px: float = A_PRIORI_SHIFT_PX) -> np.ndarray:
+    """The ``(2N, 2N)`` :data:`Orientation` of models that were not adjusted: ``shift_px**2``
+    on the diagonal (px^2), images independent."""
+    return np.eye(2 * int(n_models)) * float(shift_px) ** 2
+
+
+def resolved_orientation(orientation: Orientation, n_models: int) -> np.ndarray:
+    """The ``(2N, 2N)`` covariance a DSM uses: ``orientation``'s (:func:`joint_covariance`),
+    or :func:`a_priori_orientation` when it is ``None`` (models not adjusted)."""
+    if orientation is None:
+        return a_priori_orientation(n_models)
+    return joint_covariance(orientation, n_models)
+
+
+def sigma_covers(orientation: Orientation, n_models: int) -> str:
+    """What a DSM's ``height_sigma`` covers with ``orientation`` (before
+    :func:`resolved_orientation`), in words: the band's ``covers`` tag and the report's."""
+    if orientation is None:
+        return (
+            "matching and the models' a priori orientation error (not adjusted: "
+            f"{A_PRIORI_SHIFT_PX:g} px per image and axis, independent images; the posterior "
+            "of jaxgeo adjust replaces it: --orientation adjusted_models.json)"
+        )
+    if not np.any(joint_covariance(orientation, n_models)):
+        return "matching only (orientation covariance zero: the models given as exact)"
+    return "matching and orientation (the given covariance of the models' image shifts)"
 
 
 def pair_orientation(orientation: Orientation, n_models: int, i: int, j: int) -> np.ndarray:

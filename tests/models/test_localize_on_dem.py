@@ -179,3 +179,33 @@ def test_method_takes_what_read_dem_returns(left, ventoux_dem_ellipsoidal):  # n
     np.testing.assert_allclose(biased.project(g), xy, atol=1e-6)
     with pytest.raises(TypeError, match="DEMGrid or a DEM"):  # the library's own message
         unchecked(localize_on_dem)(left, xy, str(ventoux_dem_ellipsoidal))
+
+
+def test_shareloc_rpc_direct_dtm(real_data):
+    """shareloc's ``test_rpc_direct_dtm`` (tests/geomodels/test_rpc.py, commit df45fae6): the
+    point of its NAD83 30" MNT at index (row 10.5, col 20.5) (index ``i`` the centre of cell
+    ``i``; bilinear between centres: the height 58 m), projected with the Pleiades RPC and
+    localised back on the MNT within 1e-7 deg and 1e-4 m, shareloc's tolerances. Before issue
+    53: 1.2e-6 deg, 0.5 m: the NAD83 grid was resampled onto a WGS84 one of other cells (a
+    second bilinear interpolation); PROJ takes NAD83 as WGS84 there, so its grid is kept."""
+    import rasterio
+
+    path = real_data / "shareloc_dtm" / "MNT_P1BP--2017092838284574CP.tif"
+    rpc = jaxgeo.read_rpc(real_data / "RPC_PHR1B_P_201709281038393_SEN_PRG_FC_178609-001.XML")
+    with rasterio.open(path) as f:
+        z, t = f.read(1).astype(float), f.transform
+    row, col = 10.5, 20.5
+    lon, lat = t * (col + 0.5, row + 0.5)  # shareloc's index_to_ter
+    r0, c0 = int(row), int(col)
+    alt = float(np.mean(z[r0 : r0 + 2, c0 : c0 + 2]))  # its interpolate at the cells' middle
+    assert alt == 58.0
+    dem = read_dem(path)
+    xy = np.asarray(rpc.project(np.array([lon, lat, alt])))
+    g, status = rpc.localize_on_dem(xy[None], dem)
+    g = np.asarray(g)[0]
+    assert int(np.asarray(status)[0]) == DEMStatus.OK
+    assert abs(g[0] - lon) < 1e-7 and abs(g[1] - lat) < 1e-7, g - [lon, lat, alt]
+    assert abs(g[2] - alt) < 1e-4, g
+    # the grid the search uses is the file's own cells (no resampling)
+    grid = dem.grid((lon - 0.01, lat - 0.01, lon + 0.01, lat + 0.01))
+    np.testing.assert_allclose(np.asarray(grid.step), [t.a, t.e], rtol=1e-12)

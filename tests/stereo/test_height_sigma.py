@@ -243,3 +243,31 @@ def test_orientation_sigma_from_the_adjustment_covariance_is_calibrated(tmp_path
     assert 0.7 < rms < 1.35, rms  # 30 draws: the rms of a unit Gaussian within ~13 %
     # the per-image sigmas alone (adjusted_models.json): 0.86 here, 0.69 on seed 12 (600 px)
     assert 0.5 < np.sqrt(np.mean(np.square(z_json))) < 1.35
+
+
+def test_models_not_adjusted_get_the_a_priori_orientation_sigma(rpcs):
+    """Issue 53: without an adjustment's posterior, a DSM file's height_sigma holds the vendor
+    models' a priori orientation error (``A_PRIORI_SHIFT_PX`` per image and axis), and its
+    band says what it covers; a zero covariance states exact models (the matching alone)."""
+    from jaxgeo.stereo._uncertainty import (
+        A_PRIORI_SHIFT_PX,
+        a_priori_orientation,
+        resolved_orientation,
+        sigma_covers,
+    )
+
+    models, scene = rpcs
+    np.testing.assert_array_equal(resolved_orientation(None, 2), np.eye(4) * A_PRIORI_SHIFT_PX**2)
+    given = np.diag([0.01, 0.04, 0.09, 0.16])
+    np.testing.assert_array_equal(resolved_orientation(given, 2), given)
+    assert "a priori" in sigma_covers(None, 2) and f"{A_PRIORI_SHIFT_PX:g} px" in sigma_covers(
+        None, 2
+    )
+    assert sigma_covers(np.zeros((4, 4)), 2).startswith("matching only")
+    assert "given covariance" in sigma_covers(given, 2)
+    # about 1.5 m of height per px of relative shift along the epipolar lines (B/H 0.45,
+    # 0.67 m): 0.7 px per image, sqrt(2) between them, ~1.5 m
+    ground = np.asarray(scene.points[:5])
+    zero = (np.zeros((5, 2)), np.zeros(5))
+    _, orient = point_height_sigmas(models, ground, *zero, a_priori_orientation(2))
+    assert np.all((1.0 < orient) & (orient < 2.2)), orient

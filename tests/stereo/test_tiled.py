@@ -224,6 +224,7 @@ def test_an_untiled_dsm_is_a_plan_of_one_tile_with_the_same_cells(scene, tmp_pat
     """``make_dsm`` of a small scene: one tile made here, on a grid that holds the footprint; its
     cells those of ``dsm_from_images`` on that grid (the same chain), its report the pairs'."""
     from jaxgeo.stereo import make_dsm
+    from jaxgeo.stereo._uncertainty import a_priori_orientation
 
     _, models, paths = scene
     out = tmp_path / "dsm.tif"
@@ -236,9 +237,15 @@ def test_an_untiled_dsm_is_a_plan_of_one_tile_with_the_same_cells(scene, tmp_pat
     ]
     with rasterio.open(out) as ds:
         made, t = ds.read(), ds.transform
+        covers = ds.tags(5)["covers"]
     assert report.plan.job["heights_from"] == "tie points"
+    # models not adjusted: make_dsm gives them the a priori orientation sigma (issue 53), and
+    # says so in the band and the report
+    assert "a priori" in covers and covers == report.height_sigma_covers
+    assert f"height_sigma: {covers}" in report.summary()
     grid, _ = dsm_from_images(models, paths, DSMSettings(res_m=RES, epsg=report.epsg),
-                              origin=(t.c, t.f), shape=made.shape[1:])  # fmt: skip
+                              origin=(t.c, t.f), shape=made.shape[1:],
+                              orientation=a_priori_orientation(2))  # fmt: skip
     bands = np.stack(list(grid.bands().values()))
     np.testing.assert_array_equal(made, bands)
     assert report.filled == pytest.approx(np.isfinite(bands[0]).mean())
