@@ -171,9 +171,12 @@ class Terrain(eqx.Module):
         return dataclasses.replace(proto, raw_min=float(raw.min()), raw_max=float(raw.max()))
 
     def to_dict(self) -> dict:
-        return {
-            f.name: np.asarray(getattr(self, f.name)).tolist() for f in dataclasses.fields(self)
-        }
+        """The fields as JSON lists; ``changes`` only when there are any (a single date's
+        ``truth.json`` is what it was before changes existed, byte for byte)."""
+        out = {f.name: np.asarray(getattr(self, f.name)).tolist() for f in dataclasses.fields(self)}
+        if not len(self.changes):
+            del out["changes"]
+        return out
 
     @classmethod
     def from_dict(cls, d: dict) -> Terrain:

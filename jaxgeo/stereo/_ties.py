@@ -487,19 +487,12 @@ def tie_points(
 def _check_dem(dem, ground: np.ndarray, report: TieReport) -> None:
     """Warn (:class:`TieWarning`) when ``dem``'s heights at the ties disagree with theirs
     (:func:`jaxgeo.io.internal.dem_against_ties`): it also chose the range searched."""
-    if len(ground) == 0:
-        return
-    try:
-        dem_h = np.asarray(dem(ground[:, :2]), dtype=float)
-    except ValueError:  # ties outside the DEM: its own message comes where it is used
-        return
-    why = dem_against_ties(ground[:, 2], dem_h, str(getattr(dem, "path", "the DEM")))
+    dem_h = np.asarray(dem.sample(ground[:, :2]), dtype=float)  # NaN outside the DEM
+    why = dem_against_ties(ground[:, 2], dem_h, str(dem.path)) if len(ground) else None
     if why is not None:
-        out = report.rejected.get("height_range", 0)
+        lo, hi = report.height_range_m
         warnings.warn(
-            f"{why}; only {report.n_kept} ties kept ({out} more rejected outside the height "
-            f"range {report.height_range_m[0]:.0f}..{report.height_range_m[1]:.0f} m it gave: "
-            "far fewer than the images support)",
-            TieWarning,
-            stacklevel=3,
-        )
+            f"{why}; only {report.n_kept} ties kept ({report.rejected.get('height_range', 0)} "
+            f"more rejected outside the height range {lo:.0f}..{hi:.0f} m it gave: far fewer "
+            "than the images support)", TieWarning, stacklevel=3,
+        )  # fmt: skip

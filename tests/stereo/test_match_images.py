@@ -57,7 +57,8 @@ def test_the_same_observations_as_the_command(triplet, library_run, tmp_path, ca
     np.testing.assert_array_equal(obs.xy, cli.xy)
     np.testing.assert_array_equal(obs.sigma_px, cli.sigma_px)
     # the JSON the command prints is the result's, with the output named
-    assert printed == {"out": str(out), **json.loads(json.dumps(result.as_dict()))}
+    assert printed == {"out": str(out), "ok": True, "exit_code": 0,
+                       **json.loads(json.dumps(result.as_dict()))}  # fmt: skip
     # written by the result: the same file, byte for byte; never over an existing one
     mine = result.write(tmp_path / "lib.csv")
     assert mine.read_bytes() == out.read_bytes()
