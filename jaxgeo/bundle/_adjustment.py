@@ -24,7 +24,7 @@ import numpy as np
 from ..io import GroundPoints, Observations
 from ..lsq import SolverConfig
 from ..lsq.internal import DEFAULT_SOLVER
-from ..models import AbstractBias, AbstractSensorModel, Biased, JitterBias
+from ..models import AbstractBias, AbstractSensorModel, Biased
 from ..models.internal import BIAS_KINDS
 from ._diagnose import checked_geometry
 from ._prepare import prepare
@@ -73,7 +73,7 @@ def with_bias(
         domains = domains or {}
 
         def kind(name, m):
-            return JitterBias(image_lines(m, domains.get(name)), *jitter)
+            return jitter.bias(image_lines(m, domains.get(name)))
     else:
         cls = BIAS_KINDS.get(bias) if isinstance(bias, str) else bias
         if cls is None:

@@ -375,6 +375,7 @@ def adjust_files(
     with beside_solve(work, models, obs, points, roles=tuple(direct_roles)) as direct:
         result = adjust(models, obs, points, prior_sigma=prior, solver=solver, settings=settings)
     direct = direct.result()
+    notes += result.setup.notes  # what the preparation chose (a jitter's knots and priors)
     inputs = [p for img in opened.values() for p in image_inputs(img)]
     inputs += [observations] + ([ground] if ground is not None else [])
     dem = settings.tie_height

@@ -15,14 +15,40 @@ import math
 from collections.abc import Callable, Mapping
 from typing import Any, NamedTuple
 
+from ..models import JitterBias
+from ..models.internal import KNOT_SIGMA_PX
+
 
 class JitterSettings(NamedTuple):
-    """The spline of ``bias="jitter"``: a knot every ``knot_lines`` lines, second differences
-    of its coefficients held at ``smoothness_px`` (px). The defaults follow a jitter of a
-    period of 400 lines or more to < 0.1 px (benchmarks/accuracy/jitter.py)."""
+    """The spline of ``bias="jitter"`` (:class:`~jaxgeo.models.JitterBias`).
 
-    knot_lines: float = 100.0
+    ``knot_lines``: a knot every that many lines; ``None`` (default): chosen per image when the
+    block is prepared, from its lines and its measurements (:mod:`._prepare.jitter`: about
+    100 lines, which follows a jitter of a period of 400 lines or more to < 0.1 px,
+    benchmarks/accuracy/jitter.py; wider where the measurements are sparse along the lines or
+    the problem would grow too large). A spacing given is used as it is, and refused when it
+    asks for more knots than the image's measurements support or than the memory bounds allow.
+    ``smoothness_px``: prior sigma (px) of the coefficients' second differences;
+    ``knot_sigma_px``: prior sigma (px) of each coefficient about zero (holds a knot no
+    measurement reaches and what the images do not observe)."""
+
+    knot_lines: float | None = None
     smoothness_px: float = 1.0
+    knot_sigma_px: float = KNOT_SIGMA_PX
+
+    def bias(self, lines: tuple[float, float]) -> JitterBias:
+        """A zero :class:`~jaxgeo.models.JitterBias` over image lines ``lines = (first,
+        last)``: with this spacing, or, without one, a one-segment placeholder whose spacing
+        the preparation of the block chooses (``auto_knots``)."""
+        first, last = (float(v) for v in lines)
+        auto = self.knot_lines is None
+        return JitterBias(
+            (first, last),
+            (last - first) if auto else self.knot_lines,
+            self.smoothness_px,
+            knot_sigma_px=self.knot_sigma_px,
+            auto_knots=auto,
+        )
 
 
 DEFAULT_JITTER = JitterSettings()
@@ -83,8 +109,12 @@ class AdjustSettings:
             raise ValueError(
                 f"tie_height_sigma_m must be a positive number, got {self.tie_height_sigma_m!r}"
             )
-        knots, smooth = self.jitter
-        if not (0 < knots < math.inf and 0 < smooth < math.inf):
+        knots, smooth, sigma = self.jitter
+        if not (
+            (knots is None or 0 < knots < math.inf)
+            and 0 < smooth < math.inf
+            and 0 < sigma < math.inf
+        ):
             raise ValueError(f"jitter must hold positive numbers, got {tuple(self.jitter)}")
 
     def replace(self, **changes) -> AdjustSettings:

@@ -30,9 +30,11 @@ no input is ever replaced (``--overwrite`` replaces earlier outputs only); the r
 before anything is written.
 
 ``--bias jitter`` adds to the affine bias offsets along the lines (a spline with a knot every
-``--jitter-knot-lines``, held smooth by ``--jitter-smoothness-px``) for attitude jitter; the
-RPC written holds the affine part and ``<image>_jitter.csv`` the rest (``image = RPC(ground) +
-(dx, dy)`` at the RPC's line).
+``--jitter-knot-lines``, by default chosen per image from its lines and measurements, held
+smooth by ``--jitter-smoothness-px`` and each coefficient by ``--jitter-knot-sigma-px``; the
+report states the knots and these priors) for attitude jitter; the RPC written holds the
+affine part and ``<image>_jitter.csv`` the rest (``image = RPC(ground) + (dx, dy)`` at the
+RPC's line).
 
 Gross errors: by default the image observations and GCP coordinates get a Cauchy loss at 3 a
 priori sigmas (IRLS), then data snooping (Baarda's w-test, iterated) removes the flagged
@@ -67,13 +69,11 @@ EXIT_CODES = {
 
 
 def register(sub) -> None:
-    from ..bundle import JitterSettings
     from ..bundle.internal import BIAS_CHOICES
-    from ._adjustment_options import add_adjustment_options
+    from ._adjustment_options import add_adjustment_options, add_jitter_options
     from ._common import add_command
     from ._inputs import add_image_options
 
-    jitter = JitterSettings()
     parser = add_command(sub, "adjust", "bundle block adjustment of RPC images (bias "
                          "compensation)", __doc__, EXIT_CODES)  # fmt: skip
     parser.add_argument("images", nargs="*", metavar="IMG",
@@ -92,14 +92,7 @@ def register(sub) -> None:
         "GCPs the bias priors default to a relative orientation's",
         tie_height_sigma_m=10.0,
     )
-    parser.add_argument("--jitter-knot-lines", type=float, default=jitter.knot_lines,
-                        metavar="N", help=f"--bias jitter: a spline knot every N lines (default "
-                        f"{jitter.knot_lines:g}; about an eighth of the shortest jitter period "
-                        "to follow)")  # fmt: skip
-    parser.add_argument("--jitter-smoothness-px", type=float, default=jitter.smoothness_px,
-                        metavar="S", help="--bias jitter: prior sigma (px) of the spline's "
-                        f"second differences (default {jitter.smoothness_px:g}; smaller is "
-                        "smoother)")  # fmt: skip
+    add_jitter_options(parser)
     parser.add_argument("--copy-images", action="store_true", help="also copy each image into "
                         "--out beside its adjusted RPC (GDAL then opens the copy with the "
                         "adjusted model)")  # fmt: skip
@@ -162,7 +155,7 @@ def open_named_images(args: argparse.Namespace) -> dict:
 
 def run(args: argparse.Namespace) -> int:
     from .. import bundle
-    from ..bundle import AdjustSettings, JitterSettings
+    from ..bundle import AdjustSettings
     from ..bundle.internal import check_out_dir, image_inputs
     from ..lsq.internal import DEFAULT_SOLVER
     from . import _adjustment_options as shared
@@ -171,9 +164,7 @@ def run(args: argparse.Namespace) -> int:
 
     start = shared.Start("adjust", args)
     shared.check_adjustment_options(args)
-    jitter = JitterSettings(args.jitter_knot_lines, args.jitter_smoothness_px)
-    shared.positive(("--jitter-knot-lines", jitter.knot_lines),
-                    ("--jitter-smoothness-px", jitter.smoothness_px))  # fmt: skip
+    jitter = shared.jitter_settings(args)
     solver = shared.solver_config(args, DEFAULT_SOLVER)
     images = open_named_images(args)
     sources = {name: img.path or img.model_path for name, img in images.items()}

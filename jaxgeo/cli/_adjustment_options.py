@@ -1,17 +1,12 @@
 """What ``jaxgeo adjust`` and ``jaxgeo strip`` share: their options, their checks, their start.
 
-Both commands adjust image biases with the same solver, the same gross-error handling and the
-same tie heights, so the options are defined once here: the tables (``--observations``,
-``--ground``), the bias and its priors, the solver (``--method``, ``--max-steps``), gross errors
-(``--loss``, ``--loss-scale``, ``--keep-blunders``), tie heights from a DEM (``--dem``,
-``--dem-height``, ``--geoid`` as every command that reads a DEM has them, plus ``--dem-offset-m``
-and ``--tie-height-sigma-m``) and the output (``-o/--out``, ``--overwrite``, ``--rpc-format``,
-``--json``, ``--quiet``). The checks name the options, never a library parameter.
-
-``--dem-offset-m`` is added to the DEM's (ellipsoidal) heights: a constant vertical shift (a
-local datum, a known DEM bias, or a constant geoid undulation over a small area with
-``--dem-height ellipsoidal``). An orthometric DEM takes ``--geoid`` (or its declared vertical
-CRS) instead; both at once are refused (the undulation would be added twice).
+The options are defined once here: the tables (``--observations``, ``--ground``), the bias and
+its priors, the solver (``--method``, ``--max-steps``), gross errors (``--loss``,
+``--loss-scale``, ``--keep-blunders``), tie heights from a DEM (``--dem``, ``--dem-height``,
+``--geoid``, plus ``--dem-offset-m``: added to the DEM's ellipsoidal heights, refused with a
+geoid, and ``--tie-height-sigma-m``), the output (``-o/--out``, ``--overwrite``,
+``--rpc-format``, ``--json``, ``--quiet``) and adjust's jitter spline (``--jitter-*``, refused
+with another bias). The checks name the options, never a library parameter.
 """
 
 from __future__ import annotations
@@ -89,6 +84,40 @@ def add_adjustment_options(
                      "OSSIM <name>.geom or DIMAP v2 RPC_<name>.XML")  # fmt: skip
     add_json(parser)
     add_quiet(parser)
+
+
+def add_jitter_options(parser: argparse.ArgumentParser) -> None:
+    """The spline of ``--bias jitter`` (:class:`jaxgeo.bundle.JitterSettings`)."""
+    from ..bundle import JitterSettings
+
+    d, group = JitterSettings(), parser.add_argument_group("jitter (--bias jitter only)")
+    group.add_argument("--jitter-knot-lines", type=float, metavar="N",
+                       help="a spline knot every N lines, about an eighth of the shortest "
+                       "jitter period to follow (default: per image from its lines and "
+                       "measurements, ~100 lines, stated in the report); refused when the "
+                       "measurements cannot support that many knots")  # fmt: skip
+    for flag, value, what in (("--jitter-smoothness-px", d.smoothness_px, "the spline's second "
+                               "differences (smaller is smoother)"), ("--jitter-knot-sigma-px",
+                               d.knot_sigma_px, "each coefficient about 0 (holds what the "
+                               "measurements leave open)")):  # fmt: skip
+        group.add_argument(flag, type=float, metavar="S",
+                           help=f"prior sigma (px) of {what}; default {value:g}")  # fmt: skip
+
+
+def jitter_settings(args: argparse.Namespace):
+    """The :class:`jaxgeo.bundle.JitterSettings` of ``--jitter-*`` (refused with another bias)."""
+    from ..bundle import JitterSettings
+    from . import CommandError
+
+    names = ("--jitter-knot-lines", "--jitter-smoothness-px", "--jitter-knot-sigma-px")
+    values = (args.jitter_knot_lines, args.jitter_smoothness_px, args.jitter_knot_sigma_px)
+    given = [(flag, v) for flag, v in zip(names, values, strict=True) if v is not None]
+    positive(*given)
+    if given and args.bias != "jitter":
+        raise CommandError(f"{', '.join(f for f, _ in given)}: only with --bias jitter "
+                           f"(--bias is {args.bias})")  # fmt: skip
+    return JitterSettings(*(d if v is None else v for v, d in zip(values, JitterSettings(),
+                                                                   strict=True)))  # fmt: skip
 
 
 def check_adjustment_options(args: argparse.Namespace) -> None:

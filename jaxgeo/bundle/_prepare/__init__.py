@@ -3,7 +3,8 @@
 Everything that can be wrong with the input is found here, before any solving, and raised as an
 :class:`~jaxgeo.bundle.AdjustmentError` naming the image, point or parameter at fault
 (:mod:`.checks`); the models are partitioned and stacked into groups (:mod:`.grouping`), the
-ground points get initial values (:mod:`.points`) and the blocks their priors (:mod:`.priors`).
+ground points get initial values (:mod:`.points`) and the blocks their priors (:mod:`.priors`);
+jitter splines get their knots, and their priors are stated (:mod:`.jitter`).
 """
 
 from __future__ import annotations
@@ -18,6 +19,7 @@ from ..._runtime.arrays import device_array
 from ...geodesy import metres_per_unit
 from ...io import GroundPoints, Observations
 from ...lsq import GroundObs, ImageObs, ModelGroup, Problem, make_structure
+from ...models import Biased
 from .._errors import AdjustmentError
 from .._settings import DEFAULT_SETTINGS, AdjustSettings
 from .checks import (
@@ -35,6 +37,7 @@ from .checks import (
 )
 from .checks import check_control as check_control_points
 from .grouping import make_group, partition_block, per_key, shared_leaves, signature
+from .jitter import place_knots, regrid_sigma
 from .points import initial_points
 from .priors import prior_arrays
 
@@ -55,7 +58,8 @@ class Prepared:
     ``image_index``: image name -> (group, block, slot); ``point_ids``/``point_role``: per point;
     ``obs_order``: problem observation -> index in the user's :class:`Observations`;
     ``ground_ids``: per ground observation (GCPs, and check points with weight 0), its point id;
-    ``param_names``: per raveled parameter.
+    ``param_names``: per raveled parameter; ``notes``: what was chosen and assumed, for the
+    report (the jitter splines' knots and priors).
     """
 
     problem: Problem
@@ -66,6 +70,7 @@ class Prepared:
     obs_order: np.ndarray
     ground_ids: tuple[str, ...]
     param_names: tuple[str, ...]
+    notes: tuple[str, ...] = ()
 
     def image_models(self, groups: tuple[ModelGroup, ...], theta) -> dict[str, Any]:
         """Image name -> sensor model with parameters ``theta`` (per group)."""
@@ -107,6 +112,14 @@ def prepare(
     initial = settings.initial
     src = sources if sources is not None else Sources()
     image_of = check_models(models)
+    models, placed, notes = place_knots(models, observations)
+    if placed and isinstance(prior_sigma, Mapping | Biased):  # given for the placeholders
+        prior_sigma = {
+            k: regrid_sigma(per_key(prior_sigma, k), k, placed[k])
+            if k in placed
+            else per_key(prior_sigma, k)
+            for k in models
+        }
     ground = (
         ground if ground is not None else GroundPoints((), np.zeros((0, 3)), (), np.zeros((0, 3)))
     )
@@ -245,6 +258,7 @@ def prepare(
         obs_order=np.concatenate(order) if order else np.zeros(0, dtype=np.int64),
         ground_ids=tuple(known),
         param_names=param_names,
+        notes=notes,
     )
 
 

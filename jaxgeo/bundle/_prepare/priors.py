@@ -3,6 +3,9 @@
 A prior is a weighted residual per parameter block: the model's ``prior_residuals()`` (orbit
 and attitude constraints of the physical models, none for RPCs) and, when the user gives a
 ``prior_sigma``, ``(theta - theta0) / sigma`` on its adjustable parameters (``inf`` = none).
+A jitter spline's coefficients get ``theta0 +- knot_sigma_px``
+(:class:`~jaxgeo.models.JitterBias`) where the user gives none: as a parameter prior, so that
+the solver's test of what is determined knows that a prior holds them.
 """
 
 from __future__ import annotations
@@ -11,12 +14,14 @@ import dataclasses
 from collections.abc import Callable, Mapping, Sequence
 from typing import Any
 
+import equinox as eqx
 import jax
 import numpy as np
 from jaxtyping import Array, Float
 
 from ..._runtime.arrays import device_array
 from ...lsq import ModelGroup
+from ...models import Biased, JitterBias
 from .._errors import AdjustmentError
 from .checks import label
 from .grouping import partition_block, per_key, ravel_stacked
@@ -45,6 +50,27 @@ def prior_from_sigma(
     return np.asarray(theta0, dtype=float), weight
 
 
+def with_knot_prior(
+    user: tuple[np.ndarray, np.ndarray] | None,
+    model: Any,
+    theta0: np.ndarray,
+    key: Any,
+    partition: Callable[[Any], Any],
+) -> tuple[np.ndarray, np.ndarray] | None:
+    """``user`` (a raveled ``(mean, weight)`` or ``None``) with ``theta0 +- knot_sigma_px`` on
+    a jitter spline's coefficients where it has no weight."""
+    if not (isinstance(model, Biased) and isinstance(model.bias, JitterBias)):
+        return user
+    sigma = jax.tree.map(lambda x: np.full(np.shape(x), np.inf), model)
+    knots = np.full(np.shape(model.bias.knots_px), model.bias.knot_sigma_px)
+    sigma = eqx.tree_at(lambda m: m.bias.knots_px, sigma, knots)
+    _, weight = prior_from_sigma(sigma, theta0, key, partition)
+    if user is None:
+        return np.asarray(theta0, dtype=float), weight
+    mean, given = user
+    return mean, np.where(given > 0, given, weight)
+
+
 def prior_arrays(
     groups: Sequence[ModelGroup],
     labels: Sequence[Sequence[Any]],
@@ -65,7 +91,8 @@ def prior_arrays(
                 return partition_block(tree, spec, f"prior of {label(key)}")
 
             theta_k = np.asarray(grp.theta0)[k]
-            means.append(prior_from_sigma(per_key(prior_sigma, key), theta_k, key, partition))
+            user = prior_from_sigma(per_key(prior_sigma, key), theta_k, key, partition)
+            means.append(with_knot_prior(user, models[key], theta_k, key, partition))
         if any(m is not None for m in means):
             mean = np.stack([m[0] if m else np.zeros(grp.n_params) for m in means])
             weight = np.stack([m[1] if m else np.zeros(grp.n_params) for m in means])
