@@ -73,8 +73,8 @@ def add_height_options(
     parser.add_argument(
         "--geoid",
         default=None,
-        help=f"egm96, egm2008 (PROJ grids) or a geoid grid file, for orthometric heights of {dem} "
-        "(implies --dem-height orthometric)",
+        help=f"egm96 (shipped), egm2008 (PROJ's grid) or a geoid grid file, for orthometric "
+        f"heights of {dem} (implies --dem-height orthometric)",
     )
 
 

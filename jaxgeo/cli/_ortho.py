@@ -49,7 +49,7 @@ def register(sub) -> None:
         "--geoid",
         default=None,
         metavar="GEOID",
-        help="egm96, egm2008 (PROJ grids) or a geoid grid file, for orthometric "
+        help="egm96 (shipped), egm2008 (PROJ's grid) or a geoid grid file, for orthometric "
         "DEMs (implies --dem-height orthometric)",
     )
     add_dem_fill_options(parser)

@@ -157,17 +157,18 @@ def plan_ortho(
     resampling, occlusion, step_px, tol_px = s.resampling, s.occlusion, s.step_px, s.tol_px
     out_crs = like.crs if like is not None else check_crs(s.crs) if s.crs is not None else None
     box = s.bounds
+    asked = box if box is not None else like.bounds if like is not None else None
 
     width, height = sensor.size
     with open_raster(sensor.path) as src:  # a raster in its own pixel frame
         bands, dtype = src.count, src.dtypes[0]
     model = sensor.model
     need = None  # the output asked for: a DEM that covers it is enough
-    if box is not None:
+    if asked is not None:  # --bounds or the --like grid
         import pyproj
 
         to_ll = pyproj.Transformer.from_crs(out_crs, 4326, always_xy=True)
-        need = to_ll.transform_bounds(*box, densify_pts=21)
+        need = to_ll.transform_bounds(*asked, densify_pts=21)
     dem_grid = dem_for_image(model, dem, width, height, source=str(sensor.path), need=need)
     ground = footprint(model, dem_grid, width, height, source=str(dem.path), warn=need is None)
     out_crs = out_crs if out_crs is not None else default_crs(ground)

@@ -83,6 +83,16 @@ def test_a_dsm_with_a_fill_is_the_next_dem(tmp_path, capsys):
         valid[name] = report["valid_fraction"]
         with rasterio.open(out) as src:
             data[name] = src.read(1, masked=True).astype(float)  # uint16: no wrap-around
+    # a DEM that covers the --like grid is enough too (a 0.7 m grid inside the DSM's box)
+    w, s_, e, n = bounds
+    inner = rasterio.Affine(0.7, 0.0, w + 0.2 * (e - w), 0.0, -0.7, n - 0.2 * (n - s_))
+    with rasterio.open(tmp_path / "grid.tif", "w", driver="GTiff", width=int(0.6 * (e - w) / 0.7),
+                       height=int(0.6 * (n - s_) / 0.7), count=1, dtype="uint8",
+                       crs="EPSG:32631", transform=inner) as g:  # fmt: skip
+        g.write(np.zeros((1, g.height, g.width), np.uint8))
+    code, _, err_like = _ortho(capsys, left, tmp_path / "like.tif", "--dem", dsm,
+                               "--like", tmp_path / "grid.tif")  # fmt: skip
+    assert code == 0, err_like  # refused before: the DSM does not cover the image's footprint
     with capsys.disabled():  # the figures a reader wants
         print("\nvalid fraction of the ortho over the DSM's box:", valid)
     assert valid["dsm+fill"] == pytest.approx(1.0) and valid["dsm"] < 0.9
