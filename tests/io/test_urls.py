@@ -201,3 +201,17 @@ def test_url_is_never_an_output(served, tmp_path, capsys):
     assert code == 2
     assert "local file" in capsys.readouterr().err
     assert not (root / "out.tif").exists()
+
+
+def test_adjusted_rpc_outputs_of_a_url_image(tmp_path):
+    """The RPC files of an image by URL are named by its stem (no query string); a copy of the
+    image (a download) is refused, naming the image."""
+    from jaxgeo.io.internal import image_stem, plan_rpc_outputs
+
+    url = "https://example.com/scene/left_image.tif?X-Amz-Signature=a//b"
+    assert image_stem(url) == "left_image"
+    plan = plan_rpc_outputs("left_image", url, tmp_path)
+    assert plan.sidecar == tmp_path / "left_image_RPC.TXT" and plan.image_copy is None
+    for option in ({"copy_image": True}, {"write_into": True}):
+        with pytest.raises(ValueError, match="left_image.*read by URL"):
+            plan_rpc_outputs("left_image", url, tmp_path, **option)
