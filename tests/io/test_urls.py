@@ -4,69 +4,26 @@ never whole."""
 
 from __future__ import annotations
 
-import http.server
+import json
+import os
 import pathlib
-import re
 import shutil
-import threading
+import subprocess
+import sys
 
 import numpy as np
 import pytest
 import rasterio
 
 from jaxgeo.cli import main
-from jaxgeo.io import open_image, read_dem, read_rpc, write_geotiff_rpc
+from jaxgeo.io import open_image, read_dem, read_rpc, write_geotiff_rpc, write_rpb
 from jaxgeo.io._remote import RangeReader, RemotePath, as_path, is_remote
-
-_RANGE = re.compile(r"bytes=(\d+)-(\d*)$")
-
-
-class _RangeHandler(http.server.BaseHTTPRequestHandler):
-    """GET/HEAD of the files under ``server.root``; ``Range: bytes=a-b`` answered 206 with
-    those bytes. Each request is logged in ``server.log`` as ``(method, path, range, bytes)``."""
-
-    def do_HEAD(self):
-        self._answer(body=False)
-
-    def do_GET(self):
-        self._answer(body=True)
-
-    def _answer(self, body: bool):
-        path = self.server.root / self.path.split("?")[0].lstrip("/")
-        ranges = "noranges" not in self.path  # ?noranges: a server that ignores Range
-        if not path.is_file():
-            self.server.log.append((self.command, self.path, None, 0))
-            self.send_error(404)
-            return
-        data = path.read_bytes()
-        ranged = self.headers.get("Range") if ranges else None
-        status, start, stop = 200, 0, len(data)
-        if ranged:
-            m = _RANGE.match(ranged.strip())
-            start = int(m.group(1))
-            stop = min(int(m.group(2)) + 1 if m.group(2) else len(data), len(data))
-            if start >= len(data):
-                self.send_error(416)
-                return
-            status = 206
-        chunk = data[start:stop]
-        self.send_response(status)
-        self.send_header("Content-Length", str(len(chunk)))
-        self.send_header("Accept-Ranges", "bytes")
-        if status == 206:
-            self.send_header("Content-Range", f"bytes {start}-{stop - 1}/{len(data)}")
-        self.end_headers()
-        if body:
-            self.wfile.write(chunk)
-        self.server.log.append((self.command, self.path, ranged, len(chunk) if body else 0))
-
-    def log_message(self, *args):  # quiet
-        pass
 
 
 @pytest.fixture(scope="module")
 def served(real_data, tmp_path_factory):
-    """``(root folder, base URL, request log)`` of a local server of copies of real files."""
+    """``(root folder, base URL, request log)`` of a local server of copies of real files
+    (``range_server.py``, in a process of its own)."""
     root = tmp_path_factory.mktemp("served")
     for rel in ("ventoux/left_image.tif", "phr_ventoux__left_image.geom",
                 "ventoux/dem/N44E005_srtm90.tif", "formats/rpc_PLEIADES.xml"):  # fmt: skip
@@ -80,13 +37,37 @@ def served(real_data, tmp_path_factory):
     with rasterio.open(real_data / "ventoux" / "left_image.tif") as src:
         pixels = src.read(1)
     write_geotiff_rpc(image.model.base_rpc(), root / "tagged.tif", pixels)
-    server = http.server.ThreadingHTTPServer(("127.0.0.1", 0), _RangeHandler)
-    server.root, server.log = root, []
-    thread = threading.Thread(target=server.serve_forever, daemon=True)
-    thread.start()
-    yield root, f"http://127.0.0.1:{server.server_address[1]}", server.log
-    server.shutdown()
-    server.server_close()
+    # and a GeoTIFF without RPC tags whose RPC is an .RPB sidecar beside it
+    with rasterio.open(root / "sidecar.tif", "w", driver="GTiff", width=500, height=500, count=1,
+                       dtype=pixels.dtype) as dst:  # fmt: skip
+        dst.write(pixels, 1)
+    write_rpb(image.model.base_rpc(), root / "sidecar.RPB")
+    log = tmp_path_factory.mktemp("server") / "requests.jsonl"
+    env = {**os.environ, "no_proxy": "127.0.0.1,localhost", "NO_PROXY": "127.0.0.1,localhost"}
+    script = pathlib.Path(__file__).with_name("range_server.py")
+    server = subprocess.Popen([sys.executable, str(script), str(root), str(log)],
+                              stdout=subprocess.PIPE, text=True, env=env)  # fmt: skip
+    try:
+        port = int(server.stdout.readline())
+        yield root, f"http://127.0.0.1:{port}", _Log(log)
+    finally:
+        server.terminate()
+        server.wait(timeout=10)
+
+
+class _Log:
+    """The server's requests so far: ``(method, path, range, body bytes)`` tuples."""
+
+    def __init__(self, path: pathlib.Path):
+        self.path = path
+
+    def __iter__(self):
+        if not self.path.exists():
+            return iter(())
+        return iter(tuple(json.loads(line)) for line in self.path.read_text().splitlines())
+
+    def __repr__(self):
+        return repr(list(self))
 
 
 @pytest.fixture(autouse=True)
@@ -132,6 +113,15 @@ def test_image_and_model_by_url_equal_the_local_ones(served, real_data):
     gets = _gets(log, "tagged.tif")
     assert gets and all(rng is not None for _, _, rng, _ in gets), gets
     assert sum(n for *_, n in gets) < (root / "tagged.tif").stat().st_size  # header, tag only
+
+
+def test_rpc_sidecar_of_a_url_raster(served):
+    """A raster by URL without RPC tags: its .RPB sidecar is asked for and read (as locally)."""
+    root, base, log = served
+    local, remote = open_image(root / "sidecar.tif"), open_image(f"{base}/sidecar.tif")
+    g = np.array([[5.2, 44.2, 500.0], [5.21, 44.21, 900.0]])
+    assert np.array_equal(np.asarray(remote.model.project(g)), np.asarray(local.model.project(g)))
+    assert any(entry[1] == "/sidecar.RPB" and entry[3] > 0 for entry in log), log
 
 
 @pytest.mark.parametrize("name", ["fore_RPC.TXT", "rpc_PLEIADES.xml"])
