@@ -30,7 +30,7 @@ import numpy as np
 
 from .._runtime.kept import beside_solve
 from ..io import DEM, SensorImage, open_image, read_ground, read_observations
-from ..io.internal import detect_rpc_format, table_lines
+from ..io.internal import as_path, detect_rpc_format, is_remote, table_lines
 from ..lsq import SolverConfig
 from ..lsq.internal import DEFAULT_SOLVER
 from ..models import AffineBias, Biased, JitterBias, ShiftBias, ShiftDriftBias
@@ -52,7 +52,7 @@ LISTED = 50
 """Flagged observations named in the summary (all of them are in residuals.csv)."""
 
 
-def image_inputs(image: SensorImage) -> tuple[pathlib.Path, ...]:
+def image_inputs(image: SensorImage) -> tuple[os.PathLike, ...]:
     """The files ``image`` was (or may have been) read from: its raster, its model file, and
     the RPC sidecars GDAL reads beside the raster (``<stem>.RPB``, ``<stem>_RPC.TXT``)."""
     found = list(image.inputs)
@@ -77,8 +77,8 @@ def sensor_image(
     ``model`` does not). Raises ``FileNotFoundError`` naming the image and file."""
     if isinstance(source, SensorImage):
         return source
-    path = pathlib.Path(source)
-    if not path.is_file():
+    path = as_path(source)  # a URL stays one (GDAL reads it; its absence: the server's error)
+    if not is_remote(path) and not path.is_file():
         what = "is not a file" if path.exists() else "no such file"
         raise FileNotFoundError(f"image {name!r}: {path}: {what}")
     if detect_rpc_format(path) == "raster":

@@ -104,8 +104,9 @@ def register(sub) -> None:
 def _images(files: list[str], specs: list[str]) -> dict[str, str]:
     """Image name -> file: each IMG named by its stem, each ``--image NAME=FILE`` by NAME."""
     from . import CommandError
+    from ._common import path_or_url
 
-    named = [(pathlib.Path(f).stem, f, f"image {f}") for f in files]
+    named = [(path_or_url(f).stem, f, f"image {f}") for f in files]  # a URL: no query string
     for spec in specs:
         name, sep, path = spec.partition("=")
         if not sep or not name or not path:

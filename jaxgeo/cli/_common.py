@@ -101,6 +101,14 @@ def add_json(parser: argparse.ArgumentParser) -> None:
     )
 
 
+def path_or_url(path: str | os.PathLike):
+    """``path`` as a :class:`pathlib.Path`, or a URL as a RemotePath (``//`` kept; its last
+    segment, query string dropped, gives the file name and the image's name)."""
+    from ..io.internal import as_path
+
+    return as_path(path)
+
+
 def _same(a: pathlib.Path, b: pathlib.Path) -> bool:
     try:
         return a.resolve() == b.resolve() or (a.exists() and b.exists() and os.path.samefile(a, b))
@@ -113,11 +121,16 @@ def guard_outputs(
 ) -> list[pathlib.Path]:
     """Check outputs before any computation: none is an input (whatever ``overwrite``), none
     exists unless ``overwrite``, each one's folder exists and is writable."""
+    from ..io.internal import is_remote
     from . import CommandError
 
-    inputs = [pathlib.Path(p) for p in inputs]
+    # an input by URL is never a local output (and pathlib would fold its "//")
+    inputs = [pathlib.Path(p) for p in inputs if not is_remote(p)]
     checked = []
-    for out in map(pathlib.Path, outputs):
+    for out in outputs:
+        if is_remote(out):
+            raise CommandError(f"{out}: an output is a local file, not a URL")
+        out = pathlib.Path(out)
         for inp in inputs:
             if _same(out, inp):
                 raise CommandError(f"{out}: this output is an input of the command; name another")

@@ -9,7 +9,7 @@ import argparse
 import pathlib
 from collections.abc import Sequence
 
-from ._common import note
+from ._common import note, path_or_url
 
 
 def add_image_options(parser: argparse.ArgumentParser) -> None:
@@ -128,11 +128,11 @@ def check_dem_fill_options(args: argparse.Namespace) -> None:
             raise CommandError(f"{option} needs {'--dem-fill' if 'geoid' in option else '--dem'}")
 
 
-def dem_inputs(args: argparse.Namespace) -> list[pathlib.Path]:
-    """The DEM, fill DEM and geoid files among a command's inputs."""
-    files = [pathlib.Path(args.dem)] if args.dem is not None else []
+def dem_inputs(args: argparse.Namespace) -> list:
+    """The DEM, fill DEM and geoid files among a command's inputs (a URL: a RemotePath)."""
+    files = [path_or_url(args.dem)] if args.dem is not None else []
     if getattr(args, "dem_fill", None) is not None:
-        files.append(pathlib.Path(args.dem_fill))
+        files.append(path_or_url(args.dem_fill))
     for geoid in (args.geoid, getattr(args, "dem_fill_geoid", None)):
         if geoid is not None and pathlib.Path(geoid).exists():
             files.append(pathlib.Path(geoid))
@@ -183,7 +183,7 @@ def _by_image(specs: Sequence[str], images: Sequence[str], option: str) -> dict[
 
     aliases = {}
     for img in images:
-        path = pathlib.Path(img)
+        path = path_or_url(img)  # a URL: its last segment (query string dropped)
         for alias in (img, path.name, path.stem):
             aliases.setdefault(alias, img)
     out = {}
@@ -209,7 +209,7 @@ def accepted_image_names(images: Sequence[str]) -> str:
     message: ``"a/left.tif (left.tif, left); b/right.tif (right.tif, right)"``."""
     out = []
     for img in images:
-        path = pathlib.Path(img)
+        path = path_or_url(img)
         others = list(dict.fromkeys(a for a in (path.name, path.stem) if a != img))
         out.append(f"{img} ({', '.join(others)})" if others else img)
     return "; ".join(out)
@@ -231,7 +231,7 @@ def open_images(paths: Sequence[str], args: argparse.Namespace):
     from ..io import open_image
     from . import CommandError
 
-    names = [pathlib.Path(p).stem for p in paths]
+    names = [path_or_url(p).stem for p in paths]
     if len(set(names)) != len(names):
         raise CommandError("image file names (stems) must differ: they name the images")
     models, origins = image_settings(args, list(paths))

@@ -22,6 +22,7 @@ from __future__ import annotations
 
 import argparse
 import dataclasses
+import os
 import pathlib
 import sys
 import warnings
@@ -122,7 +123,7 @@ def register(sub) -> None:
     parser.set_defaults(func=run)
 
 
-def _inputs(image, dem, like) -> list[pathlib.Path]:
+def _inputs(image, dem, like) -> list[os.PathLike]:  # (a URL: a RemotePath)
     return [*image.inputs, *dem.inputs] + ([pathlib.Path(like)] if like else [])
 
 

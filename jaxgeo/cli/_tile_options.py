@@ -5,6 +5,7 @@
 from __future__ import annotations
 
 import argparse
+import os
 import pathlib
 from collections.abc import Sequence
 
@@ -61,7 +62,7 @@ def add_tile_options(parser: argparse.ArgumentParser, tile: int, unit: str) -> N
     )
 
 
-def check_tile_options(args: argparse.Namespace, inputs: Sequence[pathlib.Path],
+def check_tile_options(args: argparse.Namespace, inputs: Sequence[os.PathLike],
                        min_tile: int) -> None:  # fmt: skip
     """The tile options in range; ``--resume`` a folder that is not an input; the outputs (the
     product, or the plan only: the product is then only named) guarded (:func:`guard_outputs`)."""

@@ -14,7 +14,6 @@ returns ``Biased(RPC, bias)``: the bias and the jitter applied wherever the mode
 from __future__ import annotations
 
 import os
-import pathlib
 
 import numpy as np
 
@@ -27,6 +26,7 @@ from ..models import (
     ShiftBias,
     ShiftDriftBias,
 )
+from ._remote import as_path
 from ._rpc_common import RPCFormatError, assemble_rpc, source_name
 from ._rpc_json import parse_json
 from ._rpc_keys import COEFFS, N_TERMS, SCALARS
@@ -57,7 +57,7 @@ def adjusted_entry(path: str | os.PathLike, name: str | None = None) -> tuple[st
     a file of one image gives its entry whatever the name. An unknown name, or no name, for a
     file of several images is an :class:`RPCFormatError` naming the file and the images it
     holds."""
-    path = pathlib.Path(path)
+    path = as_path(path)
     source = source_name(path)
     root = parse_json(path.read_text(encoding="utf-8"), source)
     if not is_adjusted_models(root):
@@ -83,7 +83,7 @@ def read_adjusted_model(path: str | os.PathLike, name: str | None = None) -> Abs
     exactly into its offsets), in the frame of the model the adjustment was given.
     :class:`RPCFormatError` naming the file, the image and the key at fault."""
     name, entry = adjusted_entry(path, name)
-    where = f"{source_name(pathlib.Path(path))}: image {name!r}"
+    where = f"{source_name(as_path(path))}: image {name!r}"
     if "rpc" not in entry:
         raise RPCFormatError(
             f"{where}: its {entry.get('model')} model has no RPC in the file (only its adjusted "

@@ -48,6 +48,7 @@ from typing import Any
 import numpy as np
 
 from ..models import AbstractDEM
+from ._remote import RemotePath
 
 __all__ = ["DEM", "FILL_MISMATCH_M", "PLAUSIBLE_HEIGHTS_M", "implausible", "read_dem"]
 
@@ -94,7 +95,7 @@ class DEM(AbstractDEM):
     fill where both have heights (m, ``None``: no common cell).
     """
 
-    path: pathlib.Path
+    path: pathlib.Path | RemotePath  # a URL: read by range requests
     shape: tuple[int, int]
     crs: str | None
     bounds_lonlat: tuple[float, float, float, float]
@@ -128,7 +129,7 @@ class DEM(AbstractDEM):
         return text
 
     @property
-    def inputs(self) -> list[pathlib.Path]:
+    def inputs(self) -> list[pathlib.Path | RemotePath]:
         """The files this DEM reads: the raster, a geoid file, and those of its fill."""
         out = [self.path]
         if self.geoid is not None and pathlib.Path(str(self.geoid.source)).is_file():
@@ -315,9 +316,10 @@ def read_dem(
 
     from ._dem_checks import fill_difference, height_band, height_reference, warn_implausible
     from ._raster import open_raster
+    from ._remote import as_path, is_remote  # (RemotePath: imported above, for the annotation)
 
-    path = pathlib.Path(path)
-    if not path.exists():
+    path = as_path(path)  # a URL stays one: GDAL reads the tiles it needs by range requests
+    if not is_remote(path) and not path.exists():
         raise FileNotFoundError(f"{path}: DEM file not found")
     offset_m = float(offset_m)
     if not math.isfinite(offset_m):
@@ -354,7 +356,8 @@ def read_dem(
         transformer = pyproj.Transformer.from_crs(wgs84, horizontal, always_xy=True)
         crs_out = wkt
     reference, geoid_grid = height_reference(path, vertical, height, geoid, declared)
-    warn_implausible(path, band)
+    if not is_remote(path):  # (a decimated read of a whole file; such cells are nodata anyway)
+        warn_implausible(path, band)
     dem = DEM(path, shape, crs_out, bounds_lonlat, vertical, offset_m, inverse, transformer,
               reference, geoid_grid, band)  # fmt: skip
     if fill is None:

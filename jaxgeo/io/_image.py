@@ -39,6 +39,7 @@ from ..errors import JaxgeoError
 from ..models import RPC, AbstractSensorModel, Biased, ShiftBias
 from ._adjusted import is_adjusted_models, read_adjusted_model
 from ._raster import open_raster
+from ._remote import RemotePath, as_path, is_remote
 
 
 class ImageError(JaxgeoError, ValueError):
@@ -56,13 +57,13 @@ class SensorImage:
     name: str
     model: AbstractSensorModel
     origin: tuple[float, float]
-    path: pathlib.Path | None
+    path: pathlib.Path | RemotePath | None
     size: tuple[int, int] | None
-    model_path: pathlib.Path | None
+    model_path: pathlib.Path | RemotePath | None
     source_model: AbstractSensorModel
 
     @property
-    def inputs(self) -> tuple[pathlib.Path, ...]:
+    def inputs(self) -> tuple[pathlib.Path | RemotePath, ...]:
         """The files this image was read from (outputs must never be one of them)."""
         return tuple(p for p in (self.path, self.model_path) if p is not None)
 
@@ -197,15 +198,19 @@ def open_image(
     geotransform (applied to a separate model only, see the module docstring); a different
     non-zero frame in the file is an :class:`ImageError`. Missing files raise
     ``FileNotFoundError``; a raster without a model an :class:`ImageError` naming it.
+
+    ``path`` and ``model`` may be URLs (``https://``, ``s3://``, ``gs://``; a text model file by
+    ``http(s)`` only): GDAL reads the raster by range requests, never whole; the name is the
+    stem of the URL's last segment (query string dropped). See :mod:`jaxgeo.io._remote`.
     """
     from ._rpc_formats import read_rpc
 
     if path is None and model is None:
         raise ImageError("an image needs a raster or a model")
-    raster = pathlib.Path(path) if path is not None else None
+    raster = as_path(path) if path is not None else None  # a URL stays one (no pathlib)
     size, frame = None, (0.0, 0.0)
     if raster is not None:
-        if not raster.is_file():
+        if not is_remote(raster) and not raster.is_file():  # a URL's absence: GDAL's error
             raise FileNotFoundError(f"{raster}: no such image file")
         try:
             with open_raster(raster) as src:
@@ -227,7 +232,7 @@ def open_image(
         source_model = model
         stem = name or (raster or pathlib.Path("image")).stem
     else:
-        model_path = pathlib.Path(model) if model is not None else raster
+        model_path = as_path(model) if model is not None else raster
         stem = name or (raster or model_path).stem
         try:
             if model is not None and _is_adjusted(model_path):
@@ -254,7 +259,7 @@ def open_image(
     )
 
 
-def _is_adjusted(path: pathlib.Path) -> bool:
+def _is_adjusted(path: pathlib.Path | RemotePath) -> bool:
     """Whether ``path`` is an ``adjusted_models.json`` (read whole only when it is JSON)."""
     from ._rpc_formats import detect_rpc_format
 

@@ -34,6 +34,7 @@ import re
 
 from ..models import RPC
 from ._adjusted import is_adjusted_models
+from ._remote import RemotePath, as_path, is_remote, open_bytes
 from ._rpc_common import RPCFormatError, source_name
 from ._rpc_gdal import read_raster_rpc, write_geotiff_rpc
 from ._rpc_json import looks_like_json, parse_json, read_rpc_json
@@ -59,19 +60,28 @@ def _is_binary(head: bytes) -> bool:
     return head.startswith(_RASTER_MAGIC) or head.startswith(_JP2_MAGIC) or b"\x00" in head
 
 
-def _read_text(path: pathlib.Path) -> str:
-    data = path.read_bytes()
+def _read_text(path: pathlib.Path | RemotePath) -> str:
+    data = path.read_bytes()  # a URL: one GET (a model file is small)
     try:
         return data.decode("utf-8-sig")
     except UnicodeDecodeError:
         return data.decode("latin-1")  # old vendor files write degree signs etc. in Latin-1
 
 
-def _check_path(path: str | os.PathLike) -> pathlib.Path:
-    path = pathlib.Path(path)
-    if not path.exists():
+def _check_path(path: str | os.PathLike) -> pathlib.Path | RemotePath:
+    path = as_path(path)
+    if not is_remote(path) and not path.exists():  # a URL's absence: the server's 404
         raise FileNotFoundError(errno.ENOENT, "RPC file not found", str(path))
     return path
+
+
+def _head(path: pathlib.Path | RemotePath) -> bytes | None:
+    """The first 4 kB of ``path`` (a URL: one range request); ``None`` for a remote file only
+    GDAL reads (``s3://``, ``gs://``, ``/vsi...``): taken for a raster."""
+    if is_remote(path) and not str(path).lower().startswith(("http://", "https://")):
+        return None
+    with open_bytes(path) as f:
+        return f.read(4096)
 
 
 def _detect_text(text: str, source: str) -> str:
@@ -97,9 +107,8 @@ def _detect_text(text: str, source: str) -> str:
 def detect_rpc_format(path: str | os.PathLike) -> str:
     """The RPC format of the file at ``path`` (see the module docstring), from its content."""
     path = _check_path(path)
-    with open(path, "rb") as f:
-        head = f.read(4096)
-    if _is_binary(head):
+    head = _head(path)
+    if head is None or _is_binary(head):
         return "raster"
     return _detect_text(_read_text(path), source_name(path))
 
@@ -114,9 +123,8 @@ def read_rpc(path: str | os.PathLike) -> RPC:
     """
     path = _check_path(path)
     source = source_name(path)
-    with open(path, "rb") as f:
-        head = f.read(4096)
-    if _is_binary(head):
+    head = _head(path)
+    if head is None or _is_binary(head):
         return read_raster_rpc(path, source)
     text = _read_text(path)
     kind = _detect_text(text, source)

@@ -23,6 +23,8 @@ from jaxtyping import ArrayLike
 
 from ..models import RPC
 from ._atomic import atomic_output, refuse_existing
+from ._raster import open_raster
+from ._remote import open_bytes
 from ._rpc_common import RPCFormatError, assemble_rpc, vendor_values
 from ._rpc_keys import COEFFS, GEOTIFF_TAG_ORDER, N_TERMS, STYLES, vendor_items
 
@@ -39,7 +41,7 @@ def read_tiff_rpc_tag(path: str | os.PathLike, source: str | None = None) -> np.
     its data lies beyond the end of the file (a truncated file).
     """
     try:
-        with open(path, "rb") as f:
+        with open_bytes(path) as f:  # a URL: a range request or two, not the file
             head = f.read(16)
             endian = {b"II": "<", b"MM": ">"}.get(head[:2])
             if endian is None or len(head) < 16:
@@ -109,14 +111,11 @@ def read_raster_rpc(path: str | os.PathLike, source: str) -> RPC:
         scalars, coeffs = _tag_values(tag)
         return assemble_rpc(scalars, coeffs, f"{source} (RPCCoefficientTag)")
 
-    import rasterio
-    from rasterio.errors import NotGeoreferencedWarning, RasterioIOError
+    from rasterio.errors import RasterioIOError
 
-    try:
-        with warnings.catch_warnings():
-            warnings.simplefilter("ignore", NotGeoreferencedWarning)
-            with rasterio.open(path) as src:
-                rpcs = src.rpcs
+    try:  # a URL: its sidecars probed (one request each), GDAL's text of the tag (15 digits)
+        with open_raster(path, sidecars=True) as src:
+            rpcs = src.rpcs
     except RasterioIOError as err:
         raise RPCFormatError(f"{source}: not a readable raster or RPC file ({err})") from None
     except (KeyError, ValueError) as err:

@@ -30,6 +30,7 @@ import numpy as np
 
 from ..models import RPC
 from ._atomic import atomic_output
+from ._remote import as_path, is_remote
 from ._rpc_formats import detect_rpc_format
 from ._rpc_gdal import from_rasterio_rpc, write_geotiff_rpc
 from ._rpc_geom_dimap import write_dimap_rpc, write_ossim_geom
@@ -51,7 +52,7 @@ def sidecar_name(stem: str, fmt: str) -> str:
 
 def image_stem(path: str | os.PathLike) -> str:
     """The image stem of an image or RPC file name (see the module docstring)."""
-    name = pathlib.Path(path).name
+    name = as_path(path).name  # a URL: its last segment, query string dropped
     for pattern in (r"^(.+)_RPC\.TXT$", r"^RPC_(.+)\.XML$", r"^(.+)\.(?:RPB|geom)$"):
         m = re.match(pattern, name, re.IGNORECASE)
         if m:
@@ -107,6 +108,11 @@ def plan_rpc_outputs(
     out = pathlib.Path(out_dir)
     stem = stem or image_stem(source)
     sidecar_name(stem, fmt)  # validates fmt
+    if (copy_image or write_into) and is_remote(source):
+        raise ValueError(
+            f"image {name!r}: {source} is read by URL; --copy-images / --write-into copy the "
+            "image (a download): copy it yourself, or write the RPC files only"
+        )
     image = find_image(source) if (copy_image or write_into) else None
     if (copy_image or write_into) and image is None:
         raise ValueError(

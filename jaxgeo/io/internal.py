@@ -14,6 +14,9 @@ from ._image import reframed as reframed
 from ._plausible import dem_against_ties as dem_against_ties
 from ._raster import open_raster as open_raster
 from ._raster import raster_writer as raster_writer
+from ._remote import as_path as as_path
+from ._remote import file_id as file_id
+from ._remote import is_remote as is_remote
 from ._rpc_common import vendor_values as vendor_values
 from ._rpc_formats import detect_rpc_format as detect_rpc_format
 from ._rpc_place import image_stem as image_stem

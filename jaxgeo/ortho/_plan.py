@@ -22,7 +22,7 @@ import numpy as np
 
 from .._runtime.kept import kept
 from ..io import DEM, SensorImage, open_image, read_dem
-from ..io.internal import open_raster, refuse_existing
+from ..io.internal import file_id, open_raster, refuse_existing
 from ..tiles import RasterSpec, TilePlan, plan_tiles
 from ..tiles.internal import overview_factors
 from ._grid import common_resolution, default_crs, dem_for_image, footprint, ground_sample_distance
@@ -68,8 +68,7 @@ def _model_digest(model) -> str:
 
 
 def _file_id(path) -> dict:
-    st = os.stat(path)
-    return {"path": str(path), "bytes": st.st_size, "mtime": st.st_mtime}
+    return file_id(path)  # a URL: its address and the server's size and ETag
 
 
 @kept

@@ -33,6 +33,7 @@ from collections.abc import Sequence
 
 import numpy as np
 
+from ..io.internal import file_id
 from ..models import AbstractSensorModel
 from ..tiles import RasterSpec, Tile, TilePlan, plan_tiles
 from ..tiles.internal import NoData, cores, overview_factors, write_tile
@@ -306,8 +307,7 @@ class DSMSetup:
 
 
 def _file_id(path) -> dict:
-    st = os.stat(path)
-    return {"path": str(path), "bytes": st.st_size, "mtime": st.st_mtime}
+    return file_id(path)  # a URL: its address and the server's size and ETag
 
 
 def _model_digest(models) -> str:
