@@ -11,6 +11,7 @@
 - :mod:`.arrays` host data onto the device without compiling.
 - :mod:`.shard` ``shard_map`` over the devices, zero-size inputs handled.
 - :mod:`.interrupt` Ctrl-C / SIGTERM as a request the writers check.
+- :mod:`.progress` the progress of long steps (count, rate, ETA) on stderr, silenced by ``--quiet``.
 
 Nothing here imports another jaxgeo package (the import contract's bottom layer), and this
 ``__init__`` imports nothing: ``jaxgeo`` configures jax through :mod:`.jaxconfig` before jax is

@@ -21,6 +21,7 @@ import equinox as eqx
 import jax
 import numpy as np
 
+from .._runtime.progress import Stages
 from ..io import GroundPoints, Observations
 from ..lsq import SolverConfig
 from ..lsq.internal import DEFAULT_SOLVER
@@ -181,7 +182,9 @@ def adjust(
         models, observations, ground, prior_sigma=prior_sigma, settings=s,
         check_control=s.check_control,
     )  # fmt: skip
-    sol, rem_i, rem_g, rounds = snoop(setup, solver, progress=s.progress)
+    stages = Stages(s.progress)  # each solve's line with the time the last one took
+    sol, rem_i, rem_g, rounds = snoop(setup, solver, progress=stages)
+    stages.done(f"solved ({rounds} snooping round{'s' * (rounds != 1)})")
     result = make_result(
         setup, sol, observations, ground, solver, (rem_i, rem_g), rounds, throw=throw
     )

@@ -185,10 +185,16 @@ class Parser(argparse.ArgumentParser):
 
 
 def parse(parser: argparse.ArgumentParser, argv: list[str]) -> argparse.Namespace:
-    """``argv`` parsed; a usage error (exit 2) with ``--json`` also prints its JSON object."""
+    """``argv`` parsed; a usage error (exit 2) with ``--json`` also prints its JSON object.
+    ``--quiet`` silences every progress display of the run (:mod:`jaxgeo._runtime.progress`,
+    whatever a library default says); without it, each display's own switch decides."""
+    from .._runtime.progress import silence
+
     Parser.last_error = None
     try:
-        return parser.parse_args(argv)
+        args = parser.parse_args(argv)
+        silence(bool(getattr(args, "quiet", False)))
+        return args
     except SystemExit as end:
         if end.code and "--json" in argv:
             from ._run import CommandRun
@@ -221,7 +227,8 @@ def _jsonable(value):
 
 
 def note(message: str, quiet: bool = False) -> None:
-    """A progress or context line on stderr (not with ``--quiet``)."""
+    """A progress or context line on stderr (not with ``--quiet``: ``quiet`` is the command's
+    flag; a counted step with its ETA is :class:`jaxgeo._runtime.progress.Progress`)."""
     if not quiet:
         print(message, file=sys.stderr, flush=True)
 

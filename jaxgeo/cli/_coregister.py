@@ -102,6 +102,7 @@ def _table(result) -> str:
 def run(args: argparse.Namespace) -> int:
     import warnings
 
+    from .._runtime.progress import Stages
     from ..coreg import CoregistrationError, CoregistrationWarning, NuthKaab, coregister
     from ..io import read_dem
     from . import CommandError, _one_line
@@ -131,9 +132,11 @@ def run(args: argparse.Namespace) -> int:
     except CoregistrationError as err:
         raise CommandError(name_options(str(err), OPTIONS, err.settings)) from None
 
+    stages = Stages(None if args.quiet else note, started=True)  # the iterations' times
+
     def progress(it, increment, shift):
-        note(f"iteration {it}: increment ({increment[0]:+.3f}, {increment[1]:+.3f}) m, "
-             f"shift ({shift[0]:+.3f}, {shift[1]:+.3f}) m", args.quiet)  # fmt: skip
+        stages(f"iteration {it}: increment ({increment[0]:+.3f}, {increment[1]:+.3f}) m, "
+               f"shift ({shift[0]:+.3f}, {shift[1]:+.3f}) m")  # fmt: skip
 
     with warnings.catch_warnings(record=True) as caught:
         warnings.simplefilter("always", CoregistrationWarning)

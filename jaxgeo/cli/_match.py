@@ -20,7 +20,7 @@ import contextlib
 import math
 import sys
 
-from ._common import add_command, add_json, add_out, add_quiet, guard_outputs, note, print_json
+from ._common import add_command, add_json, add_out, add_quiet, guard_outputs, print_json
 from ._inputs import (
     add_dem_options,
     add_heights,
@@ -148,7 +148,7 @@ def run(args: argparse.Namespace) -> int:
         dem = open_dem(args)
         try:
             result = match_images(images, settings, dem=dem,
-                                  progress=None if args.quiet else note)  # fmt: skip
+                                  progress=not args.quiet)  # fmt: skip
         except NoTiesError as err:  # the summary says why, before the error
             _print_pairs(err.reports, args)
             raise

@@ -48,11 +48,11 @@ import json
 import math
 import os
 import pathlib
-import sys
 import warnings
 
 import numpy as np
 
+from .._runtime.progress import Progress
 from ..geodesy import utm_epsg, utm_zone
 from ..io import to_rasterio_rpc
 from ..io.internal import atomic_output, raster_writer
@@ -374,12 +374,11 @@ def write_stereo_scene(
     """Render and write ``scene`` into ``directory`` (module docstring), window by window
     (``block_rows`` x ``block_cols`` px, multiples of 256: memory is bounded by them). Refuses
     to replace an existing file unless ``overwrite`` (checked before any work); every file is
-    written under a temporary name and renamed when all are complete. ``progress``: a tqdm bar
-    over the row blocks (stderr)."""
+    written under a temporary name and renamed when all are complete. ``progress``: the count of
+    row blocks written, with its ETA, on stderr."""
     import pyproj
     import rasterio
     from rasterio.errors import NotGeoreferencedWarning
-    from tqdm import tqdm
 
     paths = stereo_scene_files(directory)
     sc.check_writable(paths, overwrite)
@@ -395,11 +394,11 @@ def write_stereo_scene(
         rings.append(np.stack([(np.asarray(x) - d.x0) / d.res_m - 0.5,
                                (d.y0 - np.asarray(y)) / d.res_m - 0.5], -1))  # fmt: skip
     to_lonlat = pyproj.Transformer.from_crs(d.epsg, 4326, always_xy=True)
-    bar = tqdm(total=2 * len(img_blocks) + len(dsm_blocks), unit="block", desc="stereo-scene",
-               file=sys.stderr, disable=not progress)  # fmt: skip
+    bar = Progress("stereo-scene", 2 * len(img_blocks) + len(dsm_blocks), "block",
+                   enabled=progress)  # fmt: skip
 
     def write(dst, blocks, make, label):
-        bar.set_postfix_str(label)
+        bar.note(label)
         write_blocks(dst, blocks, make, lambda: bar.update(1))
 
     with contextlib.ExitStack() as stack, warnings.catch_warnings():

@@ -20,6 +20,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from .._runtime.progress import Progress
 from ..errors import JaxgeoWarning
 from ..io import Observations, SensorImage, write_observations
 from ._join import join_ties
@@ -113,7 +114,7 @@ def match_images(
     settings: MatchSettings | None = None,
     *,
     dem=None,
-    progress: Callable[[str], None] | None = None,
+    progress: bool | Callable[[str], None] | None = None,
 ) -> TieResult:
     """Verified tie points of every pair of ``images``, joined into multi-image points (module
     docstring).
@@ -122,8 +123,10 @@ def match_images(
     raster and its model in the raster's pixels), named differently (their ``name`` names them
     in the observations). ``settings``: :class:`MatchSettings` (``roi`` applies to the first
     image, in its pairs); ``dem``: a :class:`jaxgeo.io.DEM` whose heights over the footprint
-    give the height range when ``settings.height_range_m`` is ``None``. ``progress`` is called
-    with a line per stage (each image's SIFT, each pair); ``None``: silent.
+    give the height range when ``settings.height_range_m`` is ``None``. ``progress``: ``True``,
+    the stages (each image's SIFT, each pair) counted on stderr with their rate and ETA
+    (:class:`~jaxgeo._runtime.progress.Progress`); a callable, called with a line per stage;
+    ``None`` or ``False``: silent.
 
     Warnings: a :class:`TieWarning` for a pair with fewer than ``settings.few_ties`` ties, and
     those of :func:`tie_points`, each naming its pair (``"a - b: ..."``). Raises
@@ -131,12 +134,15 @@ def match_images(
     the pairs' reports) when no tie survives in any pair.
     """
     settings = MatchSettings() if settings is None else settings
-    say = progress or (lambda _: None)
     _check_images(images, settings)
+    n_pairs = len(images) * (len(images) - 1) // 2
+    bar = Progress("match", len(images) + n_pairs, "step", enabled=progress is True)
+    say = progress if callable(progress) else bar.note
     features = []
     for k, im in enumerate(images):
         say(f"SIFT keypoints of {im.name} ({k + 1}/{len(images)})")
         features.append(sift_features_raster(im.path, settings.roi if k == 0 else None))
+        bar.update()
     # the ROI is the first image's: the pairs of the others search their whole images
     others = dataclasses.replace(settings, roi=None)
     found, reports = [], []
@@ -155,6 +161,8 @@ def match_images(
                 )
             reports.append(dataclasses.replace(ties.report, images=(a.name, b.name)))
             found.append((i, j, ties.xy1, ties.xy2))
+            bar.update()
+    bar.close()
     joined = join_ties(found)
     if len(joined.point) == 0:
         raise NoTiesError(

@@ -27,13 +27,13 @@ from __future__ import annotations
 
 import os
 import pathlib
-import sys
 import time
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field
 
 import numpy as np
 
+from .._runtime.progress import Progress, say
 from ..io.internal import open_raster
 from ..models import AbstractSensorModel
 from ._dense import (
@@ -406,8 +406,7 @@ def dsm_from_images(
             out = pathlib.Path(keep_dir)
             out.mkdir(parents=True, exist_ok=True)
             np.savez_compressed(out / f"pair_{i}.npz", points=pair.points, **pair.intermediates)
-    if progress:
-        print("[dsm] rasterising", file=sys.stderr, flush=True)
+    say("[dsm] rasterising", progress)
     if settings.register and len(all_points) > 1:
         offsets = _height_offsets(all_points, res_m, epsg)
         for pts, st, off in zip(all_points, all_stats, offsets, strict=True):
@@ -434,29 +433,21 @@ def _spacing(points, epsg):
 
 
 class _Progress:
-    """A tqdm bar over the dense-matching bands of one pair; the stage messages as its postfix.
-    Silent when not ``enabled``."""
+    """The dense-matching bands of one pair (:class:`~jaxgeo._runtime.progress.Progress`: a
+    bar, or plain lines off a terminal, with ETA); the stage messages as its note. Silent when
+    not ``enabled``."""
 
     def __init__(self, name: str, enabled: bool):
-        self.bar = None
-        if enabled:
-            from tqdm import tqdm
-
-            self.bar = tqdm(total=1, desc=name, unit="band", file=sys.stderr, leave=True)
+        self.bar = Progress(name, None, "band", enabled=enabled)
 
     def log(self, msg: str) -> None:
-        if self.bar is not None:
-            self.bar.set_postfix_str(msg[:60])
+        self.bar.note(msg)
 
     def band(self, done: int, total: int) -> None:
-        if self.bar is not None:
-            self.bar.total = total
-            self.bar.n = done
-            self.bar.refresh()
+        self.bar.set(done, total)
 
     def close(self) -> None:
-        if self.bar is not None:
-            self.bar.close()
+        self.bar.close()
 
 
 def _height_offsets(all_points, res_m, epsg):

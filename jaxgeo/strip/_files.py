@@ -18,6 +18,7 @@ import pathlib
 from collections.abc import Callable
 from typing import Any
 
+from .._runtime.progress import Stages
 from ..bundle.internal import probe_folder
 from ..io import DEM
 from ._adjustment import adjust_strip
@@ -127,9 +128,10 @@ def adjust_strip_files(
     inputs += [dem.path] if isinstance(dem, DEM) else []
     if outputs is not None:  # before any computation
         outputs.targets(strip, inputs)
-    if progress is not None:
-        progress(f"adjusting {len(strip.names)} sub-scenes: tie points, level-1 bundle "
-                 "adjustment and snooping, level-2 correction (the first run of a strip shape "
-                 "compiles, up to a minute)")  # fmt: skip
+    stages = Stages(progress)  # the adjustment's line, then the time it took
+    stages(f"adjusting {len(strip.names)} sub-scenes: tie points, level-1 bundle adjustment "
+           "and snooping, level-2 correction (the first run of a strip shape compiles, up to a "
+           "minute)")  # fmt: skip
     result = adjust_strip(strip, config)
+    stages.done(f"adjusted {len(strip.names)} sub-scenes")
     return StripFileAdjustment(result, tuple(pathlib.Path(p) for p in inputs), outputs)

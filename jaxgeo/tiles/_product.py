@@ -17,6 +17,7 @@ import pathlib
 import time
 from collections.abc import Callable, Iterable, Mapping
 
+from .._runtime.progress import say
 from ..errors import JaxgeoError
 from ..io.internal import refuse_existing
 from ._mosaic import RasterSpec, mosaic_cog
@@ -182,6 +183,8 @@ def make_product(
         if all(r.path is None for r in run.results.values()):
             raise EmptyProduct(f"no tile of the {plan.kind} holds data", stats)
         t_mosaic = time.perf_counter()
+        say(f"{plan.kind}: writing {out.name} (the mosaic of the tiles, its overviews)",
+            settings.progress)  # fmt: skip
         mosaic_cog(run, plan, spec, out, overwrite=overwrite, compress=compress,
                    overview_resampling=spec.overview_resampling)  # fmt: skip
         mosaic_s = time.perf_counter() - t_mosaic

@@ -47,11 +47,11 @@ import logging
 import os
 import pathlib
 import secrets
-import sys
 import threading
 import time
 from collections.abc import Callable
 
+from .._runtime.progress import Progress
 from ..errors import JaxgeoError
 from ..io.internal import atomic_output, atomic_write_text
 from ._plan import PlanError, Tile, TilePlan, read_plan, write_plan
@@ -302,10 +302,11 @@ def run_tiles(
 
     See the module docstring for ``work`` and the folder; ``settings``: where the tiles run
     (``workers``, ``scheduler``: the module docstring), ``retries`` of a failing tile (or of a
-    tile whose worker died) before a :class:`TileError`, ``progress`` (a bar over the tiles on
-    stderr, tqdm); its ``resume`` and ``plan`` are :func:`jaxgeo.tiles.make_product`'s (the
-    folder here is ``folder``). ``pool``: workers started earlier (:class:`WorkerPool`, left
-    open), used instead of ``workers`` and ``scheduler``.
+    tile whose worker died) before a :class:`TileError`, ``progress`` (the tiles' count, rate
+    and ETA on stderr: :class:`~jaxgeo._runtime.progress.Progress`); its ``resume`` and
+    ``plan`` are :func:`jaxgeo.tiles.make_product`'s (the folder here is ``folder``).
+    ``pool``: workers started earlier (:class:`WorkerPool`, left open), used instead of
+    ``workers`` and ``scheduler``.
     """
     workers, scheduler, retries = settings.workers, settings.scheduler, settings.retries
     progress = settings.progress
@@ -319,10 +320,7 @@ def run_tiles(
         n = resolve_workers(plan, workers, scheduler)
     bar = None
     if progress:
-        from tqdm.auto import tqdm
-
-        bar = tqdm(total=len(plan.tiles), initial=len(done), desc=plan.kind, unit="tile",
-                   file=sys.stderr, dynamic_ncols=True)  # fmt: skip
+        bar = Progress(plan.kind, len(plan.tiles), "tile", initial=len(done))
     address = None
     own = None
     try:
