@@ -100,7 +100,10 @@ class Progress:
     # --- counting -------------------------------------------------------------------------
     def update(self, n: int = 1) -> None:
         """``n`` more steps done."""
-        if self.enabled:
+        if self._bar is not None:  # tqdm's own pace of redrawing and its smoothed rate
+            self.n += n
+            self._bar.update(n)
+        elif self.enabled:
             self.set(self.n + n)
 
     def set(self, done: int, total: int | None = None) -> None:
@@ -126,6 +129,8 @@ class Progress:
             return
         if self.total is None and self.n == self.initial:
             self._t0 = time.monotonic()
+            if self._bar is not None and self.n == 0:
+                self._bar.reset()  # (its clock too)
         self._note = " ".join(str(text).split())
         if self._bar is not None:
             self._bar.set_postfix_str(self._note[:60])

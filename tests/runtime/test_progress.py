@@ -110,6 +110,12 @@ def test_a_terminal_gets_a_bar_with_eta():
     text = out.getvalue()
     assert "\r" in text and "ortho: 100%" in text and "5/5" in text and "writing" in text
     assert re.search(r"\[\d+:\d\d<\d+:\d\d", text), text  # tqdm's elapsed<remaining
+    out = Terminal()
+    with pg.Progress("pair 1/1", None, "band", file=out) as bar:  # the bands' count comes later
+        bar.note("SGM over [-15, 18] px")
+        bar.set(1, 4)
+        bar.set(4)
+    assert "pair 1/1: 100%" in out.getvalue() and "4/4" in out.getvalue()
 
 
 def test_stages_say_the_time_so_far_and_of_the_last_step(monkeypatch):
