@@ -65,6 +65,23 @@ def test_a_slow_step_still_shows_a_line_every_30_s(monkeypatch):
     assert len(out.getvalue().splitlines()) == 6  # the last count was shown already
 
 
+def test_the_rate_leaves_out_the_first_steps_start_up(monkeypatch):
+    clock, out = Clock(monkeypatch), io.StringIO()
+    bar = pg.Progress("dsm", 10, "tile", file=out)
+    clock.t += 20.0  # the first tile compiles
+    bar.update()
+    assert out.getvalue().splitlines()[-1] == (
+        "dsm: 1/10 tile (10 %), 20 s/tile, elapsed 0:20, ETA 3:00"
+    )  # one step: all there is to go by
+    for _ in range(4):
+        clock.t += 2.0
+        bar.update()
+    # 4 tiles in 8 s after the first, not 5 in 28 s: 10 s left for 5 tiles, not 28
+    assert out.getvalue().splitlines()[-1] == (
+        "dsm: 5/10 tile (50 %), 2 s/tile, elapsed 0:28, ETA 0:10"
+    )
+
+
 def test_a_note_before_the_total_restarts_the_rate_clock(monkeypatch):
     clock, out = Clock(monkeypatch), io.StringIO()
     bar = pg.Progress("pair 1/2", None, "band", file=out)
