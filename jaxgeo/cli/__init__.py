@@ -165,6 +165,7 @@ def _run_command(args: argparse.Namespace, run, restore_handlers: bool) -> int:
     """The command of ``args``, its outputs claimed first; its exit status."""
     # jax: every command computes (help and usage errors are above)
     from .._runtime import exported as _exported
+    from .._runtime import progress as _progress
     from ._common import EXIT_INTERRUPTED
 
     owned = _exported.own_process()  # restored below (tests run commands in their process)
@@ -188,6 +189,7 @@ def _run_command(args: argparse.Namespace, run, restore_handlers: bool) -> int:
         return run.report(err, _one_line)
     finally:
         _exported.own_process(owned)
+        _progress.silence(False)  # --quiet was this run's: later calls in this process decide
         if restore_handlers:
             _restore_handlers(previous)
         elif _interrupt.requested():  # the process is ending: a late signal changes nothing

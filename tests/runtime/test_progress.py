@@ -154,6 +154,8 @@ def test_stages_say_the_time_so_far_and_of_the_last_step(monkeypatch):
 
 
 # --- the commands: stderr is a pipe here (pytest captures it), so plain lines -----------------
+# (each test runs its command twice, --quiet and not: some 20 s on 2 loaded cores, most of it the
+# first run's compilation)
 
 
 @pytest.fixture(scope="module")
@@ -212,6 +214,7 @@ def test_adjust_quiet_timed_stages_and_json(tmp_path, capsys):
             "--observations", str(scene / "observations.csv"), "--bias", "shift"]  # fmt: skip
     code, out, err = _run(capsys, [*argv, "--quiet", "-o", str(tmp_path / "q")])
     assert code == 0 and err == "", err
+    assert not pg.silenced()  # --quiet was the run's own: the process is not left silenced
     code, out, err = _run(capsys, [*argv, "--json", "-o", str(tmp_path / "p")])
     assert code == 0, err
     assert len(out.strip().splitlines()) == 1 and json.loads(out)["converged"]
