@@ -380,7 +380,7 @@ def dsm_from_images(
     ``settings.keep``: write each pair's intermediate
     products there (``pair_i.npz``: epipolar images, disparity, tie points, points).
     ``settings.band_rows``: epipolar rows per band of dense matching (:func:`stereo_pair`);
-    ``progress``: a progress bar per pair (tqdm, on stderr)."""
+    ``progress``: the bands of each pair counted on stderr, with their ETA (:class:`_Progress`)."""
     if len(models) != len(paths) or len(paths) < 2:
         raise StereoError(
             f"dsm: give at least two images, each with its model ({len(paths)} images, "
