@@ -138,7 +138,7 @@ key_numbers["match"] = {
 # shareloc's tests, not as a stereo pair), a band along the bottom of the left image.
 
 # %%
-fig, axes = plt.subplots(1, 2, figsize=(12, 6))
+fig, axes = plt.subplots(1, 2, figsize=(10, 5))
 for ax, im in zip(axes, images, strict=True):
     with rasterio.open(im.path) as f:
         pixels = f.read(1)
@@ -359,7 +359,7 @@ key_numbers["ortho"] = {
 }
 
 # %%
-fig, ax = plt.subplots(figsize=(9, 8.5))
+fig, ax = plt.subplots(figsize=(7.5, 7.2))
 extent = (ortho_extent.left, ortho_extent.right, ortho_extent.bottom, ortho_extent.top)
 lo, hi = np.nanpercentile(quick, [1, 99])
 ax.imshow(quick, cmap="gray", vmin=lo, vmax=hi, extent=extent)
@@ -451,7 +451,7 @@ key_numbers["dsm"] = {
 }
 
 # %%
-fig, axes = plt.subplots(3, 1, figsize=(11, 13))
+fig, axes = plt.subplots(3, 1, figsize=(10, 12))
 window = np.ix_(np.any(both, axis=1), np.any(both, axis=0))  # the cells seen by both images
 dsm_extent = (east[window].min() - 0.5, east[window].max() + 0.5,
               north[window].min() - 0.5, north[window].max() + 0.5)  # fmt: skip
