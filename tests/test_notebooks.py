@@ -33,13 +33,14 @@ def committed(name):
     return nbformat.read(NOTEBOOKS / f"{name}.ipynb", as_version=4)
 
 
-def test_five_notebooks():
+def test_six_notebooks():
     assert NAMES == [
         "01_cartosat1_sensor_models",
         "02_kepler_rotation_orders",
         "03_full_strip",
         "04_differentiable",
         "05_what_no_peer_has",
+        "06_ventoux_real_images",
     ]
 
 
