@@ -64,6 +64,7 @@ def _residual_figure(page: Page, name: str, xy, v, flagged, frame, caption_extra
     norm = np.hypot(v[:, 0], v[:, 1])
     typical = float(np.percentile(norm[~flagged], 90)) if np.any(~flagged) else 0.0
     typical = typical or (float(norm.max()) if norm.size else 1.0) or 1.0
+    typical = max(typical, float(norm.max(initial=0.0)) / 4.0)  # the longest: <= 24 % of it
     scale = 0.06 * max(width, height) / typical  # a typical vector: 6 % of the frame
     key = float(f"{typical:.1g}")
     aspect = height / width
@@ -127,52 +128,56 @@ def _point_errors(result) -> dict[str, tuple[str, np.ndarray]]:
 
 
 def _map_figure(page: Page, result, title: str) -> None:
-    """GCPs and check points on a lon/lat map coloured by their horizontal error (m)."""
-    from matplotlib.ticker import MaxNLocator
-
+    """GCPs and check points of ``result`` on a lon/lat map coloured by their horizontal
+    error (m)."""
     ground = np.asarray(result.ground)
     index = {p: k for k, p in enumerate(result.point_ids)}
     errors = _point_errors(result)
-    fig = new_figure(560)
-    ax = fig.add_subplot()
+    sets = {}
+    for role in ("gcp", "check"):
+        ids = [p for p, (r, _) in errors.items() if r == role and p in index]
+        sets[role] = (ground[[index[p] for p in ids], :2].reshape(-1, 2),
+                      np.array([np.hypot(*errors[p][1][:2]) for p in ids]))  # fmt: skip
     ties = [index[p] for p, r in zip(result.point_ids, result.point_role, strict=True)
             if r == "tie"]  # fmt: skip
-    if ties:
-        ax.scatter(ground[ties, 0], ground[ties, 1], s=4, c="0.75", label=f"tie ({len(ties)})")
-    horiz = {p: float(np.hypot(*e[:2])) for p, (_, e) in errors.items()}
-    finite = [h for h in horiz.values() if np.isfinite(h)]
-    vmax = max(finite) if finite else 1.0
+    _points_map(page, sets, ground[ties, :2].reshape(-1, 2), title,
+                "GCPs (triangles; adjusted - given) and check points (circles; estimated - "
+                "true), coloured by their horizontal error (m); tie points in grey.")  # fmt: skip
+
+
+def _points_map(page: Page, sets, ties, title: str, caption: str) -> None:
+    """``sets``: role (``gcp``, ``check``) -> (lon/lat ``(k, 2)``, horizontal error ``(k,)``
+    m) drawn coloured by the error; ``ties`` ``(t, 2)`` in grey."""
+    from matplotlib.ticker import MaxNLocator
+
+    fig = new_figure(560)
+    ax = fig.add_subplot()
+    if len(ties):
+        ax.scatter(ties[:, 0], ties[:, 1], s=4, c="0.75", label=f"tie ({len(ties)})")
+    finite = np.concatenate([e[np.isfinite(e)] for _, e in sets.values()] + [np.zeros(0)])
+    vmax = float(finite.max()) if finite.size and finite.max() > 0 else 1.0
     sc = None
     for role, marker in (("gcp", "^"), ("check", "o")):
-        ids = [p for p, (r, _) in errors.items() if r == role and p in index]
-        if ids:
-            k = [index[p] for p in ids]
-            sc = ax.scatter(
-                ground[k, 0],
-                ground[k, 1],
-                c=[horiz[p] for p in ids],
-                cmap="plasma",
-                vmin=0.0,
-                vmax=vmax or 1.0,
-                marker=marker,
-                s=70,
-                edgecolors="k",
-                label=f"{'GCP' if role == 'gcp' else 'check point'} ({len(ids)})",
-            )
+        lonlat, err = sets.get(role, (np.zeros((0, 2)), np.zeros(0)))
+        if len(lonlat):
+            sc = ax.scatter(lonlat[:, 0], lonlat[:, 1], c=err, cmap="plasma", vmin=0.0,
+                            vmax=vmax, marker=marker, s=70, edgecolors="k",
+                            label=f"{'GCP' if role == 'gcp' else 'check point'} "
+                            f"({len(lonlat)})")  # fmt: skip
     if sc is not None:
         fig.colorbar(sc, ax=ax, label="horizontal error (m)", shrink=0.85)
     ax.set_xlabel("longitude (°)")
     ax.set_ylabel("latitude (°)")
     ax.ticklabel_format(useOffset=False, style="plain")
     ax.xaxis.set_major_locator(MaxNLocator(5))  # (long labels: 147.215 ...)
-    ax.set_aspect(1.0 / max(np.cos(np.radians(np.nanmean(ground[:, 1]))), 0.1)
-                  if len(ground) else "auto")  # fmt: skip
+    every = np.concatenate([ties, *(ll for ll, _ in sets.values())])
+    if len(every):  # degrees of longitude shorter than those of latitude
+        ax.set_aspect(1.0 / max(np.cos(np.radians(np.nanmean(every[:, 1]))), 0.1),
+                      adjustable="datalim")  # fmt: skip
     if ax.get_legend_handles_labels()[0]:
         ax.legend(fontsize=9, loc="best")
     ax.set_title(title)
-    page.figure(fig, "Ground points: GCPs (triangles; adjusted - given) and check points "
-                "(circles; estimated - true), coloured by their horizontal error (m); tie "
-                "points in grey.")  # fmt: skip
+    page.figure(fig, f"Ground points: {caption}")
 
 
 def _frames_of(images: Mapping) -> dict[str, tuple[float, float]]:
@@ -248,28 +253,25 @@ def write_adjustment_report(
 
 
 def _adjustment_sections(page: Page, result, direct, frames, detailed: Sequence[str],
-                         before_after: bool = True) -> None:  # fmt: skip
+                         block: bool = True) -> None:  # fmt: skip
+    """The sections of an adjustment; ``block``: with the counts, the table before and after
+    and the map (a strip's level 1 has its own: its ties hold heights, as GCPs do)."""
     blunders, removed = _flags(result)
     roles = list(result.point_role)
     state = "converged" if result.converged else "NOT CONVERGED (the last state is shown)"
-    page.section("Summary")
-    page.text(f"{result.message}: {state} in {result.num_steps} steps; s0 = {result.s0:.3f}, "
-              f"redundancy {result.redundancy}.", warn=not result.converged)  # fmt: skip
+    how = "" if result.message in ("converged", "") else f" ({result.message})"
+    if block:
+        page.section("Summary")
+    page.text(f"{state}{how} in {result.num_steps} steps; s0 = {result.s0:.3f}, redundancy "
+              f"{result.redundancy}; {int(blunders.sum())} observations flagged as gross "
+              f"errors, {int(removed.sum())} removed.", warn=not result.converged)  # fmt: skip
     if result.poor_fit:
         page.text(f"POOR FIT: {result.poor_fit}", warn=True)
-    page.table(("count", "value"), [
-        ("images", len(result.models)), ("observations", len(result.observation_ids)),
-        ("GCPs", roles.count("gcp")), ("check points", roles.count("check")),
-        ("tie points", roles.count("tie")),
-        ("observations flagged as gross errors", int(blunders.sum())),
-        ("of them removed", int(removed.sum())),
-        ("GCPs flagged / removed", f"{len(result.gcp_flagged)} / {len(result.gcp_removed)}"),
-        ("snooping rounds", result.snooping_rounds),
-    ])  # fmt: skip
-    if before_after:
+    if block:
+        _counts(page, result, roles, blunders, removed)
         page.section("Before and after")
         _before_after(page, direct, result)
-    if any(r in ("gcp", "check") for r in roles):
+    if block and any(r in ("gcp", "check") for r in roles):
         page.section("Ground control and check points")
         _map_figure(page, result, "GCPs and check points")
     page.section("Residual histograms")
@@ -282,6 +284,18 @@ def _adjustment_sections(page: Page, result, direct, frames, detailed: Sequence[
         sel = images == name
         if np.any(sel):
             _residual_figure(page, name, xy[sel], v[sel], blunders[sel], frames.get(name))
+
+
+def _counts(page: Page, result, roles, blunders, removed) -> None:
+    page.table(("count", "value"), [
+        ("images", len(result.models)), ("observations", len(result.observation_ids)),
+        ("GCPs", roles.count("gcp")), ("check points", roles.count("check")),
+        ("tie points", roles.count("tie")),
+        ("observations flagged as gross errors", int(blunders.sum())),
+        ("of them removed", int(removed.sum())),
+        ("GCPs flagged / removed", f"{len(result.gcp_flagged)} / {len(result.gcp_removed)}"),
+        ("snooping rounds", result.snooping_rounds),
+    ])  # fmt: skip
 
 
 def write_strip_report(run, path: str | os.PathLike, *, overwrite: bool = False) -> pathlib.Path:
@@ -322,6 +336,8 @@ def write_strip_report(run, path: str | os.PathLike, *, overwrite: bool = False)
     _scene_summary(page, rep, names, np.asarray(scene_rms))
     if rep.pairs:
         _pair_figure(page, rep)
+    page.section("Ground control and check points")
+    _strip_map(page, result)
     page.section("Level 1 in detail")
     order = [names[k] for k in np.argsort(-np.nan_to_num(np.asarray(scene_rms), nan=-1.0))]
     worst = order[:DETAILED_SCENES]
@@ -330,8 +346,33 @@ def write_strip_report(run, path: str | os.PathLike, *, overwrite: bool = False)
         f"The level-1 bundle adjustment (biases per sub-scene); residual vectors of the "
         f"{len(worst)} sub-scenes with the largest residual RMS: {', '.join(worst)}."
     )
-    _adjustment_sections(page, level1, None, frames, worst, before_after=False)
+    _adjustment_sections(page, level1, None, frames, worst, block=False)
     return page.write(path, overwrite)
+
+
+def _strip_map(page: Page, result) -> None:
+    """The strip's GCPs and check points coloured by their level-2 horizontal error (m): per
+    point the largest over its measurements."""
+    strip, rows = result.strip, result.report.rows
+    obs, ground = strip.observations, strip.ground
+    where = dict(zip(ground.ids, np.asarray(ground.lonlath)[:, :2], strict=True))
+    errors = {"gcp": np.asarray(result.solution.gcp_error_level2_m),
+              "check": np.asarray(result.evaluation.check_error_level2_m)}  # fmt: skip
+    sets = {}
+    for role, err in errors.items():
+        worst: dict[str, float] = {}
+        measured = list(rows.get(role, []))
+        if len(measured) != len(err):  # (not the rows of these errors: drawn without them)
+            err = np.full((len(measured), 2), np.nan)
+        for i, e in zip(measured, err, strict=True):
+            p = obs.point_ids[i]
+            worst[p] = np.fmax(worst.get(p, np.nan), float(np.hypot(*e)))
+        ids = [p for p in worst if p in where]
+        sets[role] = (np.array([where[p] for p in ids]).reshape(-1, 2),
+                      np.array([worst[p] for p in ids]))  # fmt: skip
+    _points_map(page, sets, np.zeros((0, 2)), "GCPs and check points after level 2",
+                "GCPs (triangles) and check points (circles) of the strip, coloured by their "
+                "largest horizontal error after level 2 (m; estimate - surveyed).")  # fmt: skip
 
 
 def _scene_summary(page: Page, rep, names: Sequence[str], scene_rms: np.ndarray) -> None:
@@ -345,6 +386,7 @@ def _scene_summary(page: Page, rep, names: Sequence[str], scene_rms: np.ndarray)
     gcp = [i for i, r in enumerate(rep.scenes) if r.get("gcp")]
     for i in gcp:
         top.axvspan(i - 0.5, i + 0.5, color="#9edae5", alpha=0.4, lw=0)
+    top.set_yscale("log")  # direct: tens of metres; adjusted: decimetres
     top.set_ylabel("check RMS plan (m)")
     top.legend(title="stage", fontsize=9, loc="upper left", bbox_to_anchor=(1.01, 1.0))
     top.set_title("per sub-scene (shaded: sub-scenes with GCPs)")
@@ -363,12 +405,16 @@ def _scene_summary(page: Page, rep, names: Sequence[str], scene_rms: np.ndarray)
 
 
 def _pair_figure(page: Page, rep) -> None:
+    from matplotlib.ticker import MaxNLocator
+
     fig = new_figure(320)
     ax = fig.add_subplot()
     k = np.arange(len(rep.pairs))
     for st, colour in (("direct", "0.5"), ("level1", "#ff7f0e"), ("level2", "#2ca02c")):
         ax.plot(k, [p.get(st, {}).get("rms", np.nan) for p in rep.pairs], ".-", color=colour,
                 label=st)  # fmt: skip
+    ax.set_yscale("log")
+    ax.xaxis.set_major_locator(MaxNLocator(integer=True))
     ax.set_xlabel("adjacent pair (strip order)")
     ax.set_ylabel("tie gap RMS (m)")
     ax.legend(title="stage", fontsize=9)
