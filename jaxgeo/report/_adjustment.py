@@ -64,7 +64,8 @@ def _residual_figure(page: Page, name: str, xy, v, flagged, frame, caption_extra
     norm = np.hypot(v[:, 0], v[:, 1])
     typical = float(np.percentile(norm[~flagged], 90)) if np.any(~flagged) else 0.0
     typical = typical or (float(norm.max()) if norm.size else 1.0) or 1.0
-    typical = max(typical, float(norm.max(initial=0.0)) / 4.0)  # the longest: <= 24 % of it
+    longest = float(norm[~flagged].max(initial=0.0))
+    typical = max(typical, longest / 4.0)  # the longest not flagged: <= 24 % of the frame
     scale = 0.06 * max(width, height) / typical  # a typical vector: 6 % of the frame
     key = float(f"{typical:.1g}")
     aspect = height / width

@@ -11,6 +11,7 @@ import shutil
 import subprocess
 import sys
 
+import numpy as np
 import pytest
 import rasterio
 
@@ -40,6 +41,7 @@ def test_adjust_report_on_the_demo(tmp_path):
     assert code == 0 and str(out / "report.html") in data["written"]
     page = sections(out / "report.html")
     assert len(page.sections["Residuals per image"]) == 2 and not page.forbidden
+    assert all(red_pixels(src) == 0 for src in page.sections["Residuals per image"])
     # refused before any computation when the page exists (and nothing else is written)
     again = tmp_path / "again"
     again.mkdir()
@@ -112,3 +114,35 @@ def test_coregister_and_ortho_reports(scene):
     assert code == 0, data
     assert data["report"] == str(w / "ortho.report.html")
     assert len(sections(w / "ortho.report.html").sections["Quicklook"]) == 1
+
+
+def red_pixels(src: str) -> int:
+    """Pixels of the gross errors' red (#d62728) in a page's PNG figure."""
+    import base64
+
+    from PIL import Image
+
+    png = base64.b64decode(src.split(",", 1)[1])
+    rgb = np.asarray(Image.open(io.BytesIO(png)).convert("RGB"), dtype=int)
+    return int(np.sum(np.abs(rgb - (214, 39, 40)).sum(axis=-1) < 30))
+
+
+def test_adjust_report_marks_a_gross_error_in_red(tmp_path):
+    """One observation moved by 25 px: flagged by snooping (with its partner: the point has
+    two rays), counted in the table and drawn in red in both images' figures (the clean demo's
+    have no red: test_adjust_report_on_the_demo)."""
+    d = tmp_path / "in"
+    shutil.copytree(demo_dir(), d)
+    lines = (d / "observations.csv").read_text().splitlines()
+    header = lines[0].split(",")
+    row = lines[5].split(",")
+    row[header.index("x")] = repr(float(row[header.index("x")]) + 25.0)
+    lines[5] = ",".join(row)
+    (d / "observations.csv").write_text("\n".join(lines) + "\n")
+    out = tmp_path / "out"
+    code, data = run(*adjust_argv(d), "--report", "-o", str(out))
+    assert code == 0 and {b["id"] for b in data["blunders"]} == {row[0]}
+    text = (out / "report.html").read_text()
+    assert f"<td>observations flagged as gross errors</td><td>{len(data['blunders'])}</td>" in text
+    for src in sections(out / "report.html").sections["Residuals per image"]:
+        assert red_pixels(src) > 30  # the red arrow and its legend
