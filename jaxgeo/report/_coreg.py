@@ -30,7 +30,7 @@ def _reference_on(look, ref) -> np.ndarray:
         xx, yy = np.meshgrid(x, y)
         to_lonlat = pyproj.Transformer.from_crs(look.crs_wkt, "EPSG:4326", always_xy=True)
         lon, lat = to_lonlat.transform(xx, yy)
-        return np.asarray(ref(np.stack([lon, lat], axis=-1)), dtype=np.float64)
+        return np.asarray(ref.sample(np.stack([lon, lat], axis=-1)), dtype=np.float64)
     out = np.full((rows, cols), np.nan)
     with open_raster(ref) as r:
         reproject(r.read(1, masked=True).filled(np.nan).astype(np.float64), out,

@@ -67,3 +67,18 @@ def test_hillshade_lit_from_the_north_west():
     assert np.isclose(w, (0.5 + np.sqrt(0.5)) / np.sqrt(2.0))  # n . light, by hand
     facing_north = np.tile(np.arange(50.0)[:, None], (1, 50))  # rows go south: rises southwards
     assert hillshade(facing_north, 1.0).mean() > f
+
+
+def test_coregistration_page_with_a_dem_reference(pages, tmp_path):
+    """REF given as a DEM (read_dem: its height reference applied), as ``coregister
+    --dem-height/--geoid`` gives it: heights sampled per cell, NaN outside it (no error)."""
+    from jaxgeo.coreg import coregister
+    from jaxgeo.io import read_dem
+    from jaxgeo.report import write_coregistration_report
+
+    w = pages["coreg"].parent
+    ref = read_dem(w / "ref.tif")
+    result = coregister(w / "moved.tif", ref, tmp_path / "aligned.tif")
+    path = write_coregistration_report(result, w / "moved.tif", ref, tmp_path / "a.html")
+    assert len(sections(path).sections["DSM - REF before and after"]) == 2
+    assert "ref.tif" in path.read_text()
