@@ -37,7 +37,7 @@ _WHERE = {name: module for module, names in _EXPORTS.items() for name in names}
 # no function shadows a module of the package
 _SUBMODULES = (
     "geodesy", "rotations", "errors", "models", "lsq", "intersect", "io", "bundle", "strip",
-    "tiles", "ortho", "stereo", "coreg", "simulate", "cli",
+    "tiles", "ortho", "stereo", "coreg", "simulate", "report", "cli",
 )  # fmt: skip
 
 

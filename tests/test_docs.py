@@ -39,6 +39,7 @@ PUBLIC_PAGES = (
     "coreg",
     "simulate",
     "tiles",
+    "report",
 )
 
 

@@ -73,6 +73,7 @@ def register(sub) -> None:
     from ._adjustment_options import add_adjustment_options, add_jitter_options
     from ._common import add_command
     from ._inputs import add_image_options
+    from ._report_option import add_report
 
     parser = add_command(sub, "adjust", "bundle block adjustment of RPC images (bias "
                          "compensation)", __doc__, EXIT_CODES)  # fmt: skip
@@ -93,6 +94,7 @@ def register(sub) -> None:
         tie_height_sigma_m=10.0,
     )
     add_jitter_options(parser)
+    add_report(parser, "report.html in -o DIR")
     parser.add_argument("--copy-images", action="store_true", help="also copy each image into "
                         "--out beside its adjusted RPC (GDAL then opens the copy with the "
                         "adjusted model)")  # fmt: skip
@@ -162,6 +164,7 @@ def run(args: argparse.Namespace) -> int:
     from . import _adjustment_options as shared
     from ._common import note, print_json
     from ._inputs import dem_inputs
+    from ._report_option import report_target
 
     start = shared.Start("adjust", args)
     shared.check_adjustment_options(args)
@@ -175,6 +178,7 @@ def run(args: argparse.Namespace) -> int:
     if args.out:  # before any computation
         with shared.out_checked():
             check_out_dir(args.out, sources, inputs, overwrite=args.overwrite, **rpc)
+    page = report_target(args, inputs, folder=True)
     settings = AdjustSettings(
         bias_prior_shift_px=args.bias_prior_shift_px, bias_prior_matrix=args.bias_prior_matrix,
         jitter=jitter, tie_height=shared.tie_dem(args), tie_height_sigma_m=args.tie_height_sigma_m,
@@ -202,6 +206,11 @@ def run(args: argparse.Namespace) -> int:
             return start.write_failed(err, data)
         report = json.loads((pathlib.Path(args.out) / "report.json").read_text())
         data["rpc_files"] = report.get("rpc_files", {})  # per image: exact or refit + error
+    if page is not None:
+        from ..report import write_adjustment_report
+
+        start.say(f"writing {page}")
+        data["written"].append(str(write_adjustment_report(run, page, overwrite=args.overwrite)))
     data["exit_status"] = code
     if args.json:
         print_json(data)

@@ -44,6 +44,7 @@ OPTIONS = {
 def register(sub) -> None:
     from ._common import add_command, add_json, add_out, add_quiet
     from ._inputs import add_height_options
+    from ._report_option import add_report
 
     parser = add_command(
         sub,
@@ -55,6 +56,7 @@ def register(sub) -> None:
     parser.add_argument("dsm", metavar="DSM", help="DSM to align (band 1; projected CRS, m)")
     parser.add_argument("ref", metavar="REF", help="reference DEM (band 1; any CRS, heights m)")
     add_out(parser, "OUT", "the shifted DSM (GeoTIFF, float32, on the DSM's grid)")
+    add_report(parser, "OUT.report.html beside OUT: DSM - REF before and after")
     parser.add_argument("--diff", metavar="DH",
                         help="also write the height difference after the alignment, shifted "
                         "DSM - REF (GeoTIFF, float32, m, on the DSM's grid, NaN where either "
@@ -116,10 +118,12 @@ def run(args: argparse.Namespace) -> int:
         print_json,
     )
     from ._inputs import check_height_options
+    from ._report_option import report_target
 
     check_height_options(args)
     inputs = [args.dsm, args.ref] + ([args.mask] if args.mask else [])
     guard_outputs([args.out] + ([args.diff] if args.diff else []), inputs, args.overwrite)
+    page = report_target(args, inputs, folder=False)
     try:
         settings = NuthKaab(
             max_iterations=args.max_iterations,
@@ -150,9 +154,14 @@ def run(args: argparse.Namespace) -> int:
         )  # fmt: skip
     for w in ours(caught):
         print(f"jaxgeo coregister: warning: {_one_line(w.message)}", file=sys.stderr)
+    if page is not None:
+        from ..report import write_coregistration_report
+
+        write_coregistration_report(result, args.dsm, ref, page, overwrite=args.overwrite)
     dx, dy, dz = result.shift_m
     if args.json:
-        print_json({"dsm": args.dsm, "ref": args.ref, "mask": args.mask, **result.as_dict()})
+        print_json({"dsm": args.dsm, "ref": args.ref, "mask": args.mask, **result.as_dict(),
+                    **({"report": str(page)} if page else {})})  # fmt: skip
     else:
         state = "converged" if result.converged else "NOT converged"
         print(f"shift added to the DSM: dx {dx:+.3f} m (east), dy {dy:+.3f} m (north), "
@@ -172,5 +181,5 @@ def run(args: argparse.Namespace) -> int:
             print(f"height difference DSM - REF over {where} with both (no mask):")
             print(_table(result.diff))
             print(f"wrote {result.diff.output}")
-        print(f"wrote {result.output}")
+        print(f"wrote {result.output}" + (f"\nwrote {page}" if page else ""))
     return EXIT_OK if result.converged else EXIT_NOT_CONVERGED

@@ -50,6 +50,7 @@ from ._inputs import (
     open_dem,
     open_images,
 )
+from ._report_option import add_report, report_target
 from ._tile_options import add_tile_options, check_tile_options, tiles_kept
 
 MAX_CELLS = 400_000_000
@@ -101,6 +102,7 @@ def register(sub) -> None:
     add_quiet(parser)
     add_json(parser)
     add_out(parser, "DSM.tif", "the DSM GeoTIFF to write")
+    add_report(parser, "DSM.report.html beside DSM.tif: hillshade, filled cells, height_sigma")
     parser.set_defaults(func=run)
 
 
@@ -196,6 +198,7 @@ def _run(args: argparse.Namespace) -> int:
             guard_outputs([], inputs, True)  # the folder is created; its files are new names
         if args.roi is not None:
             settings = dataclasses.replace(settings, roi=check_roi(args.roi, images[0]))
+        page = None if args.plan else report_target(args, inputs, folder=False)
         tiles = TileSettings(workers=args.workers, scheduler=args.scheduler,
                              retries=args.retries, resume=args.resume,
                              progress=not args.quiet, plan=args.plan)  # fmt: skip
@@ -219,8 +222,12 @@ def _run(args: argparse.Namespace) -> int:
     result = report.as_dict()
     if not report.tiled:  # the output as named
         result["output"] = str(args.out)
+    if page is not None:
+        from ..report import write_dsm_report
+
+        result["report"] = str(write_dsm_report(args.out, page, report, overwrite=args.overwrite))
     if args.json:
         print_json(result)
     else:
-        print(report.summary(str(args.out)))
+        print(report.summary(str(args.out)) + (f"\nwrote {page}" if page else ""))
     return 0

@@ -29,6 +29,7 @@ import warnings
 
 from ._common import add_command, add_json, add_out, add_quiet, ours
 from ._inputs import add_dem_fill_options, add_image_options
+from ._report_option import add_report, report_target
 from ._tile_options import add_tile_options
 
 
@@ -118,6 +119,7 @@ def register(sub) -> None:
     )
     add_tile_options(parser, 1024, "output pixels")
     add_out(parser, "OUT.tif", "the orthoimage (a COG; written only once complete)")
+    add_report(parser, "OUT.report.html beside OUT.tif: a quicklook")
     add_quiet(parser)
     add_json(parser)
     parser.set_defaults(func=run)
@@ -186,6 +188,7 @@ def _run(args: argparse.Namespace) -> int:
     dem = open_dem(args)  # its height reference noted
     check_tile_options(args, _inputs(image, dem, args.like), 64)
     settings, tiles = _settings(args)
+    page = None if args.plan else report_target(args, _inputs(image, dem, args.like), False)
     if args.plan:
         setup = plan_ortho(image, dem, args.out, settings, overwrite=True)
         write_plan(setup.plan, args.plan, overwrite=args.overwrite)
@@ -203,9 +206,14 @@ def _run(args: argparse.Namespace) -> int:
     except (KeyboardInterrupt, TileError):
         tiles_kept(args, "ortho")
         raise
+    if page is not None:
+        from jaxgeo.report import write_ortho_report
+
+        write_ortho_report(report.path, page, report, overwrite=args.overwrite)
     if args.json:
-        print_json({k: (str(v) if isinstance(v, pathlib.Path) else v)
-                    for k, v in dataclasses.asdict(report).items()})  # fmt: skip
+        print_json({**{k: (str(v) if isinstance(v, pathlib.Path) else v)
+                       for k, v in dataclasses.asdict(report).items()},
+                    **({"report": str(page)} if page else {})})  # fmt: skip
         return 0
     where = (f"{report.workers} worker(s) at {report.scheduler}" if report.scheduler
              else "this process")  # fmt: skip
@@ -220,4 +228,6 @@ def _run(args: argparse.Namespace) -> int:
               "value (--res to choose another)")  # fmt: skip
     if report.occluded_fraction is not None:
         print(f"occluded: {100 * report.occluded_fraction:.2f}% of the output")
+    if page is not None:
+        print(f"wrote {page}")
     return 0

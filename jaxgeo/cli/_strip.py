@@ -77,6 +77,7 @@ def register(sub) -> None:
     from ..strip.internal import DEGREES
     from ._adjustment_options import add_adjustment_options
     from ._common import add_command
+    from ._report_option import add_report
 
     ties0, refit0 = TieConfig(), RefitConfig()
     parser = add_command(sub, "strip", "two-level full-strip adjustment of a Carto-2S-style "
@@ -110,6 +111,7 @@ def register(sub) -> None:
     parser.add_argument("--rpc-grid", type=int, nargs=3, default=refit0.grid,
                         metavar=("NX", "NY", "NH"), help="RPC refit grid of -o/--out: columns, "
                         "rows, height layers (default %(default)s)")  # fmt: skip
+    add_report(parser, "report.html in -o DIR")
     parser.set_defaults(func=run)
 
 
@@ -155,6 +157,7 @@ def _run(args: argparse.Namespace) -> int:
     from . import CommandError
     from . import _adjustment_options as shared
     from ._common import print_json
+    from ._report_option import report_target
 
     start = shared.Start("strip", args)
     if args.tie_height is not None and args.dem is not None:
@@ -164,6 +167,7 @@ def _run(args: argparse.Namespace) -> int:
     outputs = (
         library.StripOutputs(args.out, args.rpc_format, args.overwrite, refit) if args.out else None
     )
+    page = report_target(args, [args.strip], folder=True)
     if args.dem is not None:
         config, _ = strip_config(args, shared.tie_dem(args))
     serious = (library.GCPDistributionWarning, library.UniversalCorrectionWarning,
@@ -187,6 +191,11 @@ def _run(args: argparse.Namespace) -> int:
         data = run.write()
     except (OSError, ValueError) as err:
         return start.write_failed(err, run.summary())
+    if page is not None:
+        from ..report import write_strip_report
+
+        start.say(f"writing {page}")
+        data["written"].append(str(write_strip_report(run, page, overwrite=args.overwrite)))
     worst, px = worst_refit(data)
     if px > REFIT_WARN_PX:
         start.warn(f"the refitted RPC of {worst} differs from its adjusted model by up to "
