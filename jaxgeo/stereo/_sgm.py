@@ -91,11 +91,15 @@ def cost_volume(census_l, census_r, disp_min, n_used, n_disp: int, cols=None) ->
     width = census_l.shape[1]
     cols = width if cols is None else cols
     x = jnp.arange(width)
+    # the census once, not fused into (recomputed for) every disparity
+    census_l, census_r = jax.lax.optimization_barrier((census_l, census_r))
+    # the right image's columns x + disp_min + k as slices of it padded by a full width
+    padded = jnp.pad(census_r, ((0, 0), (width, width)))
+    start = jnp.clip(width + disp_min, 0, 2 * width)
 
     def one(k):
-        xr = x + disp_min + k
-        inside = (xr >= 0) & (xr < cols)
-        right = census_r[:, jnp.clip(xr, 0, width - 1)]
+        inside = (x + disp_min + k >= 0) & (x + disp_min + k < cols)
+        right = jax.lax.dynamic_slice_in_dim(padded, start + k, width, axis=1)
         c = jax.lax.population_count(census_l ^ right).astype(jnp.uint8)
         c = jnp.where(inside[None, :], c, jnp.uint8(CENSUS_BITS))
         return jnp.where(k < n_used, c, jnp.uint8(UNUSED_COST))
@@ -127,41 +131,52 @@ def _shift(a, shift, axis=0):
     return jnp.moveaxis(out, 0, axis)
 
 
-def _aggregate_rows(cost, image, shifts, reverse, p1, p2):
-    """The summed ``L_r`` (uint16 ``(H, W, D)``) of the paths that go down the rows (up with
-    ``reverse``), each moving ``shifts[i]`` columns per row (0: vertical; +-1: diagonal)."""
+def _aggregate_rows(cost, image, shifts, p1, p2):
+    """The summed ``L_r`` (uint16 ``(H, W, D)``) of the paths along the rows, down and up in
+    one scan (half the sequential steps), each moving ``shifts[i]`` columns per row (0:
+    vertical; +-1: diagonal)."""
     img = image.astype(jnp.float32)
-    # the intensity one step back along each path, per row: (H, n_paths, W)
+    # the intensity one step back along each path, per row: (H, n_paths, W), down and up
     prev_img = jnp.stack([_shift(img, s, axis=1) for s in shifts], axis=1)
-    if reverse:
-        back = jnp.concatenate([prev_img[1:], prev_img[-1:]])
-    else:
-        back = jnp.concatenate([prev_img[:1], prev_img[:-1]])
-    steps = jnp.abs(img[:, None, :] - back)
+    back_down = jnp.concatenate([prev_img[:1], prev_img[:-1]])
+    back_up = jnp.concatenate([prev_img[1:], prev_img[-1:]])
+    steps = jnp.stack([jnp.abs(img[:, None, :] - back_down),
+                       jnp.abs(img[:, None, :] - back_up)[::-1]], axis=1)  # fmt: skip
+    n = len(shifts)
 
     def step(carry, row):
-        c, g = row
-        prev = jnp.stack([_shift(carry[i], s) for i, s in enumerate(shifts)])
-        new = _path_step(prev, c[None], g, p1, p2)
-        return new, jnp.sum(new, axis=0, dtype=jnp.uint16)
+        c, g = row  # (2, W, D) uint8: this row going down and its mirror going up
+        prev = jnp.stack([_shift(carry[:, i], s, axis=1) for i, s in enumerate(shifts)], 1)
+        new = _path_step(prev, c[:, None].astype(jnp.uint16), g, p1, p2)
+        return new, jnp.sum(new, axis=1, dtype=jnp.uint16)
 
     rows, cols, n_disp = cost.shape
-    init = jnp.zeros((len(shifts), cols, n_disp), jnp.uint16)
-    _, total = jax.lax.scan(step, init, (cost.astype(jnp.uint16), steps), reverse=reverse)
-    return total
+    init = jnp.zeros((2, n, cols, n_disp), jnp.uint16)
+    _, total = jax.lax.scan(step, init, (jnp.stack([cost, cost[::-1]], axis=1), steps))
+    return total[:, 0] + total[::-1, 1]
 
 
 def aggregate(cost, image, p1, p2, n_paths: int = 8) -> jax.Array:
     """Sum over ``n_paths`` (8: the 4 axes and 4 diagonals; 4: the axes) of the path costs
     ``L_r`` (uint16 ``(H, W, D)``) of cost volume ``cost`` of uint8 ``image`` (the left)."""
-    diag = (-1, 0, 1) if n_paths == 8 else (0,)
-    total = _aggregate_rows(cost, image, diag, False, p1, p2)
-    total = total + _aggregate_rows(cost, image, diag, True, p1, p2)
+    total = _aggregate_rows(cost, image, (-1, 0, 1) if n_paths == 8 else (0,), p1, p2)
     # horizontal paths: the same scans over the transposed volume
-    cost_t, image_t = jnp.swapaxes(cost, 0, 1), image.T
-    across = _aggregate_rows(cost_t, image_t, (0,), False, p1, p2)
-    across = across + _aggregate_rows(cost_t, image_t, (0,), True, p1, p2)
+    across = _aggregate_rows(jnp.swapaxes(cost, 0, 1), image.T, (0,), p1, p2)
     return total + jnp.swapaxes(across, 0, 1)
+
+
+def _box(volume, size):
+    """Sums of ``volume`` ``(H, W, D)`` over ``size x size`` squares (zeros outside), as
+    separable shifted sums (XLA's ``reduce_window`` is slow on a CPU)."""
+    half = size // 2
+    for axis in (0, 1):
+        n = volume.shape[axis]
+        pad = [(0, 0)] * volume.ndim
+        pad[axis] = (half, half)
+        padded = jnp.pad(volume, pad)
+        parts = [jax.lax.slice_in_dim(padded, i, i + n, axis=axis) for i in range(size)]
+        volume = functools.reduce(jnp.add, parts)
+    return volume
 
 
 def _equiangular(total, k, n_disp):
@@ -204,9 +219,7 @@ def _match(left8, right8, disp_min, n_used, p1, p2, checks, n_disp, n_paths):
     right_k = jnp.argmin(jnp.where(inside[None], gathered, big), axis=-1)
     # sub-pixel: the aggregated costs lock to whole pixels (their smoothness terms flatten the
     # minimum: a 0.4 px shift reads ~0.2 px); the window sums of the raw costs do not
-    window = (SUBPIXEL_WINDOW, SUBPIXEL_WINDOW, 1)
-    local = jax.lax.reduce_window(cost.astype(jnp.uint16), jnp.uint16(0), jax.lax.add, window,
-                                  (1, 1, 1), "SAME")  # fmt: skip
+    local = _box(cost.astype(jnp.uint16), SUBPIXEL_WINDOW)
     disp = (disp_min + k).astype(jnp.float32) + _equiangular(local, k, n_disp)
     # as OpenCV's: consistent when the right pixel below or above x + d chooses d back
     consistent = jnp.zeros_like(unique)
@@ -227,8 +240,7 @@ def census_sgm(left8, right8, disp_min, disp_max, p1, p2, checks=(10, 1), n_path
     bits; ``p2`` adaptive to the intensity step), equiangular sub-pixel fit, ``checks`` =
     ``(uniqueness_ratio %, disp12_max_diff px)`` as OpenCV's. Runs on JAX's default device; one
     program per :func:`bucket`."""
-    left8, right8 = np.asarray(left8, np.uint8), np.asarray(right8, np.uint8)
-    if left8.shape != right8.shape or left8.ndim != 2:
+    if np.shape(left8) != np.shape(right8) or np.ndim(left8) != 2:
         raise ValueError(f"census_sgm: images of shapes {left8.shape} and {right8.shape}; "
                          "expected two 2-D images of one shape")  # fmt: skip
     if n_paths not in (4, 8):
@@ -236,12 +248,14 @@ def census_sgm(left8, right8, disp_min, disp_max, p1, p2, checks=(10, 1), n_path
     lo, hi = int(np.floor(disp_min)), int(np.ceil(disp_max))
     if hi < lo:
         raise ValueError(f"census_sgm: empty disparity range [{disp_min:g}, {disp_max:g}]")
-    rows, cols = left8.shape
+    rows, cols = np.shape(left8)
     rows_b, cols_b, n_b = bucket(rows, cols, hi - lo + 1)
     pad = ((0, rows_b - rows), (0, cols_b - cols))
-    left_b, right_b = np.pad(left8, pad, mode="edge"), np.pad(right8, pad, mode="edge")
+    # on the device (where the images are already, or the default one)
+    left_b, right_b = (jnp.pad(jnp.asarray(a, jnp.uint8), pad, mode="edge")
+                       for a in (left8, right8))  # fmt: skip
     disp = _match(
-        jnp.asarray(left_b), jnp.asarray(right_b), jnp.int32(lo),
+        left_b, right_b, jnp.int32(lo),
         (jnp.int32(hi - lo + 1), jnp.int32(cols)),
         jnp.uint16(p1), jnp.float32(p2), tuple(jnp.int32(c) for c in checks), n_b, n_paths,
     )  # fmt: skip
