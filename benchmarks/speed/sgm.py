@@ -102,12 +102,17 @@ def main() -> None:
                 "median_abs_error_opencv_px": float(np.nanmedian(np.abs(d_cv[core] - shift))),
             }
         )
+    summary = {}  # the headline numbers flat, one key per disparity count (the README's table)
+    for case in cases:
+        for key in ("jax_mpx_per_s", "opencv_mpx_per_s", "opencv_over_jax_time", "jax_first_s"):
+            summary[f"{key}_d{case['disparities']}"] = round(case[key], 4)
     emit(
         {
             "benchmark": "sgm_matcher",
             "tile": [args.rows, args.cols],
             "paths": args.paths,
             "device": str(jax.devices()[0]),
+            **summary,
             "cases": cases,
         }
     )
