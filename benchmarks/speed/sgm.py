@@ -10,8 +10,9 @@ matcher runs ``sgm_disparity`` with the default :class:`jaxgeo.stereo.SGMSetting
 left-right check and speckle filter included, as in a DSM) over ``D`` disparities. The JAX
 matcher runs on JAX's default device: the images are put there first (``jax.device_put``) and
 every timed call waits on its result (``block_until_ready``; the disparities come back to the
-host as numpy, as in the DSM chain); its first call (tracing and compilation) is reported
-apart as ``jax_first_s``, not in the rate. Prints one JSON object: per ``D``, Mpx/s of each
+host as numpy, as in the DSM chain); its first call (tracing, and XLA's compilation unless
+jaxgeo's persistent compilation cache holds the program) is reported apart as ``jax_first_s``,
+not in the rate. Prints one JSON object: per ``D``, Mpx/s of each
 matcher (tile pixels / best time) and their ratio, the share of pixels within 1 px of each
 other, each matcher's fill and median error against the known shift. The same file runs on a
 GPU unchanged.
