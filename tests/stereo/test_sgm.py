@@ -174,3 +174,24 @@ def test_dsm_matcher_jax_as_accurate_as_opencv(tmp_path):
     assert cv["n"] > 20_000 and abs(jx["filled"] - cv["filled"]) < 0.02, err
     assert jx["nmad_m"] <= 1.1 * cv["nmad_m"] and jx["rms_m"] <= 1.1 * cv["rms_m"], err
     assert abs(jx["median_m"]) < 0.1, err
+
+
+def test_agrees_with_opencv_on_a_real_pleiades_pair(shared_data):
+    """The s2p triplet's img_02 / img_01 (Pleiades, a 350 px ROI), rectified by the pipeline;
+    measured: fill 0.991 (OpenCV) and 0.988 (JAX), 98 % within 1 px."""
+    from jaxgeo.io import read_rpc
+
+    folder = shared_data / "s2p_triplet"
+    paths = [folder / "img_02.tif", folder / "img_01.tif"]
+    settings = DSMSettings(roi=(300, 300, 350, 350), band_rows=None)
+    pair = stereo_pair([read_rpc(p) for p in paths], paths, settings, keep=True)
+    left, right = pair.intermediates["left"], pair.intermediates["right"]
+    left8, right8 = to_uint8(left, stretch_limits(left)), to_uint8(right, stretch_limits(right))
+    valid = np.isfinite(left)
+    drange = pair.stats["disparity_range_px"]
+    cv = sgm_disparity(left8, right8, *drange, SGMSettings(matcher="opencv"), valid=valid)
+    jx = sgm_disparity(left8, right8, *drange, SGMSettings(matcher="jax"), valid=valid)
+    fill_cv, fill_jax = np.isfinite(cv)[valid].mean(), np.isfinite(jx)[valid].mean()
+    both = np.isfinite(cv) & np.isfinite(jx)
+    assert fill_cv > 0.9 and abs(fill_jax - fill_cv) <= 0.02, (fill_cv, fill_jax)
+    assert np.mean(np.abs(cv - jx)[both] <= 1.0) >= 0.95
