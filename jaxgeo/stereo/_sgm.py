@@ -165,18 +165,20 @@ def aggregate(cost, image, p1, p2, n_paths: int = 8) -> jax.Array:
     return total + jnp.swapaxes(across, 0, 1)
 
 
-def _box(volume, size):
-    """Sums of ``volume`` ``(H, W, D)`` over ``size x size`` squares (zeros outside), as
-    separable shifted sums (XLA's ``reduce_window`` is slow on a CPU)."""
+def _window_costs(cost, k, size):
+    """``(H, W, 3)``: the raw costs at disparities ``k - 1, k, k + 1`` of each pixel (``k``
+    ``(H, W)``) summed over the ``size x size`` square around it (zeros outside; the 3 x size**2
+    gathers, not a box over every disparity)."""
     half = size // 2
-    for axis in (0, 1):
-        n = volume.shape[axis]
-        pad = [(0, 0)] * volume.ndim
-        pad[axis] = (half, half)
-        padded = jnp.pad(volume, pad)
-        parts = [jax.lax.slice_in_dim(padded, i, i + n, axis=axis) for i in range(size)]
-        volume = functools.reduce(jnp.add, parts)
-    return volume
+    rows, cols, n_disp = cost.shape
+    padded = jnp.pad(cost, ((half, half), (half, half), (0, 0)))
+    ks = jnp.clip(k[..., None] + jnp.arange(-1, 2), 0, n_disp - 1)  # (H, W, 3)
+    total = jnp.zeros((rows, cols, 3), jnp.uint16)
+    for dy in range(size):
+        for dx in range(size):
+            part = jax.lax.slice(padded, (dy, dx, 0), (dy + rows, dx + cols, n_disp))
+            total = total + jnp.take_along_axis(part, ks, axis=-1).astype(jnp.uint16)
+    return total
 
 
 def _equiangular(total, k, n_disp):
@@ -230,8 +232,9 @@ def _match(cost, left8, disp_min, n_used, p1, p2, checks, n_paths):
     right_k = jnp.argmin(jnp.where(inside[None], gathered, big), axis=-1)
     # sub-pixel: the aggregated costs lock to whole pixels (their smoothness terms flatten the
     # minimum: a 0.4 px shift reads ~0.2 px); the window sums of the raw costs do not
-    local = _box(cost.astype(jnp.uint16), SUBPIXEL_WINDOW)
-    disp = (disp_min + k).astype(jnp.float32) + _equiangular(local, k, n_disp)
+    local = _window_costs(cost, k, SUBPIXEL_WINDOW)
+    disp = (disp_min + k).astype(jnp.float32) + _equiangular(local, jnp.ones_like(k), 3)
+    disp = jnp.where((k > 0) & (k < n_disp - 1), disp, (disp_min + k).astype(jnp.float32))
     # as OpenCV's: consistent when the right pixel below or above x + d chooses d back
     consistent = jnp.zeros_like(unique)
     for xr_f in (jnp.floor(x[None, :] + disp), jnp.ceil(x[None, :] + disp)):
