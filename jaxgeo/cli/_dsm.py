@@ -3,7 +3,8 @@
     jaxgeo dsm IMG1 IMG2 [IMG3 ...] [--model IMG=FILE ...] [--image-origin IMG=COL,ROW ...]
                [--roi X Y W H] [--res M] [--crs EPSG:n] [--like RASTER] [--no-tap]
                [--triangulation {intersect,los_midpoint}]
-               [--no-register] [--band-rows N] [--orientation adjusted_models.json]
+               [--no-register] [--matcher {jax,opencv}] [--band-rows N]
+               [--orientation adjusted_models.json]
                [--keep DIR] [--quiet] [--json] -o dsm.tif [--overwrite]
 
 IMG1 is the reference: each pair (IMG1, IMGi) is rectified, matched densely (SGM) and
@@ -20,7 +21,8 @@ zone (a projected CRS in metres; a geographic CRS is refused); the grid's edges 
 from the footprint's corner); ``--like RASTER`` takes another raster's grid (CRS, transform,
 shape; not with --res, --crs, --no-tap). ``--keep DIR`` writes each pair's
 intermediate products. Dense matching runs over bands of ``--band-rows`` epipolar rows (default
-512), so its memory follows the band, not the image.
+512), so its memory follows the band, not the image; ``--matcher`` picks OpenCV's SGBM (the
+default on a CPU) or the census SGM in JAX (the default where JAX's device is a GPU or TPU).
 Everything given is checked before any computation: the images and
 their models, the ROI, the CRS, the output (never an input) and the DSM's size.
 """
@@ -83,6 +85,9 @@ def register(sub) -> None:
     arg("--no-register", action="store_true",
         help="with 3+ images, keep each pair's height offset (default: removed; see the "
         "docs)")  # fmt: skip
+    arg("--matcher", choices=("jax", "opencv"), default=None,
+        help="dense matcher: census SGM in JAX (on JAX's default device) or OpenCV's SGBM "
+        "(default: jax when that device is a GPU or TPU, else opencv)")  # fmt: skip
     arg("--band-rows", type=int, default=512, metavar="N",
         help="epipolar rows per band of dense matching (default 512; memory follows "
         "it)")  # fmt: skip
@@ -158,7 +163,7 @@ def run(args: argparse.Namespace) -> int:
 def _run(args: argparse.Namespace) -> int:
     import dataclasses
 
-    from ..stereo import DSMSettings, DSMSettingsError, make_dsm
+    from ..stereo import DSMSettings, DSMSettingsError, SGMSettings, make_dsm
     from ..tiles import TileError, TileSettings
     from . import CommandError
 
@@ -176,7 +181,7 @@ def _run(args: argparse.Namespace) -> int:
             band_rows=args.band_rows, max_hole_m=args.max_hole,
             triangulation=args.triangulation, register=not args.no_register, keep=args.keep,
             heights=tuple(args.heights) if args.heights else None, tile_px=args.tile,
-            max_cells=args.max_cells,
+            max_cells=args.max_cells, sgm=SGMSettings(matcher=args.matcher),
         )  # fmt: skip
         check_dem_options(args)
         settings = dataclasses.replace(settings, epsg=output_epsg(args.crs))

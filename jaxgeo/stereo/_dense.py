@@ -76,11 +76,26 @@ def resample_epipolar(
     return np.where(inside, out, np.nan).astype(np.float32)
 
 
+MATCHERS = ("jax", "opencv")
+"""The dense matchers: the census SGM in JAX (:mod:`._sgm`) and OpenCV's StereoSGBM."""
+
+
+def default_matcher() -> str:
+    """The matcher of ``SGMSettings(matcher=None)``: ``jax`` when JAX's default device is a GPU
+    or TPU, else ``opencv`` (on a CPU, OpenCV's SGBM is the faster)."""
+    import jax
+
+    return "opencv" if jax.default_backend() == "cpu" else "jax"
+
+
 @dataclass(frozen=True)
 class SGMSettings:
-    """StereoSGBM settings (OpenCV names): block size, smoothness ``P1 = p1 * block**2`` and
-    ``P2 = p2 * block**2``, uniqueness ratio (%), left-right tolerance ``disp12_max_diff`` px,
-    speckle filter (window px, range px)."""
+    """Dense matcher settings. ``matcher``: ``jax``, ``opencv`` or ``None`` (by device:
+    :func:`default_matcher`). OpenCV's StereoSGBM (OpenCV names): block size, smoothness
+    ``P1 = p1 * block**2`` and ``P2 = p2 * block**2``; the JAX census matcher: ``census_p1``,
+    ``census_p2`` (census bits of 48; ``P2`` falls at intensity edges) over ``paths`` (8 or 4)
+    directions. Both: uniqueness ratio (%), left-right tolerance ``disp12_max_diff`` px, speckle
+    filter (window px, range px)."""
 
     block_size: int = 5
     p1: int = 8
@@ -92,9 +107,22 @@ class SGMSettings:
     refine_window: int = 9
     """Window (px) of the sub-pixel refinement (:func:`refine_disparity`); 0: OpenCV's
     disparities as they are (parabola fit, locked to whole pixels)."""
+    matcher: str | None = None
+    census_p1: int = 16
+    census_p2: int = 160
+    paths: int = 8
+
+    def __post_init__(self):
+        if self.matcher is not None and self.matcher not in MATCHERS:
+            raise ValueError(f"matcher {self.matcher!r}: expected one of {MATCHERS} (or None: "
+                             "by device)")  # fmt: skip
+        if self.paths not in (4, 8):
+            raise ValueError(f"paths {self.paths}: expected 8 or 4")
 
 
 DEFAULT_SGM = SGMSettings()
+SPECKLE_NONE = -32768
+"""No disparity, for OpenCV's speckle filter (int16, 1/16 px)."""
 
 
 def sgm_disparity(
@@ -106,11 +134,29 @@ def sgm_disparity(
     valid: np.ndarray | None = None,
 ) -> np.ndarray:
     """Disparity ``d`` (float32, NaN = no match) of two uint8 epipolar images in the range
-    ``[disp_min, disp_max]`` (shareloc convention, module docstring), with OpenCV's left-right
-    check (``disp12_max_diff``), uniqueness and speckle filters."""
+    ``[disp_min, disp_max]`` (shareloc convention, module docstring), with a left-right check
+    (``disp12_max_diff``), uniqueness and speckle filters, by ``settings.matcher``: OpenCV's
+    StereoSGBM (3-way) or the census SGM in JAX (:func:`~._sgm.census_sgm`, on JAX's default
+    device; its speckle filter is OpenCV's, on the host)."""
     import cv2
 
     settings = DEFAULT_SGM if settings is None else settings
+    if (settings.matcher or default_matcher()) == "jax":
+        from ._sgm import census_sgm
+
+        checks = (settings.uniqueness_ratio, settings.disp12_max_diff)
+        disp = census_sgm(left8, right8, disp_min, disp_max, settings.census_p1,
+                          settings.census_p2, checks, settings.paths)  # fmt: skip
+        disp = disp.astype(np.float32)
+        if settings.speckle_window > 0:  # OpenCV's own way: 1/16 px in int16, in place
+            fixed = np.where(np.isfinite(disp), np.rint(16 * np.nan_to_num(disp)), SPECKLE_NONE)
+            fixed = np.clip(fixed, SPECKLE_NONE, 32767).astype(np.int16)
+            cv2.filterSpeckles(fixed, SPECKLE_NONE, settings.speckle_window,
+                               16 * settings.speckle_range)  # fmt: skip
+            disp[fixed == SPECKLE_NONE] = np.nan
+        if valid is not None:
+            disp[~valid] = np.nan
+        return disp
     # d = -d_cv: d in [dmin, dmax] <=> d_cv in [-dmax, -dmin]
     min_cv = int(np.floor(-disp_max))
     num = int(np.ceil((-disp_min - min_cv + 1) / 16.0)) * 16
