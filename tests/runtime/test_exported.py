@@ -16,6 +16,7 @@ import jax.numpy as jnp
 import numpy as np
 import pytest
 
+from jaxgeo._runtime import executables as _executables
 from jaxgeo._runtime import exported as _exported
 from jaxgeo.lsq import RESULTS
 
@@ -60,6 +61,42 @@ def test_same_results_and_traced_once_across_loads(cache):
     _exported.call(fn, x, 3.0, label="a")
     _exported.call(fn, x[:3], 2.0, label="a")
     assert len(list(cache.glob("*.jaxexport"))) == 3
+
+
+def _solve3(a, b):
+    return jnp.linalg.solve(a, b)  # a LAPACK kernel on a CPU (a custom call)
+
+
+def test_a_new_process_runs_the_kept_executable_without_lowering(cache, monkeypatch):
+    """On a CPU the compiled executable is kept beside the program: a new process loads and runs
+    it (no lowering, no compilation: jax's LAPACK set-up, an import of scipy.linalg, is not
+    made either), bit for bit; a damaged one is compiled again and rewritten; a program with a
+    custom call (a LAPACK kernel, which needs that set-up) keeps none."""
+    monkeypatch.setattr(_exported, "_runners", {})
+    compiled = []
+    real_compile = _exported._compile
+    monkeypatch.setattr(
+        _exported, "_compile", lambda e, *a: compiled.append(e.fun_name) or real_compile(e, *a)
+    )
+    x = np.linspace(0.0, 3.0, 7)
+    first = _exported.call(fn, x, 2.0)
+    (exe,) = cache.glob(f"*{_executables.SUFFIX}")
+    assert len(compiled) == 1
+    _exported._loaded.clear()  # as a new process
+    _exported._runners.clear()
+    again = _exported.call(fn, x, 2.0)
+    assert len(compiled) == 1 and TRACES == ["fn"]  # neither traced nor compiled
+    np.testing.assert_array_equal(again.value, first.value)
+    assert again.result == first.result and again.label == "fn"
+    exe.write_bytes(b"not an executable")
+    _exported._runners.clear()
+    third = _exported.call(fn, x, 2.0)
+    assert len(compiled) == 2 and exe.stat().st_size > 100  # compiled again, rewritten
+    np.testing.assert_array_equal(third.value, first.value)
+    a = np.array([[2.0, 1.0, 0.0], [1.0, 3.0, 1.0], [0.0, 1.0, 4.0]])
+    np.testing.assert_allclose(_exported.call(_solve3, a, np.ones(3)) @ a.T, np.ones(3))
+    assert len(list(cache.glob(f"*{_exported.SUFFIX}"))) == 2
+    assert list(cache.glob(f"*{_executables.SUFFIX}")) == [exe]
 
 
 def test_damaged_file_is_traced_again(cache):
