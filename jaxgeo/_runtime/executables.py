@@ -8,6 +8,13 @@ compilation cache. :func:`keep` writes the executable itself
 (:func:`jax.experimental.serialize_executable.serialize`) beside the program once it is
 compiled; :func:`load` gives it back to a later process, which runs it at once.
 
+An executable is kept only when this process compiled it, and only once a copy read back from
+its file has run on the program's first inputs and given the same outputs, bit for bit: XLA's
+CPU executables do not always survive serialization -- one that came out of jax's compilation
+cache, serialized again, ran into ``NOT_FOUND: Function slice_bitcast_fusion.9 not found`` in
+the next process (jaxlib 0.10.2). A kept executable that still fails its first run in a process
+is removed, and the program lowered and compiled as without it (:func:`first_run`).
+
 Its file name (``<sha256>.xlaexe``) holds the program's key, the device (id and kind), the
 jaxlib platform version and the CPU model with its instruction set extensions: a cache shared
 between machines never runs an executable built for another CPU. Not kept: programs with custom
@@ -25,11 +32,39 @@ import logging
 import os
 import pickle
 import platform
+import threading
+from collections.abc import Callable
 from pathlib import Path
+
+import numpy as np
 
 SUFFIX = ".xlaexe"
 
 _log = logging.getLogger(__name__)
+_hits = threading.local()
+_listening = threading.Lock()
+
+
+def _on_event(event: str, **kwargs) -> None:
+    if event == "/jax/compilation_cache/cache_hits":  # called in the compiling thread
+        _hits.count = getattr(_hits, "count", 0) + 1
+
+
+@functools.cache
+def _listen() -> None:
+    import jax
+
+    jax.monitoring.register_event_listener(_on_event)
+
+
+def compile_here(compile: Callable[[], object]) -> tuple[object, bool]:
+    """``compile()`` (a ``jax.stages.Compiled``), and whether XLA compiled it in this call (not
+    read from jax's compilation cache, whose executables, serialized again, may not run)."""
+    with _listening:
+        _listen()
+    before = getattr(_hits, "count", 0)
+    compiled = compile()
+    return compiled, getattr(_hits, "count", 0) == before
 
 
 @functools.cache
@@ -76,20 +111,50 @@ def load(where: Path | None, key: str, device):
     return compiled
 
 
-def keep(where: Path | None, key: str, device, compiled, exported) -> None:
+def _same(a: list, b: list) -> bool:
+    return len(a) == len(b) and all(
+        np.array_equal(np.asarray(x), np.asarray(y), equal_nan=np.asarray(x).dtype.kind in "fc")
+        for x, y in zip(a, b, strict=True)
+    )
+
+
+def first_run(compiled, leaves: list, where: Path | None, key: str, device):
+    """The outputs of a loaded executable's first run in this process, computed and checked to
+    have run; ``None`` where it failed (its file removed: the caller compiles the program)."""
+    import jax
+
+    try:
+        return jax.block_until_ready(compiled(*leaves))
+    except Exception as err:
+        _log.debug("kept executable of program %s failed (%s): removed", key, err)
+        file = path(where, key, device)
+        if file is not None:
+            file.unlink(missing_ok=True)
+        return None
+
+
+def keep(where: Path | None, key: str, device, compiled, exported, leaves, outputs) -> None:
     """Write ``compiled`` (the ``jax.stages.Compiled`` of the exported program ``exported``,
-    key ``key``, on ``device``) for :func:`load`, atomically, unless the program has custom
-    calls; never an error (not kept: a later process lowers the program)."""
+    key ``key``, on ``device``, compiled by this process) for :func:`load`, atomically, unless
+    the program has custom calls, and once a copy read back from the file has given
+    ``outputs`` on ``leaves`` (the first run's), bit for bit; never an error (not kept: a
+    later process lowers the program)."""
     file = path(where, key, device)
     if file is None:
         return
     try:
         if "custom_call" in exported.mlir_module():
             return
+        import jax
         from jax.experimental.serialize_executable import serialize
 
         from .exported import _write
 
         _write(file, pickle.dumps(serialize(compiled), protocol=4), SUFFIX)
-    except Exception as err:  # not serializable, a read-only cache
+        copy = load(where, key, device)
+        if copy is None or not _same(jax.block_until_ready(copy(*leaves)), list(outputs)):
+            raise RuntimeError("its copy read back did not give the same outputs")
+    except Exception as err:  # not serializable, a read-only cache, a copy that fails
         _log.debug("executable of program %s not kept (%s)", key, err)
+        with contextlib.suppress(OSError):
+            file.unlink(missing_ok=True)

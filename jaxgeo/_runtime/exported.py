@@ -349,8 +349,12 @@ def _call(
     key, exported, out_def, out_static = program
     device = _device(leaves)
     runner = _runners.get((key, device))
+    out_leaves = None
     if runner is None:
         runner = executables.load(where, key, device)
+        if runner is not None:
+            out_leaves = executables.first_run(runner, leaves, where, key, device)
+            runner = None if out_leaves is None else runner
     if runner is None:
         options = dict((quick and compiler_options(leaves, exported)) or solve or {})
         # inputs laid out on ``device`` by the call itself, committed or not: jax lowers a
@@ -362,14 +366,19 @@ def _call(
         place = None if device is None else jax.sharding.SingleDeviceSharding(device)
         while True:  # compiled at the first call
             try:
-                runner = _compile(exported, leaves, place, options)
+                runner, compiled_here = executables.compile_here(
+                    functools.partial(_compile, exported, leaves, place, options)
+                )
                 break
             except Exception as err:
                 if not _left_out(options, err, fn):
                     raise
-        executables.keep(where, key, device, runner, exported)
+        out_leaves = runner(*leaves)
+        if compiled_here:
+            executables.keep(where, key, device, runner, exported, leaves, out_leaves)
+    elif out_leaves is None:
+        out_leaves = runner(*leaves)
     _runners[(key, device)] = runner
-    out_leaves = runner(*leaves)
     return eqx.combine(jax.tree.unflatten(out_def, out_leaves), out_static)
 
 

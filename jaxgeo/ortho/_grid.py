@@ -104,7 +104,7 @@ def border_pixels(width: int, height: int, n: int = 16) -> np.ndarray:
 def rough_bounds(model, border_xy: np.ndarray, dh_m: float = 500.0, heights=None):
     """lon/lat box of the border localised at the model's reference height +- ``dh_m`` (or at
     ``(h_min, h_ref, h_max)`` given as ``heights``), and the box at the middle height."""
-    h0 = float(model.reference_ground()[2])
+    h0 = float(np.asarray(model.reference_ground())[2])  # numpy: no eager jax program
     pts = []
     for h in heights if heights is not None else (h0 - dh_m, h0, h0 + dh_m):
         g = np.asarray(_at_height(model, border_xy, np.full(len(border_xy), float(h))))
