@@ -51,20 +51,27 @@ def _on_event(event: str, **kwargs) -> None:
 
 
 @functools.cache
-def _listen() -> None:
+def _listen() -> bool:
+    """Whether jax's cache hits are heard (a jax without this monitoring API: never)."""
     import jax
 
-    jax.monitoring.register_event_listener(_on_event)
+    try:
+        jax.monitoring.register_event_listener(_on_event)
+    except Exception as err:
+        _log.debug("jax's cache hits not heard (%s): no executable kept", err)
+        return False
+    return True
 
 
 def compile_here(compile: Callable[[], object]) -> tuple[object, bool]:
     """``compile()`` (a ``jax.stages.Compiled``), and whether XLA compiled it in this call (not
-    read from jax's compilation cache, whose executables, serialized again, may not run)."""
+    read from jax's compilation cache, whose executables, serialized again, may not run;
+    ``False`` where that cannot be told)."""
     with _listening:
-        _listen()
+        heard = _listen()
     before = getattr(_hits, "count", 0)
     compiled = compile()
-    return compiled, getattr(_hits, "count", 0) == before
+    return compiled, heard and getattr(_hits, "count", 0) == before
 
 
 @functools.cache
