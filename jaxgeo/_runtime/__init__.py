@@ -7,6 +7,8 @@
   compiles is decided here, not by them.
 - :mod:`.exported` entry points kept on disk as serialized ``jax.export`` programs (a warm run
   neither traces nor compiles them), their XLA options, large programs compiled apart.
+- :mod:`.executables` on a CPU, their compiled executables kept beside them (a warm run
+  neither lowers nor compiles them).
 - :mod:`.program_key` the key of a kept program (jaxgeo's source, versions, input structure).
 - :mod:`.arrays` host data onto the device without compiling.
 - :mod:`.shard` ``shard_map`` over the devices, zero-size inputs handled.

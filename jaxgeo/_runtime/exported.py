@@ -17,15 +17,18 @@ environment variables that change a trace, the backend, the input structure with
 (non-array) values pickled, and each array's shape and dtype. Anything that cannot be keyed or
 exported this way (an unpicklable static value, a host callback in the program) falls back to
 ``eqx.filter_jit`` -- slower, never different.
+On a CPU the compiled executable is kept beside the program too (:mod:`.executables`): a later
+process runs it without lowering the program again.
 Results are those of the jitted function (the same StableHLO; tested bit for bit), compiled
 with the same XLA options; small programs get quicker ones (:data:`QUICK_COMPILE`), other
 solves leaner ones (:data:`SOLVE_COMPILE`), whose roundings may differ from XLA's defaults in
 the last bits (a solve then stops within its tolerance of the same point).
 
 Off with the compilation cache (``JAXGEO_CACHE_DIR=off``), inside transformations (tracers in
-the inputs) and for inputs over ``MAX_ELEMENTS``: then :func:`call` is ``eqx.filter_jit(fn)``.
-Inputs over ``MAX_ELEMENTS`` are compiled apart from their first run (``lower().compile()``, kept
-per structure), and the C heap's free pages are given back to the OS before each run
+the inputs) and for inputs over ``MAX_ELEMENTS`` (but those of a kernel, :func:`call_kernel`):
+then :func:`call` is ``eqx.filter_jit(fn)``. Inputs over ``MAX_ELEMENTS`` are compiled apart
+from their first run (``lower().compile()``, kept per structure), and the C heap's free pages
+are given back to the OS before each run
 (:func:`release_heap`): compiling a large program leaves hundreds of MB of freed memory in
 the allocator's arenas (the 200 000-observation pair: 810 -> 530 MB), and the caller's work
 between two runs tens (26 MB before a re-solve of that pair), on top of which the run would
@@ -61,6 +64,7 @@ from typing import Any
 import equinox as eqx
 import jax
 
+from . import executables
 from .jaxconfig import cache_dir
 from .program_key import key as _key
 
@@ -112,7 +116,8 @@ with contextlib.suppress(importlib.metadata.PackageNotFoundError, ValueError):
     if tuple(int(v) for v in importlib.metadata.version("jaxlib").split(".")[:2]) >= (0, 11):
         del SOLVE_COMPILE["xla_cpu_use_fusion_emitters"]
 MAX_ENTRIES = 200
-"""Exported programs kept on disk (~0.3 MB each); older ones are removed when more are written."""
+"""Exported programs kept on disk (~0.3 MB each), and as many executables (up to a few MB);
+older ones are removed when more are written."""
 
 _log = logging.getLogger(__name__)
 _owns_process = False
@@ -218,7 +223,7 @@ def _export(fn: Callable, treedef, static, leaves):
     return exported, out_parts["def"], out_parts["static"]
 
 
-def _write(path: Path, blob: bytes) -> None:
+def _write(path: Path, blob: bytes, suffix: str = SUFFIX) -> None:
     path.parent.mkdir(parents=True, exist_ok=True)
     fd, tmp = tempfile.mkstemp(dir=path.parent, suffix=".tmp")
     try:
@@ -228,7 +233,7 @@ def _write(path: Path, blob: bytes) -> None:
     except BaseException:
         Path(tmp).unlink(missing_ok=True)
         raise
-    entries = sorted(path.parent.glob(f"*{SUFFIX}"), key=lambda p: p.stat().st_mtime)
+    entries = sorted(path.parent.glob(f"*{suffix}"), key=lambda p: p.stat().st_mtime)
     for old in entries[:-MAX_ENTRIES]:
         old.unlink(missing_ok=True)
 
@@ -305,11 +310,14 @@ def compiled_apart(*args, **kwargs) -> bool:
 
 
 def call_kernel(fn: Callable, *args, **kwargs):
-    """:func:`call` of a kernel run many times (a chunk of many points): compiled with XLA's
-    defaults whatever its size, its run mattering more than its compilation. 8 192 points of
+    """:func:`call` of a kernel run many times (a chunk of many points, a tile of pixels):
+    compiled with XLA's defaults whatever its size, its run mattering more than its
+    compilation, and exported whatever its size (never compiled apart: a kernel's compilation
+    needs little memory, and a large one -- an orthoimage tile's 2 M positions -- is traced
+    again in every process otherwise: 30-50 ms of each ``jaxgeo ortho``). 8 192 points of
     an RPC localised (projected) 3.4x (2.8x) faster than with :data:`QUICK_COMPILE` (2-core
     AMD EPYC, jaxlib 0.10.2)."""
-    return _call(None, fn, args, kwargs, quick=False)
+    return _call(None, fn, args, kwargs, quick=False, apart=False)
 
 
 def _call(
@@ -319,9 +327,11 @@ def _call(
     kwargs,
     traced: Callable[[], None] = _nothing,
     quick: bool = True,
+    apart: bool = True,
 ):
     """``solve``: the XLA options of a program too large for :data:`QUICK_COMPILE` (``None``:
-    XLA's defaults); ``quick=False``: never :data:`QUICK_COMPILE`. ``traced()`` is called once
+    XLA's defaults); ``quick=False``: never :data:`QUICK_COMPILE`; ``apart=False``: exported
+    whatever the inputs' size (never compiled apart). ``traced()`` is called once
     the program is traced (or found), before it is compiled or run; on the plain-jit fall-backs
     (which trace, compile and run in one call) before that."""
     dynamic, static = eqx.partition((args, kwargs), eqx.is_array)
@@ -330,7 +340,7 @@ def _call(
     if any(isinstance(x, jax.core.Tracer) for x in leaves):
         traced()
         return _filter_jit(fn)(*args, **kwargs)
-    if _elements(leaves) > MAX_ELEMENTS:
+    if apart and _elements(leaves) > MAX_ELEMENTS:
         return _compiled_call(fn, treedef, static, leaves, args, kwargs, solve, traced)
     program = None if where is None else _program(where, fn, treedef, static, leaves)
     traced()
@@ -339,6 +349,12 @@ def _call(
     key, exported, out_def, out_static = program
     device = _device(leaves)
     runner = _runners.get((key, device))
+    out_leaves = None
+    if runner is None:
+        runner = executables.load(where, key, device)
+        if runner is not None:
+            out_leaves = executables.first_run(runner, leaves, where, key, device)
+            runner = None if out_leaves is None else runner
     if runner is None:
         options = dict((quick and compiler_options(leaves, exported)) or solve or {})
         # inputs laid out on ``device`` by the call itself, committed or not: jax lowers a
@@ -349,17 +365,28 @@ def _call(
         # ``device_put`` cost 0.45 ms a call (7 leaves), twice the run of a 512-point projection
         place = None if device is None else jax.sharding.SingleDeviceSharding(device)
         while True:  # compiled at the first call
-            runner = jax.jit(exported.call, in_shardings=place, compiler_options=options or None)
             try:
-                out_leaves = runner(*leaves)
+                runner, compiled_here = executables.compile_here(
+                    functools.partial(_compile, exported, leaves, place, options)
+                )
                 break
             except Exception as err:
                 if not _left_out(options, err, fn):
                     raise
-        _runners[(key, device)] = runner
-    else:
         out_leaves = runner(*leaves)
+        if compiled_here:
+            executables.keep(where, key, device, runner, exported, leaves, out_leaves)
+    elif out_leaves is None:
+        out_leaves = runner(*leaves)
+    _runners[(key, device)] = runner
     return eqx.combine(jax.tree.unflatten(out_def, out_leaves), out_static)
+
+
+def _compile(exported, leaves, place, options: dict):
+    """The exported program lowered and compiled for ``leaves`` (``jax.stages.Compiled``: it
+    runs inputs committed to its device or not, without compiling again)."""
+    jitted = jax.jit(exported.call, in_shardings=place, compiler_options=options or None)
+    return jitted.lower(*leaves).compile()
 
 
 def _device(leaves: list):

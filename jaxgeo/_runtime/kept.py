@@ -10,6 +10,9 @@ module's decision (on :mod:`.exported`'s machinery):
 - :func:`kept_points`: a kernel over points (a model's projection or localisation of ``n``
   points), run over fixed-size chunks: at most two programs whatever ``n``, the small chunk
   compiled quickly (a refit grid, GCPs), the large one for speed (many points).
+- :func:`kept_kernel`: a kernel over a whole tile of pixels (an orthoimage's positions and
+  resampling): one program per tile shape, kept whatever its size (a warm run traces nothing),
+  compiled for speed.
 - :func:`kept_solve`: a solve, kept as one program, or as two (its iterations, then what
   follows them) where its inputs are too large for one to compile in little memory; compiled
   with :data:`.exported.SOLVE_COMPILE` unless small.
@@ -55,6 +58,20 @@ def kept(fn: Callable) -> Callable:
     @functools.wraps(fn)
     def program(*args, **kwargs):
         return exported.call(fn, *args, **kwargs)
+
+    return program
+
+
+def kept_kernel(fn: Callable) -> Callable:
+    """Decorator of a kernel over a tile of pixels (a module-level pure JAX function whose
+    inputs have the tile's fixed, padded shapes): run as a kept program compiled with XLA's
+    defaults and kept whatever its size (:func:`.exported.call_kernel`), where :func:`kept`
+    would compile a tile of over a million values apart and trace it again in every process.
+    ``__wrapped__`` is ``fn``."""
+
+    @functools.wraps(fn)
+    def program(*args, **kwargs):
+        return exported.call_kernel(fn, *args, **kwargs)
 
     return program
 

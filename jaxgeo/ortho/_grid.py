@@ -8,15 +8,15 @@ import warnings
 
 import numpy as np
 
-from .._runtime.kept import kept, kept_points
+from .._runtime.kept import kept_points
 from ..errors import JaxgeoWarning
 from ..geodesy import utm_epsg, utm_zone
 from ..io.internal import dem_coverage
 from ..tiles import OutputGrid
 
 BATCH = 64
-"""Host-side localisations on the DEM run in chunks of ``BATCH`` points (the last one padded):
-one shape, one compilation."""
+"""Host-side localisations run in chunks of ``BATCH`` points (the last one padded): one shape,
+one program, whatever the number of points (the border's 64, the GSD's 3)."""
 ON_DEM_STEPS = 24
 """Regula falsi (Illinois) steps of :func:`on_dem`."""
 ON_DEM_TOL_M = 0.01
@@ -28,52 +28,16 @@ scene whose GSDs differ by a few percent (0.497, 0.521, 0.532 m on a Pleiades tr
 so that their orthoimages share a grid (with target-aligned pixels) at default settings."""
 
 
-@kept
+@kept_points(BATCH)
 def _at_height(model, xy, h):
+    """Image points ``xy`` ``(n, 2)`` localised at heights ``h`` ``(n,)``: ``(n, 3)``."""
     return model.localize(xy, h)
 
 
-@kept_points(BATCH, fixed=4)
-def _on_dem_bracketed(model, grid, lo, hi, xy):
-    """Image points ``xy`` ``(n, 2)`` on the DEM: a root of ``f(h) = DEM(localize(xy, h)) - h``
-    between ``lo`` (f >= 0) and ``hi`` (f <= 0) by the Illinois method. Returns the ground
-    points and the last ``|f|`` (m; NaN where the DEM has no height)."""
-    import jax
-    import jax.numpy as jnp
-
-    def f(points, h):
-        g = model.localize(points, h)
-        return g, grid.height(g[..., :2]) - h
-
-    n = xy.shape[0]
-    both = jnp.concatenate([xy, xy])
-    g_ab, f_ab = f(both, jnp.concatenate([jnp.full(n, lo), jnp.full(n, hi)]))
-    a, b, fa, fb = jnp.full(n, lo), jnp.full(n, hi), f_ab[:n], f_ab[n:]
-
-    def body(_, state):
-        a, b, fa, fb, side, g, best = state
-        den = fb - fa
-        c = jnp.where(jnp.abs(den) > 1e-12, (a * fb - b * fa) / jnp.where(den == 0, 1, den),
-                      0.5 * (a + b))  # fmt: skip
-        gc, fc = f(xy, c)
-        better = jnp.abs(fc) < best
-        g = jnp.where(better[:, None], gc, g)
-        best = jnp.where(better, jnp.abs(fc), best)
-        to_b = fc * fb > 0  # c replaces b (same sign)
-        fa = jnp.where(to_b & (side == -1), 0.5 * fa, fa)
-        fb = jnp.where(~to_b & (side == 1), 0.5 * fb, fb)
-        a, fa = jnp.where(to_b, a, c), jnp.where(to_b, fa, fc)
-        b, fb = jnp.where(to_b, c, b), jnp.where(to_b, fc, fb)
-        side = jnp.where(to_b, -1, 1)
-        return a, b, fa, fb, side, g, best
-
-    use_a = jnp.abs(fa) < jnp.abs(fb)
-    g0 = jnp.where(use_a[:, None], g_ab[:n], g_ab[n:])
-    best0 = jnp.where(jnp.isfinite(fa) | jnp.isfinite(fb), jnp.fmin(jnp.abs(fa), jnp.abs(fb)),
-                      jnp.inf)  # fmt: skip
-    state = (a, b, fa, fb, jnp.zeros(n, dtype=int), g0, best0)
-    *_, g, best = jax.lax.fori_loop(0, ON_DEM_STEPS, body, state)
-    return g, best
+@kept_points(BATCH)
+def _dem_height(grid, lonlat):
+    """The DEM ``grid``'s bilinear height at ``lonlat`` ``(n, 2)`` (NaN outside, on nodata)."""
+    return grid.height(lonlat)
 
 
 def on_dem(model, xy: np.ndarray, grid) -> tuple[np.ndarray, np.ndarray]:
@@ -82,17 +46,47 @@ def on_dem(model, xy: np.ndarray, grid) -> tuple[np.ndarray, np.ndarray]:
 
     The footprint and the GSD need an intersection of each line of sight with the DEM, not
     the first one :func:`~jaxgeo.models.localize_on_dem` marches to (hidden terrain decides no
-    border of a footprint): a bracketed root between the grid's lowest and highest heights, a
-    few dozen localisations of one compiled program (tracing the march took 3-8 s of every run,
-    compiling it a minute in the test suite). Traced once across runs (a kept program over
-    chunks of ``BATCH`` points, :mod:`jaxgeo._runtime.kept`).
+    border of a footprint): a root of ``f(h) = DEM(localize(xy, h)) - h`` between the grid's
+    lowest (``f >= 0``) and highest (``f <= 0``) heights by the Illinois method, its steps on
+    the host around two kept programs of ``BATCH`` points (a localisation at given heights, a
+    DEM height), the programs the rest of the plan runs: a warm run loads no other (one program
+    with the whole loop held two localisations; loading its 1.4 MB executable took 0.27 s of
+    every ``jaxgeo ortho``, compiling it 2.5 s of the first). The best point of each line is
+    kept: the ground point of the smallest ``|f|`` met.
     """
     xy = np.asarray(xy, dtype=float).reshape(-1, 2)
+    n = len(xy)
     z = np.asarray(grid.heights_m)
     lo, hi = float(np.nanmin(z)) - 1.0, float(np.nanmax(z)) + 1.0
-    bracket = np.asarray(lo), np.asarray(hi)  # arrays: the DEM's range is no part of the program
-    g, res = _on_dem_bracketed(model, grid, *bracket, xy)
-    ok = np.isfinite(res) & (res < ON_DEM_TOL_M) & np.all(np.isfinite(g), axis=-1)
+
+    def f(h):
+        g = _at_height(model, xy, h)
+        return g, _dem_height(grid, g[:, :2]) - h
+
+    with np.errstate(invalid="ignore", divide="ignore"):  # NaN: no height there, never kept
+        a, b = np.full(n, lo), np.full(n, hi)
+        (g_a, fa), (g_b, fb) = f(a), f(b)
+        g = np.where((np.abs(fa) < np.abs(fb))[:, None], g_a, g_b)
+        best = np.where(np.isfinite(fa) | np.isfinite(fb), np.fmin(np.abs(fa), np.abs(fb)),
+                        np.inf)  # fmt: skip
+        side = np.zeros(n, dtype=int)
+        for _ in range(ON_DEM_STEPS):
+            den = fb - fa
+            c = np.where(np.abs(den) > 1e-12, (a * fb - b * fa) / np.where(den == 0, 1, den),
+                         0.5 * (a + b))  # fmt: skip
+            gc, fc = f(c)
+            better = np.abs(fc) < best
+            g = np.where(better[:, None], gc, g)
+            best = np.where(better, np.abs(fc), best)
+            to_b = fc * fb > 0  # c replaces b (same sign)
+            fa = np.where(to_b & (side == -1), 0.5 * fa, fa)
+            fb = np.where(~to_b & (side == 1), 0.5 * fb, fb)
+            a, fa = np.where(to_b, a, c), np.where(to_b, fa, fc)
+            b, fb = np.where(to_b, c, b), np.where(to_b, fc, fb)
+            side = np.where(to_b, -1, 1)
+            if not np.any(best > 1e-6):  # all within a micron (a point without heights: inf)
+                break
+    ok = np.isfinite(best) & (best < ON_DEM_TOL_M) & np.all(np.isfinite(g), axis=-1)
     return g, ok
 
 
@@ -110,7 +104,7 @@ def border_pixels(width: int, height: int, n: int = 16) -> np.ndarray:
 def rough_bounds(model, border_xy: np.ndarray, dh_m: float = 500.0, heights=None):
     """lon/lat box of the border localised at the model's reference height +- ``dh_m`` (or at
     ``(h_min, h_ref, h_max)`` given as ``heights``), and the box at the middle height."""
-    h0 = float(model.reference_ground()[2])
+    h0 = float(np.asarray(model.reference_ground())[2])  # numpy: no eager jax program
     pts = []
     for h in heights if heights is not None else (h0 - dh_m, h0, h0 + dh_m):
         g = np.asarray(_at_height(model, border_xy, np.full(len(border_xy), float(h))))

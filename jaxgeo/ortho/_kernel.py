@@ -14,18 +14,19 @@ the per-pixel path.
 Keys a = -0.5 like GDAL's) and converts to the output type (rounded and clipped for integers),
 nodata where a position falls outside the image.
 
+Both are kept programs (:func:`jaxgeo._runtime.kept.kept_kernel`): one per tile shape, traced
+once across runs, so that a second ``jaxgeo ortho`` loads them instead of tracing them.
+
 Coordinates: image ``(x, y) = (col, row)`` with integers at pixel centres (jaxgeo's convention).
 """
 
 from __future__ import annotations
 
-import functools
-
 import jax
 import jax.numpy as jnp
 import numpy as np
 
-from .._runtime.kept import kept
+from .._runtime.kept import kept_kernel
 from ..models import AbstractSensorModel, DEMGrid
 
 RESAMPLINGS = ("nearest", "bilinear", "cubic")
@@ -67,7 +68,7 @@ def _bilinear(z, c, r):
     return jnp.where(inside, top + tr * (bottom - top), jnp.nan)
 
 
-@kept
+@kept_kernel
 def map_pixels(model: AbstractSensorModel, dem: DEMGrid, nodes_lonlat, step: int, dtype: str):
     """Image positions of a tile's pixels, their range, and the check error of every block.
 
@@ -129,7 +130,7 @@ def _keys(t):
     return [w(t + 1), w(t), w(1 - t), w(2 - t)]
 
 
-@functools.partial(jax.jit, static_argnames=("method", "out_dtype"))
+@kept_kernel
 def sample_window(window, xy, offset, size, image_box, nodata, method: str, out_dtype: str):
     """Resample ``window`` ``(bands, WH, WW)`` at positions ``xy - offset`` (``xy`` ``(2, rows,
     cols)``, ``offset`` ``(2,)`` integer: the window's first pixel in ``xy``'s frame; the

@@ -114,6 +114,24 @@ def _tile_inputs(plan_tiles_list, grid, crs, model, h_range, img_size, margin_de
     return out
 
 
+def _balanced_tile(width: int, height: int, tile: int, step_px: int) -> int:
+    """For a small product (two tiles a side at most, more than one in all): the tile size (px
+    a side, at most ``tile``) that splits it into as many tiles as ``tile`` does, but of even
+    sizes. Every tile is computed at one padded shape, so a product slightly larger than a tile
+    computed its edge tiles whole: 1052 x 1086 px in 1024 px tiles, 4.2 M positions for 1.1 M
+    pixels (3.6x the work); in 544 px tiles 1.2 M. A multiple of ``step_px`` and of the COG's
+    largest overview decimation (the tiles' overviews still align with the product's);
+    ``tile`` itself otherwise (a larger product's edge tiles are a smaller share of its work),
+    or where no smaller size keeps the count."""
+    nx, ny = math.ceil(width / tile), math.ceil(height / tile)
+    if nx == ny == 1 or max(nx, ny) > 2:
+        return tile
+    factors = overview_factors(width, height)
+    q = math.lcm(step_px, factors[-1] if factors else 1)
+    even = math.ceil(max(math.ceil(width / nx), math.ceil(height / ny)) / q) * q
+    return even if even < tile else tile
+
+
 def plan_ortho(
     image: str | os.PathLike | SensorImage,
     dem: DEM | str | os.PathLike,
@@ -198,6 +216,7 @@ def plan_ortho(
     if tile < s.tile_px:  # a power of two: the tiles' overviews align with the product's
         tile = 2 ** int(math.log2(tile))
     tile = max(tile // step_px * step_px, 4 * step_px)
+    tile = _balanced_tile(grid.width, grid.height, tile, step_px)
     th = min(tile, math.ceil(grid.height / step_px) * step_px)
     tw = min(tile, math.ceil(grid.width / step_px) * step_px)
     # (the plan keeps the power-of-two size: a product smaller than it is one tile)

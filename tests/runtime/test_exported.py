@@ -16,6 +16,7 @@ import jax.numpy as jnp
 import numpy as np
 import pytest
 
+from jaxgeo._runtime import executables as _executables
 from jaxgeo._runtime import exported as _exported
 from jaxgeo.lsq import RESULTS
 
@@ -60,6 +61,76 @@ def test_same_results_and_traced_once_across_loads(cache):
     _exported.call(fn, x, 3.0, label="a")
     _exported.call(fn, x[:3], 2.0, label="a")
     assert len(list(cache.glob("*.jaxexport"))) == 3
+
+
+def _solve3(a, b):
+    return jnp.linalg.solve(a, b)  # a LAPACK kernel on a CPU (a custom call)
+
+
+def test_a_new_process_runs_the_kept_executable_without_lowering(cache, monkeypatch):
+    """On a CPU the compiled executable is kept beside the program: a new process loads and runs
+    it (no lowering, no compilation: jax's LAPACK set-up, an import of scipy.linalg, is not
+    made either), bit for bit; a damaged one, or one that fails its first run, is compiled
+    again and rewritten; a program with a custom call (a LAPACK kernel, which needs that
+    set-up) keeps none."""
+    monkeypatch.setattr(_exported, "_runners", {})
+    compiled = []
+    real_compile = _exported._compile
+    monkeypatch.setattr(
+        _exported, "_compile", lambda e, *a: compiled.append(e.fun_name) or real_compile(e, *a)
+    )
+    x = np.linspace(0.0, 3.0, 7)
+    first = _exported.call(fn, x, 2.0)
+    (exe,) = cache.glob(f"*{_executables.SUFFIX}")
+    assert len(compiled) == 1
+    _exported._loaded.clear()  # as a new process
+    _exported._runners.clear()
+    again = _exported.call(fn, x, 2.0)
+    assert len(compiled) == 1 and TRACES == ["fn"]  # neither traced nor compiled
+    np.testing.assert_array_equal(again.value, first.value)
+    assert again.result == first.result and again.label == "fn"
+    exe.write_bytes(b"not an executable")
+    _exported._runners.clear()
+    third = _exported.call(fn, x, 2.0)
+    assert len(compiled) == 2 and exe.stat().st_size > 100  # compiled again, rewritten
+    np.testing.assert_array_equal(third.value, first.value)
+    # a kept executable that fails its first run (here: another program's) is removed, the
+    # program compiled, checked and kept in its place
+    _exported.call(fn, x[:3], 2.0)
+    other = next(p for p in cache.glob(f"*{_executables.SUFFIX}") if p != exe)
+    other.write_bytes(exe.read_bytes())
+    _exported._runners.clear()
+    np.testing.assert_array_equal(_exported.call(fn, x[:3], 2.0).value, first.value[:3])
+    assert len(compiled) == 4 and other.read_bytes() != exe.read_bytes()
+    other.unlink()
+    a = np.array([[2.0, 1.0, 0.0], [1.0, 3.0, 1.0], [0.0, 1.0, 4.0]])
+    np.testing.assert_allclose(_exported.call(_solve3, a, np.ones(3)) @ a.T, np.ones(3))
+    assert len(list(cache.glob(f"*{_exported.SUFFIX}"))) == 3
+    assert list(cache.glob(f"*{_executables.SUFFIX}")) == [exe]
+
+
+def test_an_executable_read_from_jax_cache_counts_as_not_compiled_here():
+    """Executables from jax's compilation cache are not kept again (serialized again, one ran
+    into ``Function ... not found`` in the next process): ``compile_here`` tells them apart by
+    the cache's hit event, in the compiling thread only."""
+    import threading
+
+    def hit():
+        jax.monitoring.record_event("/jax/compilation_cache/cache_hits")
+        return "from the cache"
+
+    assert _executables.compile_here(hit) == ("from the cache", False)
+    assert _executables.compile_here(lambda: "compiled") == ("compiled", True)
+    seen = []
+
+    def elsewhere():  # another thread's hit, while this one compiles
+        worker = threading.Thread(target=hit)
+        worker.start()
+        worker.join()
+        return "compiled"
+
+    seen.append(_executables.compile_here(elsewhere))
+    assert seen == [("compiled", True)]
 
 
 def test_damaged_file_is_traced_again(cache):
