@@ -28,7 +28,6 @@ import jax.numpy as jnp
 import numpy as np
 from jaxtyping import Array, ArrayLike, Float, Int
 
-from .._runtime.kept import kept_points
 from ..geodesy import geodetic_to_utm
 from ._base import AbstractSensorModel
 from ._rpc_eval import is_concrete
@@ -275,7 +274,7 @@ def localize_on_dem(
     max_steps: int = 4096,
     max_refine: int = 100,
     h_tol_m: float = 1e-6,
-) -> tuple[Float[Array, "*batch 3"], Int[Array, "*batch"]]:
+) -> tuple[Float[Array | np.ndarray, "*batch 3"], Int[Array | np.ndarray, "*batch"]]:
     """Image ``(x, y)`` px -> ground ``(lon_deg, lat_deg, h_m)`` on the DEM, and a status.
 
     The ground point is the first intersection of the line of sight with the bilinear DEM seen
@@ -292,7 +291,7 @@ def localize_on_dem(
     Numpy in, numpy out: given numpy arrays or lists (no JAX array among the inputs, outside
     any transformation) it runs compiled programs kept across runs, over chunks of points, and
     returns ``numpy.ndarray`` s; a JAX array gives JAX arrays. Each point is first searched on a
-    quadratic through three localisations of its line of sight (:func:`_fast_search`: the
+    quadratic through three localisations of its line of sight (:mod:`._dem_fast`: the
     march and the regula falsi on DEM look-ups alone, then the same Newton step on the exact
     line of sight as the robust search); a point whose outcome that search cannot decide
     beyond doubt (a sample within :data:`FAST_GUARD_M` of the terrain before the intersection,
@@ -309,239 +308,27 @@ def localize_on_dem(
         raise TypeError(
             f"dem must be a DEMGrid or a DEM from jaxgeo.io.read_dem, got {type(dem).__name__}"
         )
+    from ._dem_fast import on_dem_concrete, on_dem_traced
+
     options = (int(max_steps), int(max_refine), float(h_tol_m))
     numpy_out = not isinstance(image, jax.Array)
     if is_concrete(model, dem, image):
         flat = np.asarray(image, dtype=float)
         if flat.shape[-1:] != (2,):
-            raise ValueError(
-                f"image coordinates must have a last axis of size 2, got {flat.shape}"
-            )
+            raise ValueError(f"image coordinates must have a last axis of size 2, got {flat.shape}")
         batch = flat.shape[:-1]
-        ground, status = _localize_concrete(model, dem, options, flat.reshape(-1, 2))
+        ground, status = on_dem_concrete(model, dem, options, flat.reshape(-1, 2))
         ground, status = ground.reshape(*batch, 3), status.reshape(batch)
         return (ground, status) if numpy_out else (jnp.asarray(ground), jnp.asarray(status))
     image = jnp.asarray(image, dtype=float)
     if image.shape[-1:] != (2,):
         raise ValueError(f"image coordinates must have a last axis of size 2, got {image.shape}")
     batch = image.shape[:-1]
-    ground, status = _localize_traced(model, dem, options, image.reshape(-1, 2))
+    ground, status = on_dem_traced(model, dem, options, image.reshape(-1, 2))
     return ground.reshape(*batch, 3), status.reshape(batch)
 
 
-FAST_CHUNKS = (2048, 1 << 14)
-"""Points per compiled call of the fast search on concrete inputs
-(:func:`jaxgeo._runtime.kept.kept_points`): 2 048 below 16 384 points, 16 384 from there on
-(1e5 points padded to 114 688, 15 %); at most two programs per model type and DEM shape."""
-ROBUST_CHUNK = 256
-"""Points per compiled call of the robust search on the points the fast one leaves to it
-(few, as a rule: one program per model type and DEM shape)."""
-FAST_GUARD_M = 0.01
-"""m: a march sample of the fast search closer than this to the terrain (``|h - dem|``), up to
-the first crossing, leaves the point to the robust search: its quadratic line of sight is off
-the exact one by at most 0.25 mm over a 4 100 m DEM range (the Pleiades RPC and a simulated
-Cartosat-1 model, measured), i.e. a sign decided beyond doubt on slopes up to 40."""
-FAST_GUARD_PX = 1e-3
-"""DEM cells: a march sample this close to the DEM's edge (or, on a DEM with nodata, to a cell
-line) leaves the point to the robust search (inside/outside, nodata or not, beyond doubt)."""
-FAST_STEP_MAX_M = 1e-3
-"""m: the final Newton step (on the exact line of sight) of an accepted fast point is at most
-this; a larger one means the quadratic was not close enough: the robust search decides."""
-
-
-def _fast_search(model, dem, options, xy):
-    """The fast search over flat points ``(n, 2)``: ``(ground (n, 3), status (n,), robust
-    (n,) bool)``, the points flagged ``robust`` to be searched again by :func:`_localize_one`.
-
-    The robust search (:func:`_search_one`) localises at every march step and regula-falsi
-    probe. Over a DEM's height range a line of sight is a quadratic in ``h`` to within a
-    fraction of a millimetre (:data:`FAST_GUARD_M`), so here three localisations (the DEM's top
-    and bottom, as the robust search, and their middle) give it, and the same march (the same
-    heights) and the same Illinois iteration run on DEM look-ups alone, array-wide; the root is
-    then polished by the robust search's own Newton step on the exact line of sight (which
-    carries the implicit derivatives). A point is flagged when a decision of the march could
-    differ on the exact line of sight, when its refinement did not converge, or when that
-    Newton step or the residual after it is too large."""
-    max_steps, max_refine, h_tol = options
-    n = xy.shape[0]
-    bad = ~jnp.all(jnp.isfinite(xy), axis=-1)
-    ref = jax.lax.stop_gradient(model.reference_ground())
-    ref_xy = jax.lax.stop_gradient(model.project(ref))
-    xy_safe = jnp.where(bad[:, None], ref_xy, xy)
-    m, d, xs = _stop(model), _stop(dem), jax.lax.stop_gradient(xy_safe)
-    rows, cols = d.heights_m.shape
-    has_nan = jnp.any(jnp.isnan(d.heights_m))
-
-    lo_hi = d.height_range()
-    h_top, h_bottom = lo_hi[1] + 1.0, lo_hi[0] - 1.0
-    h_mid = 0.5 * (h_top + h_bottom)
-    ones = jnp.ones(n)
-    ll_top = m.localize(xs, h_top * ones, jnp.broadcast_to(ref[:2], (n, 2)))[:, :2]
-    ll_bottom = m.localize(xs, h_bottom * ones, ll_top)[:, :2]
-    ll_mid = m.localize(xs, h_mid * ones, 0.5 * (ll_top + ll_bottom))[:, :2]
-
-    def ray(h):
-        """The quadratic through the three localisations, at heights ``h`` (n,)."""
-        t = ((h - h_bottom) / (h_top - h_bottom))[:, None]
-        return (ll_bottom * (1 - t) * (1 - 2 * t) + ll_mid * 4 * t * (1 - t)
-                + ll_top * t * (2 * t - 1))  # fmt: skip
-
-    def sample(h):
-        """``h - dem`` on the ray, whether inside the extent, and whether a decision there
-        is in doubt (near the edge; near a cell line on a DEM with nodata)."""
-        p = d.pixel(ray(h))
-        f = h - d.height_at_pixel(p)
-        c, r = p[:, 0], p[:, 1]
-        inside = (c >= -0.5) & (c <= cols - 0.5) & (r >= -0.5) & (r <= rows - 0.5)
-        g = FAST_GUARD_PX
-        edge = (jnp.minimum(jnp.abs(c + 0.5), jnp.abs(c - cols + 0.5)) < g) | (
-            jnp.minimum(jnp.abs(r + 0.5), jnp.abs(r - rows + 0.5)) < g
-        )
-        line = jnp.minimum(jnp.abs(c - jnp.round(c)), jnp.abs(r - jnp.round(r))) < g
-        return f, inside, edge | (has_nan & line)
-
-    travel_px = jnp.max(jnp.abs(d.pixel(ll_top) - d.pixel(ll_bottom)), axis=-1)
-    steps = jnp.clip(jnp.ceil(travel_px / 0.5), 1, max_steps)
-    steps = jnp.where(jnp.isfinite(steps), steps, max_steps)
-    dh = (h_top - h_bottom) / steps
-    f_top, _, doubt_top = sample(h_top * ones)
-
-    # the robust search's march (the same heights, the same flags), all points at once
-    def march_cond(s):
-        k, crossed = s[0], s[2]
-        return jnp.any((k < steps) & ~crossed)
-
-    def march_body(s):
-        k, h_prev, crossed, nodata, doubt, h_a, f_a, h_b, f_b, f_prev = s
-        active = (k < steps) & ~crossed
-        h = h_top - (k + 1) * dh
-        f, inside, doubt_here = sample(h)
-        valid = jnp.isfinite(f)
-        hit = active & valid & (f <= 0.0)
-        near = valid & (jnp.abs(f) < FAST_GUARD_M)
-        doubt = doubt | (active & (doubt_here | near))
-        nodata = nodata | (active & inside & ~valid)
-        h_a, f_a = jnp.where(hit, h, h_a), jnp.where(hit, f, f_a)
-        h_b, f_b = jnp.where(hit, h_prev, h_b), jnp.where(hit, f_prev, f_b)
-        h_prev, f_prev = jnp.where(active, h, h_prev), jnp.where(active, f, f_prev)
-        return k + 1, h_prev, crossed | hit, nodata, doubt, h_a, f_a, h_b, f_b, f_prev
-
-    no = jnp.zeros(n, dtype=bool)
-    init = (jnp.asarray(0.0), h_top * ones, no, no, doubt_top, h_top * ones, f_top,
-            h_top * ones, f_top, f_top)  # fmt: skip
-    _, _, crossed, nodata, doubt, h_a, f_a, h_b, f_b, _ = jax.lax.while_loop(
-        march_cond, march_body, init
-    )
-    f_b = jnp.where(jnp.isfinite(f_b), f_b, h_b - h_a)
-
-    # the robust search's Illinois iteration on the quadratic
-    def refine_cond(s):
-        k, h_a, h_b = s[0], s[1], s[3]
-        return jnp.any((k < max_refine) & (h_b - h_a > h_tol) & crossed)
-
-    def refine_body(s):
-        k, h_a, f_a, h_b, f_b, side, doubt = s
-        active = (k < max_refine) & (h_b - h_a > h_tol) & crossed
-        h = jnp.where(f_b - f_a > 0, (h_a * f_b - h_b * f_a) / (f_b - f_a), 0.5 * (h_a + h_b))
-        width = h_b - h_a
-        h = jnp.clip(h, h_a + 1e-3 * width, h_b - 1e-3 * width)
-        f, _, doubt_here = sample(h)
-        f = jnp.where(jnp.isfinite(f), f, 0.0)
-        below = f <= 0.0
-        new = (
-            jnp.where(below, h, h_a),
-            jnp.where(below, f, jnp.where(side == -1, 0.5 * f_a, f_a)),
-            jnp.where(below, h_b, h),
-            jnp.where(below, jnp.where(side == 1, 0.5 * f_b, f_b), f),
-            jnp.where(below, 1, -1).astype(side.dtype),
-        )
-        old = (h_a, f_a, h_b, f_b, side)
-        kept = tuple(jnp.where(active, a, b) for a, b in zip(new, old, strict=True))
-        return k + 1, *kept, doubt | (active & doubt_here)
-
-    init = (jnp.asarray(0), h_a, f_a, h_b, f_b, jnp.zeros(n, dtype=int), doubt)
-    _, h_a, f_a, h_b, f_b, _, doubt = jax.lax.while_loop(refine_cond, refine_body, init)
-    h_root = jnp.where(f_b - f_a > 0, (h_a * f_b - h_b * f_a) / (f_b - f_a), h_a)
-    converged = h_b - h_a <= h_tol
-    status = jnp.where(
-        ~crossed,
-        jnp.where(nodata, DEMStatus.NODATA, DEMStatus.OUTSIDE),
-        jnp.where(nodata, DEMStatus.NODATA, DEMStatus.OK),
-    )
-    finite = jnp.all(jnp.isfinite(ll_top) & jnp.isfinite(ll_bottom), axis=-1)
-    status = jnp.where(finite | crossed, status, DEMStatus.NOT_CONVERGED)
-    # the robust search decides: doubts, a refinement that did not converge, no quadratic
-    robust = ~bad & (
-        doubt
-        | (crossed & ~nodata & ~converged)
-        | ~jnp.all(jnp.isfinite(ll_mid), axis=-1) & finite
-    )
-    status = jnp.where(bad, DEMStatus.BAD_INPUT, status)
-    ok = (status == DEMStatus.OK) & ~robust
-
-    # the robust search's last step (:func:`_localize_one`) on the exact line of sight: one
-    # Newton step from the root carries the implicit derivatives
-    h_star = jnp.where(ok, h_root, ref[2])
-    ll_star = jnp.where(ok[:, None], ray(h_root), ref[:2])
-
-    def residual(h):
-        return h - dem.height(model.localize(xy_safe, h, ll_star)[:, :2])
-
-    f_val, f_slope = jax.jvp(residual, (h_star,), (ones,))
-    f_slope = jax.lax.stop_gradient(f_slope)
-    safe_slope = jnp.where(ok & (jnp.abs(f_slope) > 1e-12), f_slope, 1.0)
-    step = jnp.where(ok, f_val / safe_slope, 0.0)
-    h = h_star - step
-    ll = model.localize(xy_safe, h, ll_star)[:, :2]
-    # checked: the quadratic's root near the exact one, the result on the DEM
-    left = jax.lax.stop_gradient(h - d.height(ll))
-    good = (jnp.abs(step) <= FAST_STEP_MAX_M) & (jnp.abs(left) <= max(h_tol, 1e-6))
-    robust = robust | (ok & ~jax.lax.stop_gradient(good))
-    ground = jnp.concatenate([ll, h[:, None]], axis=-1)
-    ground = jnp.where((ok & ~robust)[:, None], ground, jnp.nan)
-    return ground, status.astype(int), robust
-
-
-def _robust_search(model, dem, options, xy):
-    """The robust search (:func:`_localize_one`) vmapped over flat points ``(n, 2)``."""
-    max_steps, max_refine, h_tol = options
-    return jax.vmap(lambda p: _localize_one(model, p, dem, max_steps, max_refine, h_tol))(xy)
-
-
-@kept_points(FAST_CHUNKS, fixed=3)
-def _fast_chunk(model, dem, options, xy):
-    return _fast_search(model, dem, options, xy)
-
-
-@kept_points(ROBUST_CHUNK, fixed=3)
-def _robust_chunk(model, dem, options, xy):
-    return _robust_search(model, dem, options, xy)
-
-
-def _localize_concrete(model, dem, options, flat: np.ndarray):
-    """Numpy points ``(n, 2)`` -> numpy ``(ground, status)``: the fast search over chunks, the
-    points it leaves run by the robust one."""
-    ground, status, robust = _fast_chunk(model, dem, options, flat)
-    ground, status = np.array(ground), np.array(status)
-    again = np.flatnonzero(robust)
-    if again.size:
-        ground[again], status[again] = _robust_chunk(model, dem, options, flat[again])
-    return ground, status
-
-
-def _localize_traced(model, dem, options, flat):
-    """Under a transformation: the fast search, and the robust one over all the points (then
-    taken where the fast one left a point) only when a point needs it (``lax.cond``)."""
-    ground, status, robust = _fast_search(model, dem, options, flat)
-
-    def again(_):
-        g, s = _robust_search(model, dem, options, flat)
-        return jnp.where(robust[:, None], g, ground), jnp.where(robust, s, status)
-
-    return jax.lax.cond(jnp.any(robust), again, lambda _: (ground, status), None)
-
-
-def _footprint(model: AbstractSensorModel, image: Array) -> tuple[float, float, float, float]:
+def _footprint(model: AbstractSensorModel, image: np.ndarray) -> tuple[float, float, float, float]:
     """``(lon_min, lat_min, lon_max, lat_max)`` the lines of sight of ``image`` cross between
     the model's lowest and highest plausible heights (host-side)."""
     rpc = model.base_rpc()
