@@ -14,7 +14,10 @@ lowest, in height steps that move the ray at most half a DEM cell horizontally (
 jumped over), stops at the first sign change of ``h - dem(lon, lat)`` (the first intersection
 seen from the sensor: hidden terrain is never returned), and refines by Illinois regula falsi.
 Gradients (with respect to the model, the image point and the DEM heights) follow from the
-implicit function theorem at the converged point.
+implicit function theorem at the converged point. That march is the robust search; each point is
+first searched by a fast one (:mod:`._dem_fast`: the same march on a quadratic through three
+localisations of the line of sight, DEM look-ups alone), which leaves to the robust search only
+the points it cannot decide beyond doubt.
 """
 
 from __future__ import annotations
