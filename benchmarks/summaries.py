@@ -119,6 +119,36 @@ def batch(d: dict) -> list[str]:
     )  # fmt: skip
 
 
+def localize_dem(d: dict) -> list[str]:
+    """``localize_on_dem`` (``dem``) and the robust search alone (``dem_before``) against
+    ``localize`` at a constant height, per model and size (same run)."""
+    rows = [[r["model"], f"{r['points']:,}", ms(r["cases"]["localize"]["best_s"]),
+             ms(r["cases"]["dem"]["best_s"]), ratio(r["cases"]["dem"]["ratio_vs_localize"]),
+             ms(r["cases"]["dem_before"]["best_s"]),
+             ratio(r["cases"]["dem_before"]["ratio_vs_localize"]),
+             seconds(r["cases"]["dem"]["first_s"]), seconds(r["cases"]["dem_before"]["first_s"]),
+             str(r["same_status"]), num(r["left_to_robust_fraction"], 2),
+             f"{num(r['max_diff_vs_before_deg'], 2)} / {num(r['max_diff_vs_before_m'], 2)}"]
+            for r in d["results"]]  # fmt: skip
+    return table(
+        [
+            "model",
+            "points",
+            "localize",
+            "dem",
+            "dem / localize",
+            "before",
+            "before / localize",
+            "dem first call",
+            "before first call",
+            "same statuses",
+            "left to robust",
+            "max diff deg / m",
+        ],
+        rows,
+    )
+
+
 def cli_times(d: dict) -> list[str]:
     rows = [[f"`jaxgeo {name}`", seconds(r.get("cold_s")), seconds(r.get("warm_s")),
              seconds(r.get("off_s"))] for name, r in d["results"].items()]  # fmt: skip
@@ -439,6 +469,7 @@ SUMMARIES: dict[str, Callable[[dict], list[str]]] = {
     "projection": points,
     "device": device,
     "localization": points,
+    "localize_dem": localize_dem,
     "batch": batch,
     "cli_times": cli_times,
     "adjust_scale": adjust_scale,

@@ -11,10 +11,11 @@ image needs (:meth:`~AbstractSensorModel.required_gcps`), its soft constraints
 (:meth:`~AbstractSensorModel.exact_rpc`) and the RPC whose validity domain applies
 (:meth:`~AbstractSensorModel.base_rpc`, composed models included).
 
-Return types: every method returns JAX arrays, with one exception made for speed: an
-:class:`~jaxgeo.models.RPC`'s ``project`` and ``localize`` (without ``guess``) given numpy
-arrays or lists (no JAX array among the inputs, outside any transformation) run a compiled
-kernel on the host memory and return ``numpy.ndarray`` -- numpy in, numpy out. Given a JAX
+Return types: every method returns JAX arrays, with exceptions made for speed: an
+:class:`~jaxgeo.models.RPC`'s ``project`` and ``localize`` (without ``guess``), and every
+model's ``localize_on_dem``, given numpy arrays or lists (no JAX array among the inputs,
+outside any transformation) run compiled programs and return ``numpy.ndarray`` -- numpy in,
+numpy out. Given a JAX
 array, or under ``jit``, ``vmap`` or ``grad``, they return JAX arrays like every other model.
 ``np.asarray(result)`` is correct (and free on the CPU) in every case.
 """
@@ -27,6 +28,7 @@ from typing import TYPE_CHECKING
 import equinox as eqx
 import jax
 import jax.numpy as jnp
+import numpy as np
 from jaxtyping import Array, ArrayLike, Float, Int, PyTree
 
 from ._newton import newton_root
@@ -94,7 +96,7 @@ class AbstractSensorModel(eqx.Module):
         image: Float[ArrayLike, "*batch 2"],
         dem: DEMGrid | AbstractDEM,
         **options,
-    ) -> tuple[Float[Array, "*batch 3"], Int[Array, "*batch"]]:
+    ) -> tuple[Float[Array | np.ndarray, "*batch 3"], Int[Array | np.ndarray, "*batch"]]:
         """Image ``(x, y)`` px -> ground ``(lon_deg, lat_deg, h_m)`` on a DEM, and a status.
 
         The first intersection of the line of sight with the DEM seen from the sensor
@@ -103,6 +105,7 @@ class AbstractSensorModel(eqx.Module):
         :func:`jaxgeo.io.read_dem` returns (host-side: the window the points need is read,
         over the heights of :meth:`base_rpc`'s validity range or the reference height
         +-1000 m) or a :class:`~jaxgeo.models.DEMGrid` (jittable and differentiable).
+        Numpy in, numpy out (a JAX array in, JAX arrays out).
         ``options``: ``max_steps``, ``max_refine``, ``h_tol_m``.
         """
         from ._dem import localize_on_dem

@@ -14,7 +14,10 @@ lowest, in height steps that move the ray at most half a DEM cell horizontally (
 jumped over), stops at the first sign change of ``h - dem(lon, lat)`` (the first intersection
 seen from the sensor: hidden terrain is never returned), and refines by Illinois regula falsi.
 Gradients (with respect to the model, the image point and the DEM heights) follow from the
-implicit function theorem at the converged point.
+implicit function theorem at the converged point. That march is the robust search; each point is
+first searched by a fast one (:mod:`._dem_fast`: the same march on a quadratic through three
+localisations of the line of sight, DEM look-ups alone), which leaves to the robust search only
+the points it cannot decide beyond doubt.
 """
 
 from __future__ import annotations
@@ -30,6 +33,7 @@ from jaxtyping import Array, ArrayLike, Float, Int
 
 from ..geodesy import geodetic_to_utm
 from ._base import AbstractSensorModel
+from ._rpc_eval import is_concrete
 
 __all__ = ["AbstractDEM", "DEMGrid", "DEMStatus", "localize_on_dem"]
 
@@ -273,7 +277,7 @@ def localize_on_dem(
     max_steps: int = 4096,
     max_refine: int = 100,
     h_tol_m: float = 1e-6,
-) -> tuple[Float[Array, "*batch 3"], Int[Array, "*batch"]]:
+) -> tuple[Float[Array | np.ndarray, "*batch 3"], Int[Array | np.ndarray, "*batch"]]:
     """Image ``(x, y)`` px -> ground ``(lon_deg, lat_deg, h_m)`` on the DEM, and a status.
 
     The ground point is the first intersection of the line of sight with the bilinear DEM seen
@@ -287,34 +291,47 @@ def localize_on_dem(
     between the heights of the model's RPC validity range (``h_off +- h_scale``; a model without
     an RPC: its reference height +- :data:`DEM_HEIGHT_SPAN_M`), on the host.
 
+    Numpy in, numpy out: given numpy arrays or lists (no JAX array among the inputs, outside
+    any transformation) it runs compiled programs kept across runs, over chunks of points, and
+    returns ``numpy.ndarray`` s; a JAX array gives JAX arrays. Each point is first searched on a
+    quadratic through three localisations of its line of sight (:mod:`._dem_fast`: the
+    march and the regula falsi on DEM look-ups alone, then the same Newton step on the exact
+    line of sight as the robust search); a point whose outcome that search cannot decide
+    beyond doubt (a sample within :data:`FAST_GUARD_M` of the terrain before the intersection,
+    near the DEM's edge or a nodata cell, a failed check of the result) is searched again by
+    the robust search, which localises at every step: the same results, statuses included.
+
     Args:
         max_steps: cap on the number of march steps (each moves the ray <= half a DEM cell).
         max_refine: cap on the regula-falsi iterations; h_tol_m: bracket width (m) to stop at.
     """
-    image = jnp.asarray(image, dtype=float)
-    if image.shape[-1:] != (2,):
-        raise ValueError(f"image coordinates must have a last axis of size 2, got {image.shape}")
     if isinstance(dem, AbstractDEM):
-        dem = dem.grid(_footprint(model, image))
+        dem = dem.grid(_footprint(model, np.asarray(image, dtype=float)))
     elif not isinstance(dem, DEMGrid):
         raise TypeError(
             f"dem must be a DEMGrid or a DEM from jaxgeo.io.read_dem, got {type(dem).__name__}"
         )
+    from ._dem_fast import on_dem_concrete, on_dem_traced
+
+    options = (int(max_steps), int(max_refine), float(h_tol_m))
+    numpy_out = not isinstance(image, jax.Array)
+    if is_concrete(model, dem, image):
+        flat = np.asarray(image, dtype=float)
+        if flat.shape[-1:] != (2,):
+            raise ValueError(f"image coordinates must have a last axis of size 2, got {flat.shape}")
+        batch = flat.shape[:-1]
+        ground, status = on_dem_concrete(model, dem, options, flat.reshape(-1, 2))
+        ground, status = ground.reshape(*batch, 3), status.reshape(batch)
+        return (ground, status) if numpy_out else (jnp.asarray(ground), jnp.asarray(status))
+    image = jnp.asarray(image, dtype=float)
+    if image.shape[-1:] != (2,):
+        raise ValueError(f"image coordinates must have a last axis of size 2, got {image.shape}")
     batch = image.shape[:-1]
-    ground, status = _localize_flat(
-        model, image.reshape(-1, 2), dem, int(max_steps), int(max_refine), float(h_tol_m)
-    )
+    ground, status = on_dem_traced(model, dem, options, image.reshape(-1, 2))
     return ground.reshape(*batch, 3), status.reshape(batch)
 
 
-@eqx.filter_jit
-def _localize_flat(model, flat, dem, max_steps, max_refine, h_tol):
-    """The vmapped search, compiled: called with host arrays it runs as one program, not op by
-    op (2000 points took 30 s so); inside a caller's jit it is inlined."""
-    return jax.vmap(lambda xy: _localize_one(model, xy, dem, max_steps, max_refine, h_tol))(flat)
-
-
-def _footprint(model: AbstractSensorModel, image: Array) -> tuple[float, float, float, float]:
+def _footprint(model: AbstractSensorModel, image: np.ndarray) -> tuple[float, float, float, float]:
     """``(lon_min, lat_min, lon_max, lat_max)`` the lines of sight of ``image`` cross between
     the model's lowest and highest plausible heights (host-side)."""
     rpc = model.base_rpc()
