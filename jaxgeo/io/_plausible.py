@@ -23,6 +23,10 @@ terrain of these images (a DSM's roofs and trees over a bare-earth DEM, and the 
 vendor's pointing leaves in the ties' heights, stay well below it on a median)."""
 MIN_TIES = 5
 """Fewer ties than this say nothing about a DEM."""
+VALIDITY_MARGIN_M = 100.0
+"""Metres (at least; a tenth of the RPC's height scale if more) a DEM's median height may lie
+beyond its model's validity range before :func:`dem_against_model` names it: a little
+extrapolation is harmless (a coast at 0 m under a range from 40 m; a geoid left out)."""
 
 
 def dem_against_ties(tie_h_m, dem_h_m, source: str) -> str | None:
@@ -68,7 +72,8 @@ def dem_against_model(dem_h_m, model, source: str, image: str) -> str | None:
     """Why the DEM ``source`` cannot hold the terrain of the image ``image`` whose model is
     ``model``: the median of its heights ``dem_h_m`` (m, ellipsoidal) over the image's
     footprint lies outside the model's validity range (its RPC's height offset +- scale: the
-    vendor fits the RPC over the heights of the terrain it images), with the likely cause (a
+    vendor fits the RPC over the heights of the terrain it images) by more than
+    :data:`VALIDITY_MARGIN_M` or a tenth of the scale, with the likely cause (a
     factor 3.28 against the height offset: feet; else an offset). ``None`` when it lies inside,
     for a model without an RPC, or without heights. The check needs no tie point (an ortho):
     it finds a DEM in feet or off by hundreds of metres over a whole scene, whose RPC's range
@@ -82,7 +87,8 @@ def dem_against_model(dem_h_m, model, source: str, image: str) -> str | None:
     off, scale = float(rpc.ground_offset[2]), abs(float(rpc.ground_scale[2]))
     lo, hi = off - scale, off + scale
     med = float(np.median(h))
-    if lo <= med <= hi:
+    margin = max(VALIDITY_MARGIN_M, 0.1 * scale)
+    if lo - margin <= med <= hi + margin:
         return None
     ratio = med / off if abs(off) > 1.0 else np.nan
     if abs(ratio - FEET_PER_METRE) < 0.1 * FEET_PER_METRE:

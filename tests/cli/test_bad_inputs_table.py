@@ -57,7 +57,7 @@ def workspace(tmp_path):
 def _wrong_dems(srtm: pathlib.Path) -> None:
     """Beside the SRTM tile (EGM96 heights, 470..580 m under the Ventoux crops): the same in feet
     (undeclared, and declared as the band's unit; capped at 8900, below the heights no terrain
-    has, whose warning would be a second line), +500 m and +1500 m."""
+    has, whose warning would be a second line), +500 m and +2000 m."""
     import numpy as np
     import rasterio
 
@@ -68,7 +68,7 @@ def _wrong_dems(srtm: pathlib.Path) -> None:
     for name, values, units in (("srtm_feet.tif", feet, None),
                                 ("srtm_ft_declared.tif", feet, ("ft",)),
                                 ("srtm_plus500.tif", z + 500, None),
-                                ("srtm_plus1500.tif", z + 1500, None)):  # fmt: skip
+                                ("srtm_plus2000.tif", z + 2000, None)):  # fmt: skip
         with rasterio.open(srtm.parent / name, "w", **profile) as dst:
             dst.write(np.where(void, z, values).astype(z.dtype), 1)
             if units:
@@ -116,9 +116,9 @@ CASES = [
      ["srtm_feet.tif", "tie points' triangulated heights", "heights in feet", "--heights"]),
     ("dsm: a DEM 500 m too high", [*DSM_DEM, "{in}/srtm_plus500.tif"], 2,
      ["srtm_plus500.tif", "a constant offset of +", "--geoid"]),
-    ("ortho: a DEM 1500 m too high (beyond the model's validity range)",
-     [*ORTHO_DEM, "{in}/srtm_plus1500.tif"], 2,
-     ["srtm_plus1500.tif", "validity range 190..1960 m", "above the range"]),
+    ("ortho: a DEM 2000 m too high (beyond the model's validity range)",
+     [*ORTHO_DEM, "{in}/srtm_plus2000.tif"], 2,
+     ["srtm_plus2000.tif", "validity range 190..1960 m", "above the range"]),
     ("ortho: a DEM declaring its heights in feet", [*ORTHO_DEM, "{in}/srtm_ft_declared.tif"], 2,
      ["srtm_ft_declared.tif", "in 'ft'", "0.3048"]),
 ]  # fmt: skip

@@ -65,6 +65,9 @@ def test_a_dem_against_the_models_validity_range():
     why = dem_against_model(terrain + 1500.0, model, "dem.tif", "img.tif")
     assert "above the range" in why and "feet" not in why
     assert "below the range" in dem_against_model(terrain - 1500.0, model, "d.tif", "i.tif")
+    # a little beyond the range (a coast at 0 m under a range from 190 m): extrapolated, fine
+    assert dem_against_model(np.full(9, 100.0), model, "d.tif", "i.tif") is None
+    assert dem_against_model(np.full(9, 60.0), model, "d.tif", "i.tif") is not None
     assert dem_against_model(np.full(3, np.nan), model, "d.tif", "i.tif") is None
     # a crop of a scene: its terrain may lie anywhere in the range; feet inside it pass (the
     # tie points' check finds them where there are ties)
