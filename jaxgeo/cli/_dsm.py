@@ -12,9 +12,11 @@ triangulated; the points are pooled into one height per cell (median; bands: hei
 WGS84 ellipsoid, count, spread, filled, height_sigma). ``height_sigma`` is the height's
 standard deviation per cell (m): the matching's (from each disparity's correlation peak) and,
 with ``--orientation DIR/adjusted_models.json`` (written by ``jaxgeo adjust --out DIR``, whose
-adjusted RPCs are the images' models), the adjusted models' posterior uncertainty, propagated
-through the intersection; without it, the models' a priori orientation error (0.7 px per image
-and axis: same-pass vendor RPCs; the band's ``covers`` tag and the summary say which). ``--roi``
+adjusted RPCs are the images' models), the adjusted models' posterior uncertainty (no larger
+than the a priori where the ties left a direction open), propagated through the intersection;
+without it, the models' a priori orientation error (the RPC's ERR_BIAS/ERR_RAND where its vendor
+states them, else 0.7 px per image and axis; the band's ``covers`` tag and the summary say
+which). ``--roi``
 in pixels of IMG1 (default: all of it); ``--res`` metres (default 0.5); CRS default the local UTM
 zone (a projected CRS in metres; a geographic CRS is refused); the grid's edges are multiples of
 --res (target-aligned cells, as the orthos': the products of one job share a grid; ``--no-tap``:
@@ -93,8 +95,8 @@ def register(sub) -> None:
         "it)")  # fmt: skip
     arg("--orientation", metavar="JSON",
         help="adjusted_models.json of `jaxgeo adjust --out` for these images: their posterior "
-        "bias sigmas enter the height_sigma band (default: the a priori 0.7 px per image; "
-        "the band's covers tag says which)")  # fmt: skip
+        "bias sigmas enter the height_sigma band (default: the a priori, the RPC's "
+        "ERR_BIAS/ERR_RAND or 0.7 px per image; the band's covers tag says which)")  # fmt: skip
     add_dem_options(parser, "its heights over the footprint, +-50 m, give the tie points' range")
     add_heights(parser)
     arg("--max-hole", type=float, default=4.0, metavar="M",
@@ -191,11 +193,11 @@ def _run(args: argparse.Namespace) -> int:
         orientation = None
         if args.orientation is not None:
             from ..stereo import OrientationError
-            from ..stereo.internal import orientation_covariances
+            from ..stereo.internal import adjusted_orientation
 
             inputs.append(args.orientation)
-            try:
-                orientation = orientation_covariances(args.orientation, [im.name for im in images])
+            try:  # the posterior, bounded by the models' a priori where the ties left it open
+                orientation = adjusted_orientation(args.orientation, [im.name for im in images])
             except OrientationError as err:
                 raise CommandError(str(err)) from None
         check_tile_options(args, inputs, 64)

@@ -19,8 +19,10 @@ from ._metadata import read_metadata as read_metadata
 from ._metadata import write_metadata_json as write_metadata_json
 from ._observations import GroundPoints as GroundPoints
 from ._observations import Observations as Observations
+from ._rpc_accuracy import RPCAccuracy as RPCAccuracy
 from ._rpc_common import RPCFormatError as RPCFormatError
 from ._rpc_formats import read_rpc as read_rpc
+from ._rpc_formats import read_rpc_accuracy as read_rpc_accuracy
 from ._rpc_gdal import from_rasterio_rpc as from_rasterio_rpc
 from ._rpc_gdal import to_rasterio_rpc as to_rasterio_rpc
 from ._rpc_gdal import write_geotiff_rpc as write_geotiff_rpc

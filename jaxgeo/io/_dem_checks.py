@@ -15,7 +15,7 @@ import numpy as np
 from ..errors import JaxgeoWarning
 from ._dem import DEM, FILL_MISMATCH_M, HEIGHT_BAND, PLAUSIBLE_HEIGHTS_M, implausible
 
-__all__ = ["fill_difference", "height_band", "height_reference", "warn_implausible"]
+__all__ = ["fill_difference", "height_band", "height_reference", "refuse_feet", "warn_implausible"]
 
 
 def height_band(path, src, band) -> tuple[int, str | None]:
@@ -49,7 +49,34 @@ def height_band(path, src, band) -> tuple[int, str | None]:
     dsm = tag.startswith("ellipsoidal") and (
         src.count == 1 or descriptions[band - 1].lower() == HEIGHT_BAND
     )
+    refuse_feet(path, src, band)
     return band, "ellipsoidal" if dsm else None
+
+
+FEET = ("ft", "feet", "foot", "us survey foot", "us-ft", "ftus", "us_survey_foot", "foot_us")
+"""Unit names a DEM may declare for heights in feet (band ``units``, a vertical CRS's axis)."""
+
+
+def refuse_feet(path, src, band: int) -> None:
+    """A ``ValueError`` naming the file when the open raster ``src`` declares the heights of
+    ``band`` in feet (its band's unit, or its vertical CRS's axis unit): jaxgeo reads metres,
+    and a DEM in feet puts the terrain 3.28 times too high (undeclared, the tie points' or the
+    model's check finds it: :mod:`jaxgeo.io._plausible`)."""
+    import pyproj
+
+    units = [str((src.units or ())[band - 1] or "") if len(src.units or ()) >= band else ""]
+    if src.crs is not None:
+        crs = pyproj.CRS.from_wkt(src.crs.to_wkt())
+        for sub in crs.sub_crs_list if crs.is_compound else []:
+            if sub.is_vertical and sub.axis_info:
+                units.append(sub.axis_info[0].unit_name or "")
+    found = next((u for u in units if u.strip().lower() in FEET), None)
+    if found is not None:
+        raise ValueError(
+            f"{path}: declares the heights of band {band} in {found!r}: jaxgeo reads DEM heights "
+            "in metres; convert them first (heights x 0.3048, e.g. gdal_calc.py "
+            "--calc='A*0.3048')"
+        )
 
 
 def fill_difference(dem: DEM, max_cells: int = 16_384) -> float | None:

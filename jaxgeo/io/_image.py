@@ -40,6 +40,7 @@ from ..models import RPC, AbstractSensorModel, Biased, ShiftBias
 from ._adjusted import is_adjusted_models, read_adjusted_model
 from ._raster import open_raster
 from ._remote import RemotePath, as_path, is_remote
+from ._rpc_accuracy import RPCAccuracy
 
 
 class ImageError(JaxgeoError, ValueError):
@@ -51,8 +52,10 @@ class SensorImage:
     """An image: ``name`` (the raster's or model's file stem), ``model`` in the raster's pixel
     frame, ``origin`` (model pixel of the raster's pixel (0, 0); ``(0, 0)`` without a frame),
     ``path`` of the raster (``None`` when only a model was given), ``size`` ``(width, height)`` px
-    (``None`` without a raster), ``model_path`` (where the model came from) and ``source_model``
-    (the model in its own frame)."""
+    (``None`` without a raster), ``model_path`` (where the model came from), ``source_model``
+    (the model in its own frame) and ``vendor_accuracy`` (the RPC's stated ``ERR_BIAS`` /
+    ``ERR_RAND``, :class:`~jaxgeo.io.RPCAccuracy`; ``None`` for a model that is not a vendor's
+    RPC file: an adjusted model, a model object)."""
 
     name: str
     model: AbstractSensorModel
@@ -61,6 +64,7 @@ class SensorImage:
     size: tuple[int, int] | None
     model_path: pathlib.Path | RemotePath | None
     source_model: AbstractSensorModel
+    vendor_accuracy: RPCAccuracy | None = None
 
     @property
     def inputs(self) -> tuple[pathlib.Path | RemotePath, ...]:
@@ -203,7 +207,7 @@ def open_image(
     ``http(s)`` only): GDAL reads the raster by range requests, never whole; the name is the
     stem of the URL's last segment (query string dropped). See :mod:`jaxgeo.io._remote`.
     """
-    from ._rpc_formats import read_rpc
+    from ._rpc_formats import read_rpc_with_accuracy
 
     if path is None and model is None:
         raise ImageError("an image needs a raster or a model")
@@ -227,7 +231,7 @@ def open_image(
                 f"origin {frame[0]:g} {frame[1]:g} in its geotransform"
             )
         frame = origin
-    model_path = None
+    model_path, accuracy = None, None
     if isinstance(model, AbstractSensorModel):
         source_model = model
         stem = name or (raster or pathlib.Path("image")).stem
@@ -238,7 +242,7 @@ def open_image(
             if model is not None and _is_adjusted(model_path):
                 source_model = read_adjusted_model(model_path, stem)
             else:
-                source_model = read_rpc(model_path)
+                source_model, accuracy = read_rpc_with_accuracy(model_path)
         except FileNotFoundError:
             raise
         except ValueError as err:
@@ -256,6 +260,7 @@ def open_image(
         size=size,
         model_path=model_path if model_path != raster else None,
         source_model=source_model,
+        vendor_accuracy=accuracy,
     )
 
 

@@ -23,6 +23,9 @@ from 1 and is shifted on reading. GDAL's RPC transformer gives pixel/line = ours
 RPC00A files are permuted into RPC00B order. Anything unreadable raises :class:`RPCFormatError`
 (a ``ValueError``) naming the file and the key or line; a missing path raises
 ``FileNotFoundError``.
+
+:func:`read_rpc_accuracy` reads the accuracy the vendor states beside the model (RPC00B
+``ERR_BIAS``/``ERR_RAND``, m; :mod:`jaxgeo.io._rpc_accuracy`), where the format has it.
 """
 
 from __future__ import annotations
@@ -35,6 +38,7 @@ import re
 from ..models import RPC
 from ._adjusted import is_adjusted_models
 from ._remote import RemotePath, as_path, is_remote, open_bytes
+from ._rpc_accuracy import RPCAccuracy
 from ._rpc_common import RPCFormatError, source_name
 from ._rpc_gdal import read_raster_rpc, write_geotiff_rpc
 from ._rpc_json import looks_like_json, parse_json, read_rpc_json
@@ -121,6 +125,19 @@ def read_rpc(path: str | os.PathLike) -> RPC:
     :class:`RPCFormatError` (a ``ValueError``) naming the file and the key/line at fault for an
     unknown format, a truncated file, or a missing or non-numeric value.
     """
+    return read_rpc_with_accuracy(path)[0]
+
+
+def read_rpc_accuracy(path: str | os.PathLike) -> RPCAccuracy:
+    """The accuracy the vendor states for the RPC of the file at ``path`` (any format
+    :func:`read_rpc` reads; the RPC is read and checked too): RPC00B ``ERR_BIAS`` and
+    ``ERR_RAND`` in metres per horizontal axis, ``None`` each where unknown (``-1``, ``0``,
+    absent, or a format without them: DIMAP, rpcm's JSON). Errors as :func:`read_rpc`."""
+    return read_rpc_with_accuracy(path)[1]
+
+
+def read_rpc_with_accuracy(path: str | os.PathLike) -> tuple[RPC, RPCAccuracy]:
+    """:func:`read_rpc` and :func:`read_rpc_accuracy` of one read of the file."""
     path = _check_path(path)
     source = source_name(path)
     head = _head(path)
@@ -128,8 +145,8 @@ def read_rpc(path: str | os.PathLike) -> RPC:
         return read_raster_rpc(path, source)
     text = _read_text(path)
     kind = _detect_text(text, source)
-    if kind == "dimap":
-        return read_dimap(parse_xml(text, source), source)
+    if kind == "dimap":  # no stated accuracy (its ERR_BIAS_ROW/COL are fit errors)
+        return read_dimap(parse_xml(text, source), source), RPCAccuracy(source=source)
     if kind == "maxar_xml":
         return read_maxar_xml(parse_xml(text, source), source)
     if kind == "rpb":
@@ -151,6 +168,8 @@ __all__ = [
     "RPCFormatError",
     "detect_rpc_format",
     "read_rpc",
+    "read_rpc_accuracy",
+    "read_rpc_with_accuracy",
     "write_geotiff_rpc",
     "write_rpb",
     "write_rpc_text",

@@ -25,6 +25,7 @@ from ..models import RPC
 from ._atomic import atomic_output, refuse_existing
 from ._raster import open_raster
 from ._remote import open_bytes
+from ._rpc_accuracy import RPCAccuracy, stated_value
 from ._rpc_common import RPCFormatError, assemble_rpc, vendor_values
 from ._rpc_keys import COEFFS, GEOTIFF_TAG_ORDER, N_TERMS, STYLES, vendor_items
 
@@ -103,13 +104,26 @@ def _tag_values(tag: np.ndarray) -> tuple[dict[str, float], dict[str, list[float
     return scalars, coeffs
 
 
-def read_raster_rpc(path: str | os.PathLike, source: str) -> RPC:
-    """RPC of a raster: the GeoTIFF tag when present (exact, sidecars ignored), else GDAL's RPC
-    metadata (NITF TREs, sidecars, PAM)."""
+def _accuracy(err_bias, err_rand, source: str) -> RPCAccuracy:
+    """The vendor's ERR_BIAS/ERR_RAND as GDAL or the tag hold them (None, NaN, <= 0: unknown)."""
+    values = []
+    for value in (err_bias, err_rand):
+        try:
+            value = float(value)
+        except (TypeError, ValueError):
+            value = math.nan
+        values.append(stated_value(value) if math.isfinite(value) else None)
+    return RPCAccuracy(values[0], values[1], source)
+
+
+def read_raster_rpc(path: str | os.PathLike, source: str) -> tuple[RPC, RPCAccuracy]:
+    """RPC of a raster and its vendor's ERR_BIAS/ERR_RAND: the GeoTIFF tag when present (exact,
+    sidecars ignored), else GDAL's RPC metadata (NITF TREs, sidecars, PAM)."""
     tag = read_tiff_rpc_tag(path, source)
     if tag is not None:
         scalars, coeffs = _tag_values(tag)
-        return assemble_rpc(scalars, coeffs, f"{source} (RPCCoefficientTag)")
+        rpc = assemble_rpc(scalars, coeffs, f"{source} (RPCCoefficientTag)")
+        return rpc, _accuracy(scalars["err_bias"], scalars["err_rand"], source)
 
     from rasterio.errors import RasterioIOError
 
@@ -122,7 +136,8 @@ def read_raster_rpc(path: str | os.PathLike, source: str) -> RPC:
         raise RPCFormatError(f"{source}: malformed RPC metadata ({err!r})") from None
     if rpcs is None:
         raise RPCFormatError(f"{source}: raster holds no RPC metadata")
-    return from_rasterio_rpc(rpcs, source)
+    rpc = from_rasterio_rpc(rpcs, source)
+    return rpc, _accuracy(getattr(rpcs, "err_bias", None), getattr(rpcs, "err_rand", None), source)
 
 
 def _image_shape(rpc: RPC) -> tuple[int, int]:

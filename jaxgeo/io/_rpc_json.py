@@ -27,8 +27,9 @@ import json
 import math
 
 from ..models import RPC
+from ._rpc_accuracy import RPCAccuracy, read_accuracy
 from ._rpc_common import RPCFormatError, assemble_rpc, read_coeffs, read_scalars
-from ._rpc_keys import STYLES, KeyStyle
+from ._rpc_keys import ERROR_KEYS, STYLES, KeyStyle
 
 JSON_STYLES: tuple[KeyStyle, ...] = (
     STYLES["rpcm_json"],
@@ -126,8 +127,9 @@ def _style_of(d: dict, source: str) -> KeyStyle:
     return best
 
 
-def read_rpc_json(text: str, source: str) -> RPC:
-    """Parse a JSON RPC dictionary (see the module docstring)."""
+def read_rpc_json(text: str, source: str) -> tuple[RPC, RPCAccuracy]:
+    """Parse a JSON RPC dictionary (see the module docstring): its RPC and the vendor's errors
+    under GDAL's names (``ERR_BIAS``/``ERR_RAND``, or rasterio's ``err_bias``/``err_rand``)."""
     d, prefix = _rpc_dict(parse_json(text, source), source)
     style = _style_of(d, source)
 
@@ -141,7 +143,9 @@ def read_rpc_json(text: str, source: str) -> RPC:
         return f"missing key {prefix}{key}"
 
     scalars = read_scalars(style, lookup, source, missing)
-    return assemble_rpc(scalars, read_coeffs(style, lookup, source, missing), source)
+    rpc = assemble_rpc(scalars, read_coeffs(style, lookup, source, missing), source)
+    keys = next((k for k in (ERROR_KEYS["rpc_txt"], ERROR_KEYS["rasterio"]) if k[0] in d), None)
+    return rpc, read_accuracy(keys, lookup, source)
 
 
 __all__ = ["JSON_STYLES", "looks_like_json", "parse_json", "read_rpc_json"]

@@ -147,6 +147,19 @@ STYLES: Mapping[str, KeyStyle] = {
 }
 """Every vendor style, by the format name :func:`jaxgeo.io.detect_rpc_format` gives."""
 
+ERROR_KEYS: Mapping[str, tuple[str, str] | None] = {
+    "rpc_txt": ("ERR_BIAS", "ERR_RAND"),
+    "dimap": None,  # its ERR_BIAS_ROW/COL are the rational functions' fit errors, not these
+    "ossim_geom": ("bias_error", "rand_error"),
+    "rasterio": ("err_bias", "err_rand"),
+    "rpb": ("errBias", "errRand"),
+    "maxar_xml": ("ERRBIAS", "ERRRAND"),
+    "rpcm_json": None,
+}
+"""Per style, the names of the vendor's stated errors ``(ERR_BIAS, ERR_RAND)`` (m per
+horizontal axis; :mod:`jaxgeo.io._rpc_accuracy`), ``None`` where the format has none. The
+GeoTIFF tag holds them as its first two doubles (:data:`GEOTIFF_TAG_ORDER`)."""
+
 
 DIMAP_V1_SCALARS: Mapping[str, tuple[str, str]] = {
     "lon_off": ("Lon", "B"),
@@ -197,6 +210,7 @@ __all__ = [
     "COEFFS",
     "DIMAP_V1_POLYNOMIALS",
     "DIMAP_V1_SCALARS",
+    "ERROR_KEYS",
     "GEOTIFF_TAG_ORDER",
     "N_TERMS",
     "RPC_KEYS",

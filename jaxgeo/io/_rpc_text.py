@@ -33,6 +33,7 @@ from collections.abc import Callable
 
 from ..models import RPC
 from ._atomic import atomic_write_text
+from ._rpc_accuracy import RPCAccuracy, read_accuracy
 from ._rpc_common import (
     RPCFormatError,
     assemble_rpc,
@@ -43,7 +44,7 @@ from ._rpc_common import (
     read_scalars,
     vendor_values,
 )
-from ._rpc_keys import COEFFS, N_TERMS, NITF_ALIASES, SCALARS, STYLES, vendor_items
+from ._rpc_keys import COEFFS, ERROR_KEYS, N_TERMS, NITF_ALIASES, SCALARS, STYLES, vendor_items
 
 # ---------------------------------------------------------------- _RPC.TXT (key: value)
 
@@ -98,13 +99,15 @@ def _line_lookup(entries: dict[str, tuple[int, str]]):
 def _txt_relevant(key: str) -> bool:
     return (
         key in _TXT.scalar_names()
+        or key in ERROR_KEYS["rpc_txt"]
         or key in _TXT.coeff_names()
         or _INDEXED.fullmatch(key) is not None
     )
 
 
-def read_rpc_txt(text: str, source: str) -> RPC:
-    """Parse a GDAL/Ikonos/SkySat/Cartosat-1 ``_RPC.TXT`` key: value file."""
+def read_rpc_txt(text: str, source: str) -> tuple[RPC, RPCAccuracy]:
+    """Parse a GDAL/Ikonos/SkySat/Cartosat-1 ``_RPC.TXT`` key: value file: its RPC and the
+    vendor's ``ERR_BIAS``/``ERR_RAND``."""
     entries = _key_value_lines(text, source, upper=True, relevant=_txt_relevant)
     for key, (lineno, _) in entries.items():
         match = _INDEXED.fullmatch(key)
@@ -115,7 +118,8 @@ def read_rpc_txt(text: str, source: str) -> RPC:
             )
     lookup = _line_lookup(entries)
     scalars = read_scalars(_TXT, lookup, source)
-    return assemble_rpc(scalars, read_coeffs(_TXT, lookup, source), source)
+    rpc = assemble_rpc(scalars, read_coeffs(_TXT, lookup, source), source)
+    return rpc, read_accuracy(ERROR_KEYS["rpc_txt"], lookup, source, units=True)
 
 
 def format_rpc_txt(rpc: RPC, units: bool = False) -> str:
@@ -144,12 +148,16 @@ def write_rpc_text(
 # ------------------------------------------------------------------------ .RPB (ODL groups)
 
 _RPB = STYLES["rpb"]
-_RPB_READ = {name.upper() for name in (*_RPB.scalar_names(), *_RPB.coeff_names(), "SpecId")}
+_RPB_READ = {
+    name.upper()
+    for name in (*_RPB.scalar_names(), *_RPB.coeff_names(), "SpecId", *ERROR_KEYS["rpb"])
+}
 _ASSIGN = re.compile(r"([A-Za-z_]\w*)[ \t]*=[ \t]*")
 
 
-def read_rpb(text: str, source: str) -> RPC:
-    """Parse a DigitalGlobe/GDAL ``.RPB`` file (``name = value;`` in ``BEGIN_GROUP = IMAGE``)."""
+def read_rpb(text: str, source: str) -> tuple[RPC, RPCAccuracy]:
+    """Parse a DigitalGlobe/GDAL ``.RPB`` file (``name = value;`` in ``BEGIN_GROUP = IMAGE``):
+    its RPC and the vendor's ``errBias``/``errRand``."""
     matches = list(_ASSIGN.finditer(text))
     items: dict[str, tuple[int, str, str]] = {}  # KEY -> (line, name as written, value text)
     for m, nxt in zip(matches, matches[1:] + [None], strict=True):
@@ -181,7 +189,8 @@ def read_rpb(text: str, source: str) -> RPC:
         spec[2] if spec else None, source, f"line {spec[0]} (SpecId)" if spec else ""
     )
     scalars = read_scalars(_RPB, lookup, source)
-    return assemble_rpc(scalars, read_coeffs(_RPB, lookup, source), source, order=order)
+    rpc = assemble_rpc(scalars, read_coeffs(_RPB, lookup, source), source, order=order)
+    return rpc, read_accuracy(ERROR_KEYS["rpb"], lookup, source)
 
 
 def format_rpb(rpc: RPC, sat_id: str = "UNKNOWN", band_id: str = "UNKNOWN") -> str:
@@ -231,8 +240,9 @@ GEOM_MARKER = re.compile(
 """An OSSIM coefficient key (2-digit, 0-based index); group 1 is the keyword prefix."""
 
 
-def read_ossim_geom(text: str, source: str) -> RPC:
-    """Parse an OSSIM keyword list (``.geom``) holding an ``ossimRpcModel`` (or a subclass).
+def read_ossim_geom(text: str, source: str) -> tuple[RPC, RPCAccuracy]:
+    """Parse an OSSIM keyword list (``.geom``) holding an ``ossimRpcModel`` (or a subclass):
+    its RPC and its ``bias_error``/``rand_error`` (OTB writes 0 for unknown: read as unknown).
 
     Keys may carry a common prefix (``image0.line_off``). ``polynomial_format`` A or B gives the
     term order (OSSIM's A is RPC00A, B is RPC00B; B when absent). OSSIM's adjustable parameters
@@ -243,7 +253,11 @@ def read_ossim_geom(text: str, source: str) -> RPC:
 
     def relevant(key: str) -> bool:
         name = key.removeprefix(prefix)
-        return name in _GEOM.scalar_names() or name == "polynomial_format" or "_coeff_" in name
+        return (
+            name in _GEOM.scalar_names()
+            or name in ("polynomial_format", *ERROR_KEYS["ossim_geom"])
+            or "_coeff_" in name
+        )
 
     entries = _key_value_lines(text, source, upper=False, relevant=relevant)
     fmt_entry = entries.get(prefix + "polynomial_format")
@@ -263,7 +277,8 @@ def read_ossim_geom(text: str, source: str) -> RPC:
 
     scalars = read_scalars(_GEOM, lookup, source, missing)
     coeffs = read_coeffs(_GEOM, lookup, source, missing)
-    return assemble_rpc(scalars, coeffs, source, order=order)
+    rpc = assemble_rpc(scalars, coeffs, source, order=order)
+    return rpc, read_accuracy(ERROR_KEYS["ossim_geom"], lookup, source)
 
 
 def _refuse_ossim_adjustment(entries: dict[str, tuple[int, str]], prefix: str, src: str) -> None:

@@ -35,6 +35,7 @@ import numpy as np
 
 from ..errors import JaxgeoWarning
 from ..models import RPC
+from ._rpc_accuracy import RPCAccuracy, read_accuracy
 from ._rpc_common import (
     RPCFormatError,
     assemble_rpc,
@@ -44,7 +45,7 @@ from ._rpc_common import (
     read_coeffs,
     read_scalars,
 )
-from ._rpc_keys import DIMAP_V1_POLYNOMIALS, DIMAP_V1_SCALARS, N_TERMS, STYLES
+from ._rpc_keys import DIMAP_V1_POLYNOMIALS, DIMAP_V1_SCALARS, ERROR_KEYS, N_TERMS, STYLES
 
 _DIMAP = STYLES["dimap"]
 _MAXAR = STYLES["maxar_xml"]
@@ -252,8 +253,9 @@ def _check_direct_model(rpc_1: RPC, s: dict, polys: dict, source: str) -> None:
         )
 
 
-def read_maxar_xml(root: ET.Element, source: str) -> RPC:
-    """RPC of a DigitalGlobe/Maxar image XML tree (``RPB/IMAGE``)."""
+def read_maxar_xml(root: ET.Element, source: str) -> tuple[RPC, RPCAccuracy]:
+    """RPC of a DigitalGlobe/Maxar image XML tree (``RPB/IMAGE``) and the vendor's
+    ``<ERRBIAS>``/``<ERRRAND>``."""
     rpb = root if _local(root.tag) == "RPB" else _find(root, "RPB")
     image = _find(rpb, "IMAGE") if rpb is not None else None
     if image is None:
@@ -261,7 +263,8 @@ def read_maxar_xml(root: ET.Element, source: str) -> RPC:
     spec = _children(rpb).get("SPECID")
     order = parse_order(spec.text if spec is not None else None, source, "<SPECID>")
     missing = _missing_in("<RPB><IMAGE>")
-    scalars = read_scalars(_MAXAR, _element_lookup(_children(image)), source, missing)
+    lookup = _element_lookup(_children(image))
+    scalars = read_scalars(_MAXAR, lookup, source, missing)
 
     def polynomial(tag: str) -> tuple[str, str] | None:
         nodes = [e for e in image.iter() if _local(e.tag).upper() == tag]
@@ -269,4 +272,5 @@ def read_maxar_xml(root: ET.Element, source: str) -> RPC:
         return (f"<{tag}>", " ".join(n.text or "" for n in nodes)) if nodes else None
 
     coeffs = read_coeffs(_MAXAR, polynomial, source, missing)
-    return assemble_rpc(scalars, coeffs, source, order=order)
+    rpc = assemble_rpc(scalars, coeffs, source, order=order)
+    return rpc, read_accuracy(ERROR_KEYS["maxar_xml"], lookup, source)

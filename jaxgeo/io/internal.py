@@ -11,6 +11,7 @@ from ._atomic import write_csv as write_csv
 from ._dem_grid import dem_coverage as dem_coverage
 from ._image import pixel_frame as pixel_frame
 from ._image import reframed as reframed
+from ._plausible import dem_against_model as dem_against_model
 from ._plausible import dem_against_ties as dem_against_ties
 from ._raster import open_raster as open_raster
 from ._raster import raster_writer as raster_writer

@@ -11,7 +11,7 @@ import numpy as np
 from .._runtime.kept import kept_points
 from ..errors import JaxgeoWarning
 from ..geodesy import utm_epsg, utm_zone
-from ..io.internal import dem_coverage
+from ..io.internal import dem_against_model, dem_coverage
 from ..tiles import OutputGrid
 
 BATCH = 64
@@ -124,7 +124,8 @@ def dem_for_image(model, dem, width: int, height: int, source: str = "image", ne
     """The :class:`DEMGrid` around the image footprint (clipped to the DEM); error if the DEM
     does not cover the footprint, or, given ``need`` (the lon/lat box of the requested output,
     e.g. its bounds), the part of the footprint in ``need``: a DEM that covers the output is
-    enough."""
+    enough; error if its heights there lie outside the model's validity range
+    (:func:`jaxgeo.io.internal.dem_against_model`)."""
     border = border_pixels(width, height)
     box, ref_box = rough_bounds(model, border)
     check, what = ref_box, f"the footprint of {source}"
@@ -156,6 +157,9 @@ def dem_for_image(model, dem, width: int, height: int, source: str = "image", ne
         box = (min(box[0], box2[0]), min(box[1], box2[1]), max(box[2], box2[2]),
                max(box[3], box2[3]))  # fmt: skip
         grid = dem.grid(clip(box))
+    why = dem_against_model(z, model, str(dem.path), source)  # feet, hundreds of metres off
+    if why is not None:
+        raise ValueError(why)
     return grid
 
 

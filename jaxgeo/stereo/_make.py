@@ -29,7 +29,7 @@ from ._report import DSMReport
 from ._settings import DEFAULT_DSM, DSMSettings, DSMSettingsError
 from ._tiled import TILED_MIN_PX, DSMSetup, dsm_workers, plan_dsm
 from ._triangulation import StereoError
-from ._uncertainty import Orientation
+from ._uncertainty import Orientation, vendor_orientation
 
 
 def footprint_cells(image: SensorImage, settings: DSMSettings) -> tuple[float, float]:
@@ -184,8 +184,11 @@ def make_dsm(
     then). ``dem`` (a :class:`jaxgeo.io.DEM`): its heights over the footprint, +-50 m, are the
     terrain's height range unless ``settings.heights`` gives it. ``orientation``: the
     covariance of the models' image shifts (px^2, :data:`~jaxgeo.stereo.Orientation`), into
-    the ``height_sigma`` band. ``tiles.progress``: the tiles' (or the pairs') progress and one
-    line about the plan on stderr.
+    the ``height_sigma`` band; ``None``: the models' a priori error, the vendor's
+    ``ERR_BIAS``/``ERR_RAND`` where an image's RPC states them
+    (:attr:`~jaxgeo.io.SensorImage.vendor_accuracy`), else the stated default
+    (:func:`~jaxgeo.stereo._uncertainty.vendor_orientation`). ``tiles.progress``: the tiles'
+    (or the pairs') progress and one line about the plan on stderr.
 
     Returns a :class:`DSMReport`. Raises :class:`DSMSettingsError` (naming the field) for
     settings these images cannot take (an ROI outside the reference image, a DSM over
@@ -205,6 +208,9 @@ def make_dsm(
     pool = _early_pool(tiles) if tiled else None
     try:
         models, paths = [im.model for im in images], [im.path for im in images]
+        accuracies = [im.vendor_accuracy for im in images]
+        if orientation is None and any(a is not None and a.known for a in accuracies):
+            orientation = vendor_orientation(models, accuracies, [im.name for im in images])
         t_plan = time.perf_counter()
         setup = plan_dsm(models, paths, settings, dem=dem, orientation=orientation,
                          tiled=tiled, progress=tiles.progress)  # fmt: skip

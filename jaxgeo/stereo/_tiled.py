@@ -37,6 +37,7 @@ from ..io.internal import file_id
 from ..models import AbstractSensorModel
 from ..tiles import RasterSpec, Tile, TilePlan, plan_tiles
 from ..tiles.internal import NoData, cores, overview_factors, write_tile
+from ._dem_check import check_dem
 from ._dsm import DSM_BANDS, dsm_band_tags, dsm_grid, local_utm_epsg, rasterize, to_map
 from ._pipeline import _height_offsets, _spacing, dsm_from_images, image_size, stereo_pair
 from ._settings import DEFAULT_DSM, DSMSettings
@@ -328,12 +329,14 @@ def dsm_heights(
     from: ``settings.heights`` (``"given"``), else the DEM's heights over the footprint +-50 m
     (``"dem"``), else the tie points' (``"tie points"``: :func:`scene_heights`; for an untiled
     DSM, ``tiled=False``, within the models' whole validity cube, whose points it keeps, and
-    each window once), else the reference model's validity range."""
+    each window once), else the reference model's validity range. A DEM unlike the images is
+    refused (:func:`~._dem_check.check_dem`)."""
     if settings.heights is not None:
         return settings.heights, "given"
     roi = settings.roi or (0, 0, *image_size(paths[0]))
     if dem is not None:
         lo, hi = footprint_dem_heights(models[0], dem, roi)
+        check_dem(models, paths, _sample_windows(roi)[0], dem, (lo, hi))  # refuses a wrong DEM
         return (lo - HEIGHT_MARGIN_M, hi + HEIGHT_MARGIN_M), "dem"
     if tiled:
         heights = scene_heights(models, paths, roi)

@@ -17,10 +17,16 @@ Then
   with per-image sigmas only overstates the sigma where the adjustment correlates the
   images). Models that were not adjusted carry their vendor's pointing error, which no
   matching sees: a DSM file (:func:`~jaxgeo.stereo.make_dsm`) then takes the a priori
-  :func:`a_priori_orientation` (:data:`A_PRIORI_SHIFT_PX` per image and axis, independent
-  images; :func:`resolved_orientation`) and says so in the band's ``covers`` tag and its
-  report (:func:`sigma_covers`). A zero matrix states exact models (simulations): the
-  matching's sigma alone.
+  orientation error (:func:`vendor_orientation`): where an image's RPC states its accuracy
+  (RPC00B ``ERR_BIAS``/``ERR_RAND``, m per horizontal axis: :class:`jaxgeo.io.RPCAccuracy`),
+  that error mapped into its pixels by the model's ground-to-image Jacobian, else the stated
+  default :data:`A_PRIORI_SHIFT_PX` per axis (:func:`a_priori_orientation`); independent
+  images. The band's ``covers`` tag and the report say which (:func:`sigma_covers`). The
+  posterior of an adjustment (:func:`adjusted_orientation`) is bounded by the same a priori
+  in every direction (:func:`bounded_by_a_priori`): what the ties leave open (the relative
+  along-track shift of a ties-only block, a height offset to them) stays at the given models'
+  values, whose error is the a priori one, not the adjustment's loose prior that held it.
+  A zero matrix states exact models (simulations): the matching's sigma alone.
 
 **Cells** (:func:`cell_sigma`). A cell's height is the median of its ``n`` points. The matching
 errors of neighbouring points are not independent (their correlation windows overlap by most
@@ -38,6 +44,7 @@ and is added in quadrature:
 
 from __future__ import annotations
 
+import dataclasses
 import json
 import os
 import pathlib
@@ -54,13 +61,26 @@ from ..lsq.internal import inv3_spd
 from ..models import AbstractSensorModel
 
 CHUNK = 65536
-Orientation = np.ndarray | Sequence[np.ndarray | None] | None
+
+
+@dataclasses.dataclass(frozen=True)
+class OrientationCovariance:
+    """A ``(2N, 2N)`` covariance (px^2) of the models' image shifts with what it holds, in
+    words (``covers``: the DSM band's ``covers`` tag, :func:`sigma_covers`): the a priori of
+    :func:`vendor_orientation`, the bounded posterior of :func:`adjusted_orientation`."""
+
+    matrix: np.ndarray
+    covers: str
+
+
+Orientation = np.ndarray | OrientationCovariance | Sequence[np.ndarray | None] | None
 """The covariance (px^2) of the models' remaining image shifts ``(x_1, y_1, ..., x_N, y_N)``:
 one ``(2N, 2N)`` matrix (with the correlations between images: :func:`adjustment_covariance`,
-:func:`orientation_covariances`), or per model a ``2 x 2`` matrix or ``None`` (independent
-images), or ``None``: for a pair's points and :func:`~jaxgeo.stereo.dsm_from_images` no
-orientation term (the matching alone); for :func:`~jaxgeo.stereo.make_dsm` (``jaxgeo dsm``)
-models that were not adjusted, with the a priori :func:`a_priori_orientation`."""
+:func:`orientation_covariances`), or one with its description (:class:`OrientationCovariance`),
+or per model a ``2 x 2`` matrix or ``None`` (independent images), or ``None``: for a pair's
+points and :func:`~jaxgeo.stereo.dsm_from_images` no orientation term (the matching alone);
+for :func:`~jaxgeo.stereo.make_dsm` (``jaxgeo dsm``) models that were not adjusted, with the
+a priori :func:`vendor_orientation`."""
 
 
 def joint_covariance(orientation: Orientation, n_models: int) -> np.ndarray:
@@ -68,6 +88,8 @@ def joint_covariance(orientation: Orientation, n_models: int) -> np.ndarray:
     out = np.zeros((2 * n_models, 2 * n_models))
     if orientation is None:
         return out
+    if isinstance(orientation, OrientationCovariance):
+        orientation = np.asarray(orientation.matrix, float)
     if isinstance(orientation, np.ndarray) and orientation.ndim == 2:
         if orientation.shape != out.shape:
             raise ValueError(
@@ -102,6 +124,73 @@ def a_priori_orientation(n_models: int, shift_px: float = A_PRIORI_SHIFT_PX) -> 
     return np.eye(2 * int(n_models)) * float(shift_px) ** 2
 
 
+_NOT_ADJUSTED = "matching and the models' a priori orientation error (not adjusted: "
+_REPLACED = (
+    "independent images; the posterior of jaxgeo adjust replaces it: --orientation "
+    "adjusted_models.json)"
+)
+
+
+def _pixels_per_metre(model: AbstractSensorModel) -> np.ndarray:
+    """``(2, 2)``: image ``(x, y)`` px per metre east and north at the model's reference ground
+    point (its ground sample distance along each axis, with the image's rotation)."""
+    g = jnp.asarray(model.reference_ground(), dtype=float)
+    jac = np.asarray(jax.jacfwd(model.project)(g)) / np.asarray(metres_per_unit(g))
+    return jac[:, :2]
+
+
+def vendor_orientation(
+    models: Sequence[AbstractSensorModel],
+    accuracies: Sequence[object | None],
+    names: Sequence[str],
+) -> OrientationCovariance:
+    """The a priori :class:`OrientationCovariance` of models that were not adjusted (images
+    independent): per image its vendor's stated accuracy (``accuracies[i]``, a
+    :class:`jaxgeo.io.RPCAccuracy` or ``None``), ``ERR_BIAS`` and ``ERR_RAND`` in quadrature
+    (m per horizontal axis on the ground: ``s**2 I`` east/north) mapped into its pixels by the
+    model's Jacobian ``J`` (px per metre), ``s**2 J J^T``; where it is unknown, the stated
+    default :data:`A_PRIORI_SHIFT_PX` per axis. ``covers`` names each image's source and its
+    sigma in px (``"left: vendor ERR_BIAS 3.31 m, ERR_RAND 0.5 m = 6.7 x 6.6 px (x, y)"``,
+    ``"right: stated default 0.7 px"``). ``ERR_BIAS`` is the image's absolute pointing error:
+    images of one pass share much of it, which moves the DSM in plan rather than in height,
+    so for them the sigma is an upper bound (:func:`adjusted_orientation` gives the
+    posterior)."""
+    n = len(models)
+    cov = a_priori_orientation(n)
+    parts = []
+    for i, (model, accuracy, name) in enumerate(zip(models, accuracies, names, strict=True)):
+        total = getattr(accuracy, "horizontal_m", None)
+        if total is None:
+            parts.append(f"{name}: stated default {A_PRIORI_SHIFT_PX:g} px")
+            continue
+        jac = _pixels_per_metre(model)
+        block = total**2 * (jac @ jac.T)
+        cov[2 * i : 2 * i + 2, 2 * i : 2 * i + 2] = block
+        sx, sy = np.sqrt(np.diag(block))
+        parts.append(f"{name}: {accuracy.describe()} = {sx:.2g} x {sy:.2g} px (x, y)")
+    covers = _NOT_ADJUSTED + "; ".join(parts) + " per image and axis; " + _REPLACED
+    return OrientationCovariance(cov, covers)
+
+
+def bounded_by_a_priori(posterior: np.ndarray, a_priori: np.ndarray) -> np.ndarray:
+    """``posterior`` (``(2N, 2N)`` px^2) with no direction more uncertain than ``a_priori``
+    (positive definite): in the metric of ``a_priori`` (``W = A^{-1/2}``), the eigenvalues of
+    ``W P W`` above 1 are set to 1. A direction the adjustment left open (its estimate stayed
+    at the given models' values, held only by its prior: ``jaxgeo adjust``'s relative
+    orientation holds the shifts by 10 px) has the given models' error, the a priori one;
+    where the adjustment determined a direction, its posterior stays."""
+    lam, v, root = _in_a_priori_metric(posterior, a_priori)
+    return root @ ((v * np.clip(lam, 0.0, 1.0)) @ v.T) @ root
+
+
+def _in_a_priori_metric(posterior, a_priori):
+    """The eigenvalues and eigenvectors of ``W P W`` (``W = A^{-1/2}``) and ``A^{1/2}``."""
+    vals, vecs = np.linalg.eigh(np.asarray(a_priori, float))
+    white = (vecs / np.sqrt(vals)) @ vecs.T
+    lam, v = np.linalg.eigh(white @ np.asarray(posterior, float) @ white)
+    return lam, v, (vecs * np.sqrt(vals)) @ vecs.T
+
+
 def resolved_orientation(orientation: Orientation, n_models: int) -> np.ndarray:
     """The ``(2N, 2N)`` covariance a DSM uses: ``orientation``'s (:func:`joint_covariance`),
     or :func:`a_priori_orientation` when it is ``None`` (models not adjusted)."""
@@ -115,10 +204,12 @@ def sigma_covers(orientation: Orientation, n_models: int) -> str:
     :func:`resolved_orientation`), in words: the band's ``covers`` tag and the report's."""
     if orientation is None:
         return (
-            "matching and the models' a priori orientation error (not adjusted: "
-            f"{A_PRIORI_SHIFT_PX:g} px per image and axis, independent images; the posterior "
-            "of jaxgeo adjust replaces it: --orientation adjusted_models.json)"
+            _NOT_ADJUSTED
+            + f"stated default {A_PRIORI_SHIFT_PX:g} px per image and axis; "
+            + _REPLACED
         )
+    if isinstance(orientation, OrientationCovariance):
+        return orientation.covers
     if not np.any(joint_covariance(orientation, n_models)):
         return "matching only (orientation covariance zero: the models given as exact)"
     return "matching and orientation (the given covariance of the models' image shifts)"
@@ -308,6 +399,36 @@ def orientation_covariances(
         raise OrientationError(
             f"{path}: its covariance does not hold the bias shifts of {', '.join(keys)} ({err})"
         ) from None
+
+
+def adjusted_orientation(
+    path: str | os.PathLike,
+    images: Sequence[str | os.PathLike],
+    a_priori: OrientationCovariance | None = None,
+) -> OrientationCovariance:
+    """The orientation a DSM of ``images`` takes from ``jaxgeo adjust``'s
+    ``adjusted_models.json`` (``path``): the posterior of :func:`orientation_covariances`,
+    bounded in every direction by the a priori (:func:`bounded_by_a_priori`; ``a_priori``:
+    :func:`vendor_orientation` of the given models, default the stated
+    :data:`A_PRIORI_SHIFT_PX` per image and axis). ``covers`` says so, with how many of the
+    ``2N`` directions the adjustment left open (bounded). :class:`OrientationError` as
+    :func:`orientation_covariances`."""
+    posterior = orientation_covariances(path, images)
+    n = len(images)
+    prior = a_priori_orientation(n) if a_priori is None else joint_covariance(a_priori, n)
+    bounded = bounded_by_a_priori(posterior, prior)
+    n_open = int(np.sum(_in_a_priori_metric(posterior, prior)[0] > 1.0))
+    if a_priori is None:
+        source = f"the stated default {A_PRIORI_SHIFT_PX:g} px per image and axis"
+    else:
+        source = a_priori.covers.removeprefix(_NOT_ADJUSTED).split("; independent")[0]
+    covers = (
+        f"matching and orientation (the posterior of jaxgeo adjust, {pathlib.Path(path).name}; "
+        f"{n_open} of its {2 * n} shift directions left open by the adjustment (e.g. the "
+        "relative along-track shift without GCPs) take the models' a priori error instead of "
+        f"the adjustment's prior: {source})"
+    )
+    return OrientationCovariance(bounded, covers)
 
 
 def sigma_calibration(

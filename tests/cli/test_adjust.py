@@ -75,7 +75,7 @@ def test_adjust_json_and_outputs(scene, tmp_path, capsys):
         assert np.isclose(np.sqrt(cov[i, i]), models[image]["sigmas"]["." + leaf], rtol=1e-9)
     sx = [joint["parameters"].index(f"{n}.bias.shift_px[0]") for n in ("fore", "aft")]
     assert abs(cov[sx[0], sx[1]]) > 0.1 * np.sqrt(cov[sx[0], sx[0]] * cov[sx[1], sx[1]])
-    from jaxgeo.stereo.internal import orientation_covariances
+    from jaxgeo.stereo._uncertainty import orientation_covariances
 
     np.testing.assert_allclose(
         orientation_covariances(out / "adjusted_models.json", ["fore", "aft"]),

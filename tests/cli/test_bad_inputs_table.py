@@ -1,8 +1,9 @@
 """The table of issue 53's bad inputs and unclear errors through the CLI: each case ends with its
 exit status and a message naming the option, file or other run at fault, with ``--json`` exactly
 one JSON object on stdout (``ok``, ``exit_code``, ``error``), and no input changed (hashes
-before and after). Every case fails before any computation (fast); the cases of a second run,
-a killed run and the environment are the tests after the table."""
+before and after). Every case fails before any computation (fast; a DSM's DEM is checked against
+the tie points of one window first, ~10 s); the cases of a second run, a killed run and the
+environment are the tests after the table."""
 
 import hashlib
 import json
@@ -39,6 +40,7 @@ def workspace(tmp_path):
     for side in ("left", "right"):
         shutil.copy(REAL / f"phr_ventoux__{side}_image.geom", src / f"{side}.geom")
     shutil.copy(REAL / "ventoux" / "dem" / "N44E005_srtm90.tif", src / "srtm.tif")
+    _wrong_dems(src / "srtm.tif")
     for name in ("fore.txt", "aft.txt", "ground.csv", "observations.csv"):
         shutil.copy(DEMO / name, src / name)
     header = (DEMO / "observations.csv").read_text().splitlines()[0]
@@ -52,10 +54,34 @@ def workspace(tmp_path):
     assert sorted(p.name for p in src.iterdir()) == sorted(p.name for p in hashes)
 
 
+def _wrong_dems(srtm: pathlib.Path) -> None:
+    """Beside the SRTM tile (EGM96 heights, 470..580 m under the Ventoux crops): the same in feet
+    (undeclared, and declared as the band's unit; capped at 8900, below the heights no terrain
+    has, whose warning would be a second line), +500 m and +2000 m."""
+    import numpy as np
+    import rasterio
+
+    with rasterio.open(srtm) as src:
+        z, profile = src.read(1), src.profile
+    void = z == profile["nodata"]
+    feet = np.minimum(np.round(z / 0.3048), 8900)
+    for name, values, units in (("srtm_feet.tif", feet, None),
+                                ("srtm_ft_declared.tif", feet, ("ft",)),
+                                ("srtm_plus500.tif", z + 500, None),
+                                ("srtm_plus2000.tif", z + 2000, None)):  # fmt: skip
+        with rasterio.open(srtm.parent / name, "w", **profile) as dst:
+            dst.write(np.where(void, z, values).astype(z.dtype), 1)
+            if units:
+                dst.units = units
+
+
 PAIR = ["{in}/left_image.tif", "{in}/right_image.tif", "--model", "left_image={in}/left.geom",
         "--model", "right_image={in}/right.geom"]  # fmt: skip
 ORTHO = ["ortho", "{in}/left_image.tif", "--model", "{in}/left.geom", "--dem", "{in}/srtm.tif"]
 ADJUST = ["adjust", "{in}/fore.txt", "{in}/aft.txt", "--ground", "{in}/ground.csv"]
+DSM_DEM = ["dsm", *PAIR, "--geoid", "egm96", "-o", "{out}/d.tif", "--dem"]
+ORTHO_DEM = ["ortho", "{in}/left_image.tif", "--model", "{in}/left.geom", "--geoid", "egm96",
+             "-o", "{out}/o.tif", "--dem"]  # fmt: skip
 
 # (case, argv with {in}/{out} placeholders, expected exit status, words of the message)
 CASES = [
@@ -85,6 +111,16 @@ CASES = [
      ["header_only.csv", "no measurements", "no rows"]),
     ("match: a missing image", ["match", "{in}/nope.tif", "{in}/left_image.tif",
                                 "-o", "{out}/t.csv"], 2, ["nope.tif"]),
+    ("dsm (tiled): a DEM in feet", [*DSM_DEM, "{in}/srtm_feet.tif", "--tile", "256",
+                                    "--workers", "0"], 2,
+     ["srtm_feet.tif", "tie points' triangulated heights", "heights in feet", "--heights"]),
+    ("dsm: a DEM 500 m too high", [*DSM_DEM, "{in}/srtm_plus500.tif"], 2,
+     ["srtm_plus500.tif", "a constant offset of +", "--geoid"]),
+    ("ortho: a DEM 2000 m too high (beyond the model's validity range)",
+     [*ORTHO_DEM, "{in}/srtm_plus2000.tif"], 2,
+     ["srtm_plus2000.tif", "validity range 190..1960 m", "above the range"]),
+    ("ortho: a DEM declaring its heights in feet", [*ORTHO_DEM, "{in}/srtm_ft_declared.tif"], 2,
+     ["srtm_ft_declared.tif", "in 'ft'", "0.3048"]),
 ]  # fmt: skip
 
 

@@ -62,8 +62,8 @@ def test_dem_500_m_off_is_named(shared_data, dems):
 
 
 def test_dsm_command_names_the_dem(shared_data, dems, tmp_path, capsys):
-    """``jaxgeo dsm --dem`` with the DEM in feet: the warning is the command's own line naming
-    the file (here too few ties are left for a DSM: exit 2, nothing written)."""
+    """``jaxgeo dsm --dem`` with the DEM in feet: refused before any tile (exit 2, nothing
+    written), the error naming the file (the tie points of one window against it)."""
     from jaxgeo.cli import main
 
     d = shared_data / "s2p_triplet"
@@ -72,5 +72,5 @@ def test_dsm_command_names_the_dem(shared_data, dems, tmp_path, capsys):
                "200", "200", "--dem", str(dems["ft"]), "-o", str(out), "--quiet"])  # fmt: skip
     err = capsys.readouterr().err
     assert "Traceback" not in err and "TieWarning" not in err
-    assert f"jaxgeo dsm: warning: {dems['ft']}: its heights differ" in err
-    assert rc in (0, 2) and (rc == 0) == out.exists()
+    assert f"jaxgeo dsm: error: {dems['ft']}: its heights differ" in err and "feet" in err
+    assert rc == 2 and not out.exists()

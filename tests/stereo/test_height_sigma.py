@@ -27,8 +27,12 @@ from jaxgeo.stereo import (
     sigma_calibration,
 )
 from jaxgeo.stereo._dense import correlation_sigma_px, refine_disparity_sigma
-from jaxgeo.stereo._uncertainty import cell_sigma, intersection_jacobian, point_height_sigmas
-from jaxgeo.stereo.internal import orientation_covariances
+from jaxgeo.stereo._uncertainty import (
+    cell_sigma,
+    intersection_jacobian,
+    orientation_covariances,
+    point_height_sigmas,
+)
 
 EPSG = 32631
 
@@ -271,3 +275,105 @@ def test_models_not_adjusted_get_the_a_priori_orientation_sigma(rpcs):
     zero = (np.zeros((5, 2)), np.zeros(5))
     _, orient = point_height_sigmas(models, ground, *zero, a_priori_orientation(2))
     assert np.all((1.0 < orient) & (orient < 2.2)), orient
+
+
+def test_vendor_errors_give_the_a_priori_orientation(rpcs):
+    """Issue 53: an RPC's stated ERR_BIAS / ERR_RAND (m per horizontal axis) become its a priori
+    image-shift covariance through the model's Jacobian (px per metre: about 1 / GSD); an image
+    without them keeps the stated default; the covers text names each source."""
+    from jaxgeo.io import RPCAccuracy
+    from jaxgeo.stereo._uncertainty import (
+        A_PRIORI_SHIFT_PX,
+        resolved_orientation,
+        sigma_covers,
+        vendor_orientation,
+    )
+
+    models, scene = rpcs
+    stated = RPCAccuracy(3.0, 1.0, "left.tif")
+    got = vendor_orientation(models, [stated, RPCAccuracy(source="right.tif")], ["l", "r"])
+    block = got.matrix[:2, :2]
+    gsd = 0.67  # the simulated Pleiades-like pair (about; off-nadir views stretch it)
+    sx, sy = np.sqrt(np.diag(block))
+    assert 0.8 < sx * gsd / np.hypot(3.0, 1.0) < 1.25 and 0.8 < sy * gsd / np.hypot(3.0, 1.0) < 1.25
+    np.testing.assert_allclose(got.matrix[2:, 2:], np.eye(2) * A_PRIORI_SHIFT_PX**2)
+    assert not np.any(got.matrix[:2, 2:])  # independent images
+    covers = sigma_covers(got, 2)
+    assert f"l: vendor ERR_BIAS 3 m, ERR_RAND 1 m = {sx:.2g} x {sy:.2g} px (x, y)" in covers
+    assert f"r: stated default {A_PRIORI_SHIFT_PX:g} px" in covers
+    np.testing.assert_array_equal(resolved_orientation(got, 2), got.matrix)
+    # the block is s^2 J J^T: a ground error of 1 m east maps to J[:, 0] px
+    from jaxgeo.stereo._uncertainty import _pixels_per_metre
+
+    jac = _pixels_per_metre(models[0])
+    np.testing.assert_allclose(block, 10.0 * jac @ jac.T)
+    g = np.asarray(models[0].reference_ground())
+    east = g + np.array([1.0 / (111_320.0 * np.cos(np.radians(g[1]))), 0.0, 0.0])
+    moved = np.asarray(models[0].project(east)) - np.asarray(models[0].project(g))
+    np.testing.assert_allclose(jac[:, 0], moved, rtol=2e-3)
+
+
+def test_a_posterior_is_bounded_by_the_a_priori_where_left_open():
+    from jaxgeo.stereo._uncertainty import a_priori_orientation, bounded_by_a_priori
+
+    prior = a_priori_orientation(2)  # 0.7 px per axis
+    # ties determine the relative x shift (0.03 px); the relative y shift and the common
+    # shifts only the adjustment's prior holds (1.5 px each)
+    rel_x = np.array([1.0, 0.0, -1.0, 0.0]) / np.sqrt(2)
+    basis = np.stack([rel_x, [1, 0, 1, 0], [0, 1, 0, 1], [0, 1, 0, -1]]).astype(float)
+    basis /= np.linalg.norm(basis, axis=1, keepdims=True)
+    posterior = basis.T @ np.diag([0.03**2, 1.5**2, 1.5**2, 1.5**2]) @ basis
+    bounded = bounded_by_a_priori(posterior, prior)
+    assert rel_x @ bounded @ rel_x == pytest.approx(0.03**2)  # determined: kept
+    for v in basis[1:]:  # open: the a priori
+        assert v @ bounded @ v == pytest.approx(0.7**2)
+    small = np.diag([0.01, 0.02, 0.03, 0.04])  # within the a priori everywhere: unchanged
+    np.testing.assert_allclose(bounded_by_a_priori(small, prior), small, atol=1e-15)
+    np.testing.assert_allclose(bounded_by_a_priori(10 * prior, prior), prior)
+
+
+def test_adjusted_orientation_states_what_it_bounded(tmp_path):
+    from jaxgeo.stereo._uncertainty import adjusted_orientation, sigma_covers
+
+    path = _adjusted_json(
+        tmp_path / "adjusted_models.json", {"left": (0.1, 1.5), "right": (0.3, 0.4)}
+    )
+    got = adjusted_orientation(path, ["left.tif", "right.tif"])
+    np.testing.assert_allclose(got.matrix, np.diag([0.01, 0.49, 0.09, 0.16]))
+    covers = sigma_covers(got, 2)
+    assert "posterior of jaxgeo adjust, adjusted_models.json" in covers
+    assert "1 of its 4 shift directions left open" in covers and "0.7 px" in covers
+
+
+def test_make_dsm_takes_the_vendor_errors_of_the_images(tmp_path):
+    """``make_dsm`` (``jaxgeo dsm``) without an orientation: an image whose RPC states
+    ERR_BIAS / ERR_RAND gets them as its a priori, the other the stated default; the band's
+    covers tag and the report say so (the plan alone: nothing computed)."""
+    from rasterio.rpc import RPC as RasterioRPC
+
+    from jaxgeo.io import open_image
+    from jaxgeo.simulate import stereo_scene
+    from jaxgeo.stereo import make_dsm
+    from jaxgeo.tiles import TileSettings
+
+    stereo_scene(tmp_path / "scene", 128, 4)
+    left = tmp_path / "scene" / "left.tif"
+    with rasterio.open(left, "r+") as dst:
+        dst.rpcs = RasterioRPC(**(dst.rpcs.to_dict() | {"err_bias": 2.0, "err_rand": 0.5}))
+    images = [open_image(left), open_image(tmp_path / "scene" / "right.tif")]
+    assert images[0].vendor_accuracy.bias_m == 2.0 and not images[1].vendor_accuracy.known
+    settings = DSMSettings(heights=(0.0, 600.0))
+    report = make_dsm(images, tmp_path / "dsm.tif", settings,
+                      TileSettings(plan=tmp_path / "plan.json", progress=False))  # fmt: skip
+    covers = report.height_sigma_covers
+    assert "left: vendor ERR_BIAS 2 m, ERR_RAND 0.5 m = " in covers, covers
+    assert "right: stated default 0.7 px" in covers, covers
+    assert f"height_sigma: {covers}" in report.summary()
+    # without stated errors (jaxgeo's own RPC files say -1) the default for both, said once
+    from jaxgeo.io import write_rpc_text
+
+    model = write_rpc_text(images[0].source_model, tmp_path / "left_RPC.TXT")
+    plain = [open_image(left, model=model), images[1]]
+    report = make_dsm(plain, tmp_path / "dsm2.tif", settings,
+                      TileSettings(plan=tmp_path / "plan2.json", progress=False))  # fmt: skip
+    assert "stated default 0.7 px per image and axis" in report.height_sigma_covers
