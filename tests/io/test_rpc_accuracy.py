@@ -66,9 +66,7 @@ def test_every_writable_format_carries_the_values(rpc, tmp_path):
 
     geom = write_ossim_geom(rpc, tmp_path / "e.geom")  # "bias_error: 0": unknown
     assert not read_rpc_accuracy(geom).known
-    (tmp_path / "f.geom").write_text(
-        geom.read_text().replace("bias_error: 0", "bias_error: 1.5")
-    )
+    (tmp_path / "f.geom").write_text(geom.read_text().replace("bias_error: 0", "bias_error: 1.5"))
     assert read_rpc_accuracy(tmp_path / "f.geom").bias_m == 1.5
 
     from jaxgeo.io import to_rasterio_rpc

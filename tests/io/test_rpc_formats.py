@@ -225,9 +225,7 @@ def test_txt_variants_read_the_same(real_rpcs, tmp_path):
         values = re.findall(rf"^{poly}_\d+: (\S+)$", text, re.M)
         text = re.sub(rf"^{poly}_\d+: \S+\n", "", text, flags=re.M)
         text += f"{poly}: {' '.join(values)}\n"  # GDAL metadata style: 20 values on one line
-    text = (
-        "# comment\n" + text + "MAX_LAT: 0\nMAX_LAT: 1\n"
-    )  # unread repeats are fine
+    text = "# comment\n" + text + "MAX_LAT: 0\nMAX_LAT: 1\n"  # unread repeats are fine
     (tmp_path / "b_RPC.TXT").write_text(text)
     assert_same_rpc(read_rpc(tmp_path / "b_RPC.TXT"), rpc)
 
