@@ -14,9 +14,10 @@ class DSMReport:
     """What :func:`make_dsm` (or :func:`tiled_dsm`) made: ``path`` (``None``: only the plan
     was written, at ``plan_path``), its grid (``epsg``, ``res_m``, ``width`` x ``height``
     cells), ``filled`` (share of cells with a height), ``interpolated`` (share of cells
-    interpolated), the run (``tiles``, ``empty_tiles``: nodata, ``reused_tiles``, ``workers``,
-    ``scheduler``, ``seconds``: of which ``plan_s`` planning, ``tiles_s`` running the tiles
-    and ``mosaic_s`` writing the COG), per tile its :class:`~jaxgeo.tiles.TileStats`
+    interpolated: of all the grid's, as ``filled``; :meth:`summary` prints it as a share of the
+    cells with a height), the run (``tiles``, ``empty_tiles``: nodata, ``reused_tiles``,
+    ``workers``, ``scheduler``, ``seconds``: of which ``plan_s`` planning, ``tiles_s`` running
+    the tiles and ``mosaic_s`` writing the COG), per tile its :class:`~jaxgeo.tiles.TileStats`
     (``tile_stats``: a tile's pairs' numbers in ``details``, or why it is empty in
     ``no_data``); ``tiled``: made tile by tile (else one tile of the whole ROI, whose pairs'
     stats are ``pairs`` and median height sigma ``median_height_sigma_m``); the ``plan``."""
@@ -77,11 +78,13 @@ class DSMReport:
         """The report in a few lines for people (what ``jaxgeo dsm`` prints); ``out``: the
         output's name as the user gave it."""
         out = out or str(self.path)
+        # ``interpolated`` is a share of the grid, as ``filled``: printed as one of the heights
+        of_heights = self.interpolated / self.filled if self.filled > 0 else 0.0
         if not self.tiled:
             sigma = self.median_height_sigma_m
             lines = [f"wrote {out}: {self.width} x {self.height} cells of {self.res_m:g} m, "
                      f"EPSG:{self.epsg}, {100 * self.filled:.1f}% with a height (ellipsoidal, "
-                     f"m), {100 * self.interpolated:.1f}% of them interpolated (band "
+                     f"m), {100 * of_heights:.1f}% of them interpolated (band "
                      f"'filled'); median height_sigma {sigma or float('nan'):.2f} m"]  # fmt: skip
             for pair in self.as_dict()["pairs"]:
                 lines.append(f"  {pair['images'][0]} - {pair['images'][1]}: " + _pair_line(pair))
@@ -91,7 +94,7 @@ class DSMReport:
                  else "this process")  # fmt: skip
         lines = [f"wrote {self.path}: {self.width} x {self.height} cells of {self.res_m:g} m, "
                  f"EPSG:{self.epsg}, {100 * self.filled:.1f}% with a height (ellipsoidal, m), "
-                 f"{100 * self.interpolated:.1f}% interpolated (band 'filled'); {self.tiles} "
+                 f"{100 * of_heights:.1f}% of them interpolated (band 'filled'); {self.tiles} "
                  f"tiles ({len(empty)} without data, {self.reused_tiles} reused) on {where}; "
                  f"{self.seconds:.1f} s"]  # fmt: skip
         lines += [f"  tile {k}: no data ({why[:160]})" for k, why in list(empty.items())[:5]]
