@@ -312,13 +312,14 @@ def _iterate(grids, step_m, settings, shift, tolerance_m, callback, limit_m=math
         if callback is not None:
             callback(it, (-t[0], -t[1]), (float(shift[0]), float(shift[1])))
         if math.hypot(*shift) > limit_m:
+            fraction = settings.max_shift_fraction
             raise CoregistrationError(
-                f"the horizontal shift ran to ({shift[0]:+.2f}, {shift[1]:+.2f}) m in {it} "
-                f"iterations, beyond {limit_m:.1f} m ({settings.max_shift_fraction:g} x the "
-                f"{limit_m / settings.max_shift_fraction:.0f} m shorter side of the extent both "
-                "rasters have heights over): the fit is not determined by this overlap (too "
-                "small, or too smooth, for the reference's cells); use a larger DSM, a finer "
-                "reference, or vertical_only",
+                f"the horizontal shift ran to ({shift[0]:+.2f}, {shift[1]:+.2f}) m after {it} "
+                f"iteration{'s' if it > 1 else ''}, beyond {limit_m:.1f} m ({fraction:g} x the "
+                f"{limit_m / fraction:.0f} m shorter side of the extent both rasters have "
+                "heights over): the fit is not determined by this overlap (too small, or too "
+                "smooth, for the reference's cells); use a larger DSM, a finer reference, or "
+                "vertical_only",
                 settings=("max_shift_fraction", "vertical_only"),
             )
         if math.hypot(*t) < tolerance_m:

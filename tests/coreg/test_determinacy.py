@@ -131,7 +131,7 @@ def test_ventoux_crop_sized_dsm_on_srtm_is_refused(real_data, tmp_path):
 def test_a_shift_beyond_the_overlap_is_stopped():
     dsm, ref = shifted_pair(seed=3)  # shifted by (3.2, -2.1) m: 3.8 m over 320 m
     step = (CELL_M, -CELL_M)
-    with pytest.raises(CoregistrationError, match=r"ran to \(.*\) m in \d+ iterations, beyond "
+    with pytest.raises(CoregistrationError, match=r"ran to \(.*\) m after \d+ iterations?, beyond "
                        r"1\.6 m \(0\.005 x the 320 m shorter side") as caught:  # fmt: skip
         nuth_kaab(dsm, ref, step, settings=NuthKaab(max_shift_fraction=0.005, pyramid=()))
     assert caught.value.settings == ("max_shift_fraction", "vertical_only")
