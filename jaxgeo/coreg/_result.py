@@ -14,7 +14,8 @@ class HeightDifference:
     the raster (``DSM - REF`` after the alignment, on the DSM's grid), ``before`` / ``after``
     the statistics of ``DSM - REF`` before and after the alignment over all its cells with
     heights in both (the change included: no mask, no outlier filter), or over every
-    ``grid_step``-th row and column of it when the DSM is decimated for the estimate."""
+    ``grid_step``-th row and column of it when the DSM is decimated for the estimate; when the
+    co-registration did not converge, both over the same cells (heights before and after)."""
 
     output: str
     before: DHStats
