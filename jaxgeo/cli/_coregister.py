@@ -1,7 +1,8 @@
 """``jaxgeo coregister``: align a DSM onto a reference DEM (Nuth and Kääb 2011).
 
     jaxgeo coregister DSM REF -o OUT [--diff DH] [--dem-height {ellipsoidal,orthometric}]
-                      [--geoid G] [--mask MASK] [--tilt] [--min-slope DEG] [--max-slope DEG]
+                      [--geoid G] [--mask MASK] [--tilt] [--vertical-only]
+                      [--min-slope DEG] [--max-slope DEG]
                       [--nmad-k K] [--max-iterations N] [--tolerance M] [--json] [--quiet]
                       [--overwrite]
 
@@ -27,7 +28,11 @@ DESCRIPTION = (
     "resampled onto the DSM grid, bilinear). --diff DH writes the height difference after the "
     "alignment (shifted DSM - REF, on the DSM's grid, NaN where either has no height: change "
     "between two dates) with its statistics before and after, over all its cells, in the output "
-    "and its tags. OUT and DH are never one of the inputs."
+    "and its tags. OUT and DH are never one of the inputs. A DSM whose heights span fewer than "
+    "10 of REF's cells in either direction (e.g. a few hundred metres on 90 m SRTM) cannot "
+    "determine a horizontal shift and is refused (exit 2): --vertical-only fits dz alone (and "
+    "the plane with --tilt). Not converged (exit 1): the statistics before and after are over "
+    "the same cells."
 )
 EXTRA_CODES = {1: "the iterations did not converge (OUT written with the last shift, reported)"}
 OPTIONS = {
@@ -37,6 +42,7 @@ OPTIONS = {
     "max_slope_deg": "--max-slope",
     "nmad_k": "--nmad-k",
     "tilt": "--tilt",
+    "vertical_only": "--vertical-only",
 }
 """The option of each :class:`jaxgeo.coreg.NuthKaab` field (a refused value is named by it)."""
 
@@ -80,6 +86,10 @@ def register(sub) -> None:
                         help="also fit and remove a tilt (a plane) of DSM - REF, as between "
                         "DSMs of two relative orientations (default: a constant dz "
                         "only)")  # fmt: skip
+    parser.add_argument("--vertical-only", action="store_true",
+                        help="no horizontal shift: dz alone, the median of DSM - REF (and "
+                        "the plane with --tilt); for a DSM spanning too few of REF's cells for a "
+                        "horizontal fit")  # fmt: skip
     parser.add_argument("--max-iterations", type=int, default=20, metavar="N",
                         help="at most N iterations (default 20)")  # fmt: skip
     parser.add_argument("--tolerance", type=float, default=0.01, metavar="M",
@@ -132,6 +142,7 @@ def run(args: argparse.Namespace) -> int:
             max_slope_deg=args.max_slope,
             nmad_k=args.nmad_k,
             tilt=args.tilt,
+            vertical_only=args.vertical_only,
         )
     except CoregistrationError as err:
         raise CommandError(name_options(str(err), OPTIONS, err.settings)) from None
@@ -148,10 +159,13 @@ def run(args: argparse.Namespace) -> int:
         if args.dem_height is not None or args.geoid is not None:
             ref = read_dem(args.ref, height=args.dem_height, geoid=args.geoid)
             note(f"REF {ref.describe().removeprefix('DEM ')}", args.quiet)
-        result = coregister(
-            args.dsm, ref, args.out, diff=args.diff, mask=args.mask, settings=settings,
-            overwrite=args.overwrite, callback=progress,
-        )  # fmt: skip
+        try:
+            result = coregister(
+                args.dsm, ref, args.out, diff=args.diff, mask=args.mask, settings=settings,
+                overwrite=args.overwrite, callback=progress,
+            )  # fmt: skip
+        except CoregistrationError as err:  # named by the options (--vertical-only)
+            raise CommandError(name_options(str(err), OPTIONS, err.settings)) from None
     for w in ours(caught):
         print(f"jaxgeo coregister: warning: {_one_line(w.message)}", file=sys.stderr)
     if page is not None:
@@ -164,6 +178,7 @@ def run(args: argparse.Namespace) -> int:
                     **({"report": str(page)} if page else {})})  # fmt: skip
     else:
         state = "converged" if result.converged else "NOT converged"
+        state = "vertical only" if settings.vertical_only else state
         print(f"shift added to the DSM: dx {dx:+.3f} m (east), dy {dy:+.3f} m (north), "
               f"dz {dz:+.3f} m (up); {result.iterations} iterations, {state}; "
               f"{result.fit_cells} cells in the last fit")  # fmt: skip
@@ -174,6 +189,9 @@ def run(args: argparse.Namespace) -> int:
                   f"north (zero at {x0:.1f}, {y0:.1f})")  # fmt: skip
         if result.grid_step > 1:
             print(f"estimated on the DSM grid decimated by {result.grid_step}")
+        if not result.converged:
+            print(f"NOT converged: the last shift's statistics, before and after it over the same "
+                  f"{result.after.cells} cells (not an improvement to rely on)")  # fmt: skip
         print(_table(result))
         if result.diff is not None:
             step = result.diff.grid_step

@@ -8,13 +8,13 @@ difference (median, NMAD, RMSE, LE90, std) over the stable terrain.
 """
 
 from ._files import coregister as coregister
-from ._nuth_kaab import Coregistration as Coregistration
 from ._nuth_kaab import CoregistrationError as CoregistrationError
 from ._nuth_kaab import CoregistrationWarning as CoregistrationWarning
-from ._nuth_kaab import HeightDifference as HeightDifference
 from ._nuth_kaab import NuthKaab as NuthKaab
 from ._nuth_kaab import nuth_kaab as nuth_kaab
 from ._nuth_kaab import shift_heights as shift_heights
+from ._result import Coregistration as Coregistration
+from ._result import HeightDifference as HeightDifference
 from ._stats import DHStats as DHStats
 from ._stats import dh_stats as dh_stats
 from ._stats import nmad as nmad

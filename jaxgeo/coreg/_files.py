@@ -29,14 +29,13 @@ import numpy as np
 from ..io import DEM
 from ..io.internal import atomic_output, open_raster, raster_writer, refuse_existing
 from ._nuth_kaab import (
-    Coregistration,
     CoregistrationError,
     CoregistrationWarning,
-    HeightDifference,
     NuthKaab,
     nuth_kaab,
     shift_heights,
 )
+from ._result import Coregistration, HeightDifference
 from ._stats import dh_stats
 
 WRITE_ROWS = 256
@@ -173,6 +172,50 @@ def _check_overlap(dsm_path, ref_path, dsm, ref) -> None:
         )
 
 
+def _ref_cell_m(ref, dsm_crs, centre) -> tuple[float, float]:
+    """The lengths (m, in the DSM's CRS) of one column step and one row step of REF's grid at
+    the map point ``centre`` of the DSM's CRS."""
+    from pyproj import Transformer
+
+    to_ref = Transformer.from_crs(dsm_crs.to_wkt(), ref.crs.to_wkt(), always_xy=True)
+    to_dsm = Transformer.from_crs(ref.crs.to_wkt(), dsm_crs.to_wkt(), always_xy=True)
+    x, y = to_ref.transform(*centre)
+    t = ref.transform
+    xs, ys = to_dsm.transform([x, x + t.a, x + t.b], [y, y + t.d, y + t.e])
+    return (math.hypot(xs[1] - xs[0], ys[1] - ys[0]), math.hypot(xs[2] - xs[0], ys[2] - ys[0]))
+
+
+def _check_determinacy(paths, dsm, ref, z, zref, transform, stable, settings) -> None:
+    """Refuse a horizontal fit the reference cannot determine: the heights both rasters share
+    (stable ones) must span ``settings.min_ref_cells`` of REF's cells (or of the estimate grid's,
+    where REF is finer) in each direction. Between its posts REF is a bilinear surface: a DSM
+    over a few of its cells sees a few patches of one slope, whose aspects leave the shift free
+    (the iterations swing by tens of metres and stop anywhere)."""
+    both = np.isfinite(z) & np.isfinite(zref) & (True if stable is None else stable)
+    if settings.vertical_only or int(both.sum()) < settings.min_cells:
+        return  # nothing to determine; too few cells: nuth_kaab says so, more directly
+    rows, cols = (np.flatnonzero(np.any(both, axis=k)) for k in (1, 0))
+    t = transform
+    span = ((cols[-1] - cols[0] + 1) * abs(t.a), (rows[-1] - rows[0] + 1) * abs(t.e))
+    centre = (t.c + t.a * (cols[0] + cols[-1] + 1) / 2.0,
+              t.f + t.e * (rows[0] + rows[-1] + 1) / 2.0)  # fmt: skip
+    ref_cell = _ref_cell_m(ref, dsm.crs, centre)
+    posts = [s / max(c, abs(g)) for s, c, g in zip(span, ref_cell, (t.a, t.e), strict=True)]
+    if min(posts) >= settings.min_ref_cells:
+        return
+    dsm_path, ref_path = paths
+    raise CoregistrationError(
+        f"{dsm_path} ({abs(dsm.transform.a):g} x {abs(dsm.transform.e):g} m cells; heights over "
+        f"{span[0]:.0f} m east-west x {span[1]:.0f} m north-south shared with the reference) "
+        f"spans only {posts[0]:.1f} x {posts[1]:.1f} cells of {ref_path} ({ref_cell[0]:.1f} x "
+        f"{ref_cell[1]:.1f} m cells); a horizontal shift needs >= {settings.min_ref_cells:g} "
+        "in each direction (fewer: a few bilinear patches of REF, whose slopes and aspects do "
+        "not determine it): use a larger DSM, a finer reference, or vertical_only (the "
+        "vertical offset alone)",
+        settings=("min_ref_cells", "vertical_only"),
+    )
+
+
 def _stable_mask(mask_path, dsm, shape, transform) -> np.ndarray:
     """Stable cells from a mask raster (non-zero = stable; no data and outside = not stable)."""
     with _open(mask_path, "stable-terrain mask") as m:
@@ -299,7 +342,11 @@ def _write_outputs(dsm_path, ds, ref, ref_dem, result, targets, overwrite, ref_n
             aligned_dst.update_tags(**tags)
         if diff_dst is None:
             return None
-        before, after = (dh_stats(np.concatenate(samples[k])) for k in ("before", "after"))
+        before, after = (np.concatenate(samples[k]) for k in ("before", "after"))
+        if not result.converged:  # the same cells before and after (see Coregistration)
+            common = np.isfinite(before) & np.isfinite(after)
+            before, after = before[common], after[common]
+        before, after = dh_stats(before), dh_stats(after)
         diff_dst.set_band_description(
             1, f"height difference (m): DSM co-registered onto {ref_name} minus it"
         )
@@ -374,10 +421,11 @@ def coregister(
                 f"{dsm_path} and {ref_path}: no cell has heights in both (their data do not "
                 "overlap)"
             )
+        _check_determinacy((dsm_path, ref_path), d, r, z, zref, transform, stable, settings)
         try:
             result = nuth_kaab(z, zref, (transform.a, transform.e), stable, settings, callback)
         except CoregistrationError as err:
-            raise CoregistrationError(f"{dsm_path} vs {ref_path}: {err}") from None
+            raise CoregistrationError(f"{dsm_path} vs {ref_path}: {err}", err.settings) from None
         rows, cols = z.shape  # the plane of tilt=True is zero at the estimate grid's centre
         centre = (transform.c + transform.a * cols / 2.0, transform.f + transform.e * rows / 2.0)
         result = replace(result, grid_step=step, tilt_origin_m=centre if settings.tilt else None)

@@ -29,12 +29,13 @@ from __future__ import annotations
 import math
 import warnings
 from collections.abc import Callable
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 
 import numpy as np
 
 from ..errors import JaxgeoError, JaxgeoWarning
-from ._stats import DHStats, dh_stats, nmad
+from ._result import Coregistration
+from ._stats import dh_stats, nmad
 
 
 class CoregistrationError(JaxgeoError, ValueError):
@@ -72,6 +73,19 @@ class NuthKaab:
     each horizontal fit (a tilt left in ``dh`` correlates with the aspects of a small scene and
     would be taken for a shift) and added to the aligned DSM; off by default (a plane can also
     absorb a real trend of change).
+
+    ``vertical_only``: no horizontal fit, only ``dz`` (the median of ``DSM - REF`` over the
+    inliers; and the plane with ``tilt``): for a DSM spanning too few reference cells for a
+    horizontal shift to be determined (the check below), or when the horizontal registration is
+    known. ``min_ref_cells`` (file-level :func:`~jaxgeo.coreg.coregister` only): the heights
+    both rasters share must span at least this many of REF's cells (its posts, as they fall on
+    the DSM's CRS; or of the estimate grid's cells where REF is finer) east-west and
+    north-south, else the horizontal fit is refused: the reference's surface, interpolated
+    between its posts, is a few bilinear patches whose slopes and aspects do not determine a
+    shift (a 500 x 160 m DSM on 90 m SRTM, 7.5 x 1.7 posts, swung by tens of metres per
+    iteration). ``max_shift_fraction``: a horizontal shift longer than this fraction of the
+    shorter side of the shared heights' extent stops the fit with an error (a run-away: the
+    overlap left would not determine it either).
     """
 
     max_iterations: int = 20
@@ -85,6 +99,9 @@ class NuthKaab:
     pyramid: tuple[int, ...] = (4, 2)
     max_cells: int = 8_000_000
     tilt: bool = False
+    vertical_only: bool = False
+    min_ref_cells: float = 10.0
+    max_shift_fraction: float = 0.25
 
     def __post_init__(self):
         def refuse(message: str, *fields: str):
@@ -104,79 +121,19 @@ class NuthKaab:
             refuse(f"pyramid {self.pyramid}: expected factors >= 2", "pyramid")
         if not isinstance(self.tilt, bool):
             refuse(f"tilt {self.tilt!r}: expected True or False", "tilt")
+        if not isinstance(self.vertical_only, bool):
+            refuse(f"vertical_only {self.vertical_only!r}: expected True or False",
+                   "vertical_only")  # fmt: skip
+        if not self.min_ref_cells >= 1:
+            refuse(f"min_ref_cells {self.min_ref_cells}: expected >= 1", "min_ref_cells")
+        if not 0 < self.max_shift_fraction <= 1:
+            refuse(f"max_shift_fraction {self.max_shift_fraction}: expected in (0, 1]",
+                   "max_shift_fraction")  # fmt: skip
         if self.max_cells < 1000:
             refuse(f"max_cells {self.max_cells}: expected >= 1000", "max_cells")
         if self.aspect_bins < 8 or self.min_bin_cells < 1 or self.min_cells < 10:
             refuse("aspect_bins >= 8, min_bin_cells >= 1 and min_cells >= 10 expected",
                    "aspect_bins", "min_bin_cells", "min_cells")  # fmt: skip
-
-
-@dataclass(frozen=True)
-class HeightDifference:
-    """The height difference a co-registration wrote (``coregister(..., diff=)``): ``output``
-    the raster (``DSM - REF`` after the alignment, on the DSM's grid), ``before`` / ``after``
-    the statistics of ``DSM - REF`` before and after the alignment over all its cells with
-    heights in both (the change included: no mask, no outlier filter), or over every
-    ``grid_step``-th row and column of it when the DSM is decimated for the estimate."""
-
-    output: str
-    before: DHStats
-    after: DHStats
-    grid_step: int = 1
-
-    def as_dict(self) -> dict:
-        """JSON-ready dict: ``output``, ``before``, ``after``, ``grid_step``."""
-        return {"output": self.output, "before": self.before.as_dict(),
-                "after": self.after.as_dict(), "grid_step": self.grid_step}  # fmt: skip
-
-
-@dataclass(frozen=True)
-class Coregistration:
-    """Result of a co-registration.
-
-    ``shift_m = (dx, dy, dz)``: what was added to the DSM to align it onto the reference (dx
-    east, dy north: the DSM's content moved by them; dz up), metres. ``before`` / ``after``:
-    statistics of ``DSM - REF`` over the stable cells (the mask only: no slope or outlier
-    filter). ``iterations``: all iterations run, at every level of the pyramid; ``increments_m``:
-    the horizontal increments applied (those of a coarse level are dropped when its result does
-    not bring the full grids closer); ``fit_cells``: cells in the last fit. File-level calls
-    add ``output`` (the path written, if any), ``grid_step`` (1, or the decimation of the
-    grid the estimate was made on) and ``diff`` (the :class:`HeightDifference` written, if any).
-    ``tilt_m_per_m = (east, north)``: the gradient of the plane also added to the DSM
-    (``NuthKaab(tilt=True)``; zero otherwise), zero at the centre of the grid: for arrays,
-    ``tilt_origin_m`` is None and the plane is ``east (col - (cols-1)/2) a + north (row -
-    (rows-1)/2) e``; file-level calls give that centre in map coordinates.
-    """
-
-    shift_m: tuple[float, float, float]
-    before: DHStats
-    after: DHStats
-    iterations: int
-    converged: bool
-    fit_cells: int
-    increments_m: tuple[tuple[float, float], ...]
-    output: str | None = None
-    grid_step: int = 1
-    diff: HeightDifference | None = None
-    tilt_m_per_m: tuple[float, float] = (0.0, 0.0)
-    tilt_origin_m: tuple[float, float] | None = None
-
-    def as_dict(self) -> dict:
-        """JSON-ready dict: ``shift_m``, ``before``, ``after`` and the other fields."""
-        return {
-            "shift_m": list(self.shift_m),
-            "before": self.before.as_dict(),
-            "after": self.after.as_dict(),
-            "iterations": self.iterations,
-            "converged": self.converged,
-            "fit_cells": self.fit_cells,
-            "increments_m": [list(i) for i in self.increments_m],
-            "output": self.output,
-            "grid_step": self.grid_step,
-            "diff": None if self.diff is None else self.diff.as_dict(),
-            "tilt_m_per_m": list(self.tilt_m_per_m),
-            "tilt_origin_m": None if self.tilt_origin_m is None else list(self.tilt_origin_m),
-        }
 
 
 def _take(z: np.ndarray, di: int, dj: int) -> np.ndarray:
@@ -218,13 +175,11 @@ def slope_aspect(ref: np.ndarray, step_m: tuple[float, float]) -> tuple[np.ndarr
     return np.hypot(g_east, g_north), np.arctan2(-g_east, -g_north)
 
 
-def _fit_displacement(
-    dh: np.ndarray, tan_slope: np.ndarray, aspect: np.ndarray, settings: NuthKaab
-) -> tuple[float, float]:
-    """Displacement ``(t_east, t_north)`` of the DSM from the cosine fit of the aspect-bin
-    medians of ``dh / tan(slope)`` (``dh`` centred on its median)."""
+def _aspect_bins(y: np.ndarray, aspect: np.ndarray, settings: NuthKaab):
+    """Rows ``(mean sin(psi), mean cos(psi), 1)`` and medians of ``y`` of the aspect bins that
+    hold ``settings.min_bin_cells`` cells; :class:`CoregistrationError` when they cannot
+    determine a horizontal displacement (fewer than 3, or nearly one direction)."""
     nb = settings.aspect_bins
-    y = dh / tan_slope
     idx = np.minimum(((aspect + np.pi) / (2 * np.pi) * nb).astype(np.int64), nb - 1)
     order = np.argsort(idx, kind="stable")
     idx, y, aspect = idx[order], y[order], aspect[order]
@@ -246,7 +201,16 @@ def _fit_displacement(
             f"{settings.min_slope_deg}-{settings.max_slope_deg} deg; terrain too flat or too "
             "uniform)"
         )
-    (t_east, t_north, _), *_ = np.linalg.lstsq(a, np.asarray(rhs), rcond=None)
+    return a, np.asarray(rhs)
+
+
+def _fit_displacement(
+    dh: np.ndarray, tan_slope: np.ndarray, aspect: np.ndarray, settings: NuthKaab
+) -> tuple[float, float]:
+    """Displacement ``(t_east, t_north)`` of the DSM from the cosine fit of the aspect-bin
+    medians of ``dh / tan(slope)`` (``dh`` centred on its median)."""
+    a, rhs = _aspect_bins(dh / tan_slope, aspect, settings)
+    (t_east, t_north, _), *_ = np.linalg.lstsq(a, rhs, rcond=None)
     return float(t_east), float(t_north)
 
 
@@ -312,11 +276,11 @@ def _detrended(dh, usable, step_m, settings) -> tuple[np.ndarray, tuple[float, f
     return dh - tilt_plane(dh.shape, step_m, g), g
 
 
-def _iterate(grids, step_m, settings, shift, tolerance_m, callback):
+def _iterate(grids, step_m, settings, shift, tolerance_m, callback, limit_m=math.inf):
     """Nuth and Kääb iterations on one grid ``grids = (dsm, ref, stable)`` from ``shift``
     (east, north): the new shift, the increments, whether the last one was below
     ``tolerance_m``, the cells of the last fit. ``callback(i, increment, shift)`` after each
-    (``i`` from 1 on this grid)."""
+    (``i`` from 1 on this grid). A shift longer than ``limit_m`` is refused (a run-away)."""
     dsm, ref, stable = grids
     tan_slope, aspect = slope_aspect(ref, step_m)
     lo, hi = (math.tan(math.radians(d)) for d in (settings.min_slope_deg, settings.max_slope_deg))
@@ -347,6 +311,17 @@ def _iterate(grids, step_m, settings, shift, tolerance_m, callback):
         increments.append((-t[0], -t[1]))
         if callback is not None:
             callback(it, (-t[0], -t[1]), (float(shift[0]), float(shift[1])))
+        if math.hypot(*shift) > limit_m:
+            fraction = settings.max_shift_fraction
+            raise CoregistrationError(
+                f"the horizontal shift ran to ({shift[0]:+.2f}, {shift[1]:+.2f}) m after {it} "
+                f"iteration{'s' if it > 1 else ''}, beyond {limit_m:.1f} m ({fraction:g} x the "
+                f"{limit_m / fraction:.0f} m shorter side of the extent both rasters have "
+                "heights over): the fit is not determined by this overlap (too small, or too "
+                "smooth, for the reference's cells); use a larger DSM, a finer reference, or "
+                "vertical_only",
+                settings=("max_shift_fraction", "vertical_only"),
+            )
         if math.hypot(*t) < tolerance_m:
             converged = True
             break
@@ -371,8 +346,12 @@ def nuth_kaab(
     ``NuthKaab()``. ``callback(i, increment_m, shift_m)`` is called after each iteration (of
     every level of the pyramid; ``i`` counts them all). Warns
     (:class:`CoregistrationWarning`) when the iterations do not converge or the result fits
-    worse than the input. Raises :class:`CoregistrationError` for too few cells or terrain that
-    cannot determine the shift.
+    worse than the input. Raises :class:`CoregistrationError` for too few cells, for terrain
+    whose slopes and aspects cannot determine the shift (checked up front on REF where both
+    have heights, and at each iteration), and for a shift that runs beyond
+    ``settings.max_shift_fraction`` of the shorter side of the extent both have heights over.
+    With ``settings.vertical_only`` only ``dz`` (and the plane with ``tilt``) is fitted: no
+    iteration, ``converged`` True.
     """
     settings = NuthKaab() if settings is None else settings
     dsm = np.asarray(dsm, dtype=np.float64)
@@ -389,7 +368,17 @@ def nuth_kaab(
             f"only {int(both.sum())} stable cells have heights in both rasters (need "
             f">= {settings.min_cells})"
         )
-    before = dh_stats(dsm[both] - ref[both])
+    if settings.vertical_only:
+        return _vertical(dsm, ref, stable, (0.0, 0.0), step_m, settings, 0, True, ())
+    # up front: the reference's slopes and aspects where both have heights must determine a
+    # shift (else the iterations wander), and a shift is bounded by the extent they share
+    tan_slope, aspect = slope_aspect(ref, step_m)
+    lo, hi = (math.tan(math.radians(d)) for d in (settings.min_slope_deg, settings.max_slope_deg))
+    sloped = both & (tan_slope >= max(lo, 1e-6)) & (tan_slope <= hi)
+    _aspect_bins(np.zeros(int(sloped.sum())), aspect[sloped], settings)
+    rows, cols = (np.flatnonzero(np.any(both, axis=k)) for k in (1, 0))
+    extent = ((cols[-1] - cols[0] + 1) * abs(step_m[0]), (rows[-1] - rows[0] + 1) * abs(step_m[1]))
+    limit = settings.max_shift_fraction * min(extent)
     shift, increments, ran = np.zeros(2), [], 0
 
     def counted(done: int):  # the callback's iteration number counts every level's
@@ -402,7 +391,7 @@ def nuth_kaab(
         try:  # a coarse level only starts the next one; the full grid decides what fails
             start, steps, _, _ = _iterate(
                 (coarse[0], coarse[1], coarse[2] >= 0.5), (step_m[0] * factor, step_m[1] * factor),
-                settings, shift, factor * settings.tolerance_m, counted(ran),
+                settings, shift, factor * settings.tolerance_m, counted(ran), limit,
             )  # fmt: skip
         except CoregistrationError:
             continue
@@ -413,36 +402,23 @@ def nuth_kaab(
             shift = start
             increments += steps
     shift, steps, converged, fit_cells = _iterate(
-        (dsm, ref, stable), step_m, settings, shift, settings.tolerance_m, counted(ran)
+        (dsm, ref, stable), step_m, settings, shift, settings.tolerance_m, counted(ran), limit
     )
     increments += steps
     ran += len(steps)
-
-    dh = shift_heights(dsm, (shift[0], shift[1], 0.0), step_m) - ref
-    usable = stable & np.isfinite(dh)
-    dh, gradient = _detrended(dh, usable, step_m, settings)
-    inlier, _ = _inliers(dh, usable, settings.nmad_k)
-    dz = -float(np.median(dh[inlier]))
-    after = dh_stats(dh[usable] + dz)
-    result = Coregistration(
-        shift_m=(float(shift[0]), float(shift[1]), dz),
-        before=before,
-        after=after,
-        iterations=ran,
-        converged=converged,
-        fit_cells=fit_cells,
-        increments_m=tuple(increments),
-        tilt_m_per_m=(-gradient[0], -gradient[1]),
-    )
+    result = _vertical(dsm, ref, stable, shift, step_m, settings, ran, converged, increments)
+    result = replace(result, fit_cells=fit_cells)
     if not converged:
         last = math.hypot(*increments[-1])
         warnings.warn(
             f"co-registration did not converge in {settings.max_iterations} iterations on the "
-            f"full grid (last "
-            f"increment {last:.3f} m > {settings.tolerance_m} m); the last shift is reported",
+            f"full grid (last increment {last:.3f} m > {settings.tolerance_m} m); the last "
+            f"shift is reported, the statistics before and after it over the same "
+            f"{result.after.cells} cells",
             CoregistrationWarning,
             stacklevel=2,
         )
+    before, after = result.before, result.after
     if after.nmad_m > 1.05 * before.nmad_m + 1e-3:
         warnings.warn(
             f"co-registration left the heights further apart (NMAD {before.nmad_m:.3f} m before, "
@@ -451,3 +427,27 @@ def nuth_kaab(
             stacklevel=2,
         )
     return result
+
+
+def _vertical(dsm, ref, stable, shift, step_m, settings, ran, converged, increments):
+    """The :class:`Coregistration` of the horizontal ``shift`` (east, north): ``dz`` (and the
+    plane with ``settings.tilt``) from the inliers of ``DSM moved - REF``, the statistics before
+    and after (over the same cells when not ``converged``)."""
+    both = stable & np.isfinite(dsm)
+    dh = shift_heights(dsm, (shift[0], shift[1], 0.0), step_m) - ref
+    usable = stable & np.isfinite(dh)
+    if not converged:  # the same cells before and after: no improvement by losing cells
+        both = usable = both & usable
+    dh, gradient = _detrended(dh, usable, step_m, settings)
+    inlier, _ = _inliers(dh, usable, settings.nmad_k)
+    dz = -float(np.median(dh[inlier]))
+    return Coregistration(
+        shift_m=(float(shift[0]), float(shift[1]), dz),
+        before=dh_stats(dsm[both] - ref[both]),
+        after=dh_stats(dh[usable] + dz),
+        iterations=ran,
+        converged=converged,
+        fit_cells=int(inlier.sum()),
+        increments_m=tuple(increments),
+        tilt_m_per_m=(-gradient[0], -gradient[1]),
+    )
