@@ -25,6 +25,7 @@ import numpy as np
 
 from ._matching import to_uint8
 from ._rectification import EpipolarGrids
+from ._stages import stage
 from ._triangulation import StereoError
 
 YShift = float | Sequence[float]
@@ -402,15 +403,16 @@ class BandMatcher:
         and (``keep``) both epipolar images of the band."""
         rows_e = self.grids.epipolar_shape[0]
         ra, rb = max(r0 - BAND_OVERLAP_ROWS, 0), min(r1 + BAND_OVERLAP_ROWS, rows_e)
-        left, right = self._resample("left", ra, rb), self._resample("right", ra, rb)
-        valid_l, valid_r = np.isfinite(left), np.isfinite(right)
-        disp = sgm_disparity(
-            to_uint8(left, self.lims[0]), to_uint8(right, self.lims[1]), *self.drange, self.sgm,
-            valid=valid_l,
-        )  # fmt: skip
+        with stage("resampling"):
+            left, right = self._resample("left", ra, rb), self._resample("right", ra, rb)
+            valid_l, valid_r = np.isfinite(left), np.isfinite(right)
+            left8, right8 = to_uint8(left, self.lims[0]), to_uint8(right, self.lims[1])
+        with stage("sgm"):
+            disp = sgm_disparity(left8, right8, *self.drange, self.sgm, valid=valid_l)
         sigma = np.where(np.isfinite(disp), UNREFINED_SIGMA_PX, np.nan).astype(np.float32)
         if self.sgm.refine_window:
-            disp, sigma = refine_disparity_sigma(left, right, disp, self.sgm.refine_window)
+            with stage("refinement"):
+                disp, sigma = refine_disparity_sigma(left, right, disp, self.sgm.refine_window)
         x0, x1 = self.x_range
         ye, xe = np.mgrid[0 : rb - ra, x0:x1]
         xr = np.rint(xe + np.nan_to_num(disp)).astype(np.int64) - x0

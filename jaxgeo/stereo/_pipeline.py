@@ -43,27 +43,36 @@ from ._dense import (
     y_shift_at,
 )
 from ._dsm import DSMGrid, local_utm_epsg, point_spacing, rasterize, to_map
-from ._matching import sift_features_raster, stretch_limits
+from ._matching import sift_features, stretch_limits, to_uint8
 from ._rectification import EpipolarGrids, epipolar_grids
 from ._settings import DEFAULT_DSM, DSMSettings
+from ._stages import stage
 from ._ties import MatchSettings, tie_points
 from ._triangulation import (
     StereoError,
     check_ties,
+    disparity_lattice,
     drop_outside_validity,
     los_heights,
-    triangulate,
+    triangulate_disparities,
 )
 from ._uncertainty import Orientation, pair_orientation, point_height_sigmas
 
 MIN_TIE_POINTS = 10
 CONTEXT_PX = 16
 """Reference-image pixels matched around the ROI (context at its edges; not in the output)."""
-TRIANGULATION_CHUNK = 65536
-TIE_KEYPOINTS = 10_000
+MIN_LATTICE_POINTS = 50_000
+"""Fewer dense matches than this are triangulated one by one (a lattice's nodes would cost as
+much)."""
+TIE_KEYPOINTS = 3000
 """Reference keypoints matched per pair (a random subset of them when there are more): the tie
 points give the rectification's height, the vertical disparity and the disparity range, for
-which thousands are plenty (a 1 Mpx window has ~60 000 keypoints; matching them all took 3 s)."""
+which a thousand or two well spread are plenty (a 1 Mpx window has ~60 000 keypoints at full
+resolution; matching 10 000 of them gave ~7 500 ties and cost a quarter of a tile's time)."""
+SIFT_COARSE_MIN_PX = 768
+"""A window at least this large (px, both sides) is searched for SIFT keypoints at half
+resolution (:data:`SIFT_LEVEL`): a quarter of the pixels, still thousands of keypoints."""
+SIFT_LEVEL = 2
 
 
 def read_window(path: str | os.PathLike, window: tuple[int, int, int, int]) -> np.ndarray:
@@ -143,12 +152,25 @@ def _sec_window(ref, sec, window, h_range, size, paths, margin=64):
     return c0, r0, c1 - c0, r1 - r0
 
 
-def _reference_keypoints(path, window):
-    """SIFT keypoints of the reference image over ``window``: a random subset (seeded) of
-    :data:`TIE_KEYPOINTS` when there are more."""
-    xy, desc = sift_features_raster(path, window)
-    if len(xy) > TIE_KEYPOINTS:
-        pick = np.sort(np.random.default_rng(0).choice(len(xy), TIE_KEYPOINTS, replace=False))
+def _window_keypoints(image, origin, limits, most=None):
+    """SIFT keypoints (raster px) and descriptors of a window already read (``image``, its
+    upper-left pixel at ``origin``; ``limits``: its uint8 stretch): at half resolution
+    (:data:`SIFT_LEVEL`) when it is :data:`SIFT_COARSE_MIN_PX` or larger (the ties fix the
+    rectification's height, the vertical disparity and the disparity range: a quarter-pixel
+    keypoint is precise enough, and the window's SIFT costs a quarter); a random subset
+    (seeded) of ``most`` when there are more."""
+    import cv2
+
+    image8 = to_uint8(image, limits)
+    level = SIFT_LEVEL if min(image8.shape) >= SIFT_COARSE_MIN_PX else 1
+    if level > 1:  # whole blocks: a size not a multiple of the level would stretch the scale
+        h, w = (n - n % level for n in image8.shape)
+        image8 = cv2.resize(image8[:h, :w], (w // level, h // level), interpolation=cv2.INTER_AREA)
+    xy, desc = sift_features(image8)
+    # a coarse pixel's centre is the centre of the level x level block it averages
+    xy = (xy + 0.5) * level - 0.5 + np.asarray(origin, dtype=float)
+    if most is not None and len(xy) > most:
+        pick = np.sort(np.random.default_rng(0).choice(len(xy), most, replace=False))
         xy, desc = xy[pick], desc[pick]
     return xy, desc
 
@@ -219,13 +241,27 @@ def stereo_pair(
     stats: dict = {}
     h_valid = los_heights(ref)
     win2 = _sec_window(ref, sec, data_win, h_valid, sec_size, paths)
-    img1, img2 = read_window(ref_path, data_win), read_window(sec_path, win2)
+    with stage("reading"):
+        img1, img2 = read_window(ref_path, data_win), read_window(sec_path, win2)
+        lims = (stretch_limits(img1[::2, ::2]), stretch_limits(img2[::2, ::2]))
     log("tie points")
-    ties = tie_points(
-        ref, sec, ref_path, sec_path, MatchSettings(
-            roi=data_win, height_range_m=settings.heights, epipolar_tol_px=epipolar_tol_px),
-        dem=dem, features1=_reference_keypoints(ref_path, data_win),
-    )  # fmt: skip
+    with stage("sift"):
+        # the secondary's keypoints where the ties' heights put the ROI (all heights when the
+        # ties' range comes from a DEM or a coarse matching: it is not known yet)
+        ties_h = settings.heights if settings.heights is not None else h_valid
+        c0, r0, cw, rh = _sec_window(ref, sec, data_win, ties_h, sec_size, paths,
+                                     margin=int(epipolar_tol_px) + 16)  # fmt: skip
+        c0, r0 = max(c0 - win2[0], 0), max(r0 - win2[1], 0)  # within img2 (win2)
+        part2 = img2[r0 : r0 + rh, c0 : c0 + cw]
+        c0, r0 = c0 + win2[0], r0 + win2[1]
+        features1 = _window_keypoints(img1, data_win[:2], lims[0], TIE_KEYPOINTS)
+        features2 = _window_keypoints(part2, (c0, r0), lims[1])
+    with stage("ties"):
+        ties = tie_points(
+            ref, sec, ref_path, sec_path, MatchSettings(
+                roi=data_win, height_range_m=settings.heights, epipolar_tol_px=epipolar_tol_px),
+            dem=dem, features1=features1, features2=features2,
+        )  # fmt: skip
     if len(ties) < MIN_TIE_POINTS:
         raise StereoError(
             f"stereo: only {len(ties)} verified tie points between {ref_path} and {sec_path} "
@@ -240,14 +276,16 @@ def stereo_pair(
     )  # fmt: skip
     lap("ties")
     log(f"{len(ties)} tie points, reference height {h0:.1f} m; rectification")
-    grids = epipolar_grids(ref, sec, grid_win, elevation=h0, epi_step=settings.epi_step)
-    # the tie points in the epipolar frame measure the vertical disparity and the disparity
-    # range (s2p's pointing correction from its sensor-space SIFT matches): no second matching
-    shift, vstats, dx = vertical_disparity(
-        grids.to_epipolar("left", ties.xy1), grids.to_epipolar("right", ties.xy2),
-        grids.epipolar_shape, paths, epipolar_tol_px,
-    )  # fmt: skip
-    dmin, dmax = disparity_range(dx)
+    with stage("rectification"):
+        grids = epipolar_grids(ref, sec, grid_win, elevation=h0, epi_step=settings.epi_step)
+        # the tie points in the epipolar frame measure the vertical disparity and the
+        # disparity range (s2p's pointing correction from its sensor-space SIFT matches): no
+        # second matching
+        shift, vstats, dx = vertical_disparity(
+            grids.to_epipolar("left", ties.xy1), grids.to_epipolar("right", ties.xy2),
+            grids.epipolar_shape, paths, epipolar_tol_px,
+        )  # fmt: skip
+        dmin, dmax = disparity_range(dx)
     stats.update(
         vstats,
         disparity_range_px=(dmin, dmax),
@@ -261,47 +299,47 @@ def stereo_pair(
     # edge columns lie outside its own epipolar extent
     rows_e, cols_e = grids.epipolar_shape
     x0, x1 = min(0, int(np.floor(dmin))), cols_e + max(0, int(np.ceil(dmax)))
-    lims = (stretch_limits(img1[::2, ::2]), stretch_limits(img2[::2, ::2]))
     band = rows_e if band_rows is None else max(int(band_rows), 1)
     starts = list(range(0, rows_e, band))
     dense = BandMatcher((img1, img2), (data_win[:2], win2[:2]), grids, shift, (x0, x1), lims,
                         (dmin, dmax), settings.sgm)  # fmt: skip
     matches, kept, n_valid, n_disp = [], [], 0, 0
-    points, sigma_h, sigma_d, direction = [], [], [], []
+    epipolar, sigma_d, direction = [], [], []
     for k, r0 in enumerate(starts):
         r1 = min(r0 + band, rows_e)
         disp, disp_sigma, valid_l, images = dense.band(r0, r1, keep)
-        ye, xe = np.mgrid[r0:r1, x0:x1].astype(float)
-        xl = grids.to_sensor("left", np.stack([xe, ye], axis=-1))
-        in_roi = valid_l & _in_window(xl.reshape(-1, 2), roi).reshape(xe.shape)
-        n_valid += int(in_roi.sum())
-        sel = np.isfinite(disp) & in_roi
-        n_disp += int(sel.sum())
-        xr_e = xe[sel] + disp[sel]
-        yr_e = ye[sel] + y_shift_at(shift, xr_e, ye[sel])
-        xr, along = grids.along("right", np.stack([xr_e, yr_e], axis=-1))
-        direction.append(along)
-        sigma_d.append(disp_sigma[sel])
-        matches.append(np.stack([xl[sel], xr], axis=1))
+        with stage("triangulation"):
+            ye, xe = np.mgrid[r0:r1, x0:x1].astype(float)
+            xl = grids.to_sensor("left", np.stack([xe, ye], axis=-1))
+            in_roi = valid_l & _in_window(xl.reshape(-1, 2), roi).reshape(xe.shape)
+            n_valid += int(in_roi.sum())
+            sel = np.isfinite(disp) & in_roi
+            n_disp += int(sel.sum())
+            xr_e = xe[sel] + disp[sel]
+            yr_e = ye[sel] + y_shift_at(shift, xr_e, ye[sel])
+            xr, along = grids.along("right", np.stack([xr_e, yr_e], axis=-1))
+            direction.append(along)
+            sigma_d.append(disp_sigma[sel])
+            matches.append(np.stack([xl[sel], xr], axis=1))
+            epipolar.append(np.stack([xe[sel], ye[sel], disp[sel]], axis=-1))
         if keep:
             kept.append((disp, *images))
-        pending = sum(len(m) for m in matches)
-        if pending >= TRIANGULATION_CHUNK or k == len(starts) - 1:
-            pts, sig = _triangulate(ref, sec, np.concatenate(matches), method)
-            points.append(pts)
-            sigma_h.append(sig)
-            matches = []
         if on_band is not None:
             on_band(k + 1, len(starts))
     stats["disparity_fill"] = float(n_disp / max(n_valid, 1))
     stats["n_bands"] = len(starts)
-    lap("sgm_triangulation")
-    points = np.concatenate(points)
-    sigma_h = np.concatenate(sigma_h)
-    stats.update(drop_outside_validity(points, (ref, sec), paths))
-    match_sigma, orient_sigma = point_height_sigmas(
-        (ref, sec), points, np.concatenate(direction), np.concatenate(sigma_d), orientation
-    )
+    lap("sgm")
+    with stage("triangulation"):
+        points, sigma_h = _triangulate_pair(
+            (ref, sec), grids, shift, (x0, x1, 0, rows_e), np.concatenate(epipolar),
+            np.concatenate(matches), method, stats,
+        )  # fmt: skip
+        stats.update(drop_outside_validity(points, (ref, sec), paths))
+    lap("triangulation")
+    with stage("sigma"):
+        match_sigma, orient_sigma = point_height_sigmas(
+            (ref, sec), points, np.concatenate(direction), np.concatenate(sigma_d), orientation
+        )
     if np.isfinite(match_sigma).any():
         stats["median_match_sigma_px"] = float(np.nanmedian(np.concatenate(sigma_d)))
         stats["median_match_sigma_h_m"] = float(np.nanmedian(match_sigma))
@@ -326,20 +364,25 @@ def stereo_pair(
     return products
 
 
-def _triangulate(ref, sec, matches, method):
-    """Points ``(n, 3)`` and height sigmas ``(n,)`` (NaN for ``los_midpoint``) of ``(n, 2, 2)``
-    matches, in chunks of one size (one compilation whatever the band)."""
-    n = matches.shape[0]
-    if n == 0:  # a last band without a match (its rows outside the ROI)
-        return np.zeros((0, 3)), np.zeros(0)
-    pad = -n % TRIANGULATION_CHUNK
-    if pad:
-        matches = np.concatenate([matches, np.full((pad, 2, 2), np.nan)])
-    points, result = triangulate([ref, sec], matches, method, chunk=TRIANGULATION_CHUNK)
-    sigma_h = np.full(n, np.nan)
-    if result is not None:
-        sigma_h = np.asarray(result.sigma_enu)[:n, 2]
-    return points[:n], sigma_h
+def _triangulate_pair(models, grids, shift, extent, epipolar, matches, method, stats):
+    """Points ``(n, 3)`` and height sigmas ``(n,)`` of a pair's dense matches (``epipolar``
+    ``(n, 3)``: left epipolar ``(xe, ye)`` and disparity; ``matches`` ``(n, 2, 2)``: left and
+    right sensor points) over ``extent = (x0, x1, y0, y1)`` epipolar px: interpolated on the
+    pair's :func:`~._triangulation.disparity_lattice` over the disparities found (its check
+    and whether it is used in ``stats``), each point on its own where the lattice fails its
+    check (:data:`~._triangulation.LATTICE_TOL_M`)."""
+    lattice = None
+    d = epipolar[:, 2]
+    if len(d) >= MIN_LATTICE_POINTS:
+
+        def right(xe, ye):
+            return np.stack([xe, ye + y_shift_at(shift, xe, ye)], axis=-1)
+
+        lattice = disparity_lattice(models, grids, right, extent,
+                                    (float(d.min()), float(d.max())), method)  # fmt: skip
+        stats["triangulation_lattice_error_m"] = lattice.check_error_m
+        stats["triangulation_lattice"] = lattice.usable
+    return triangulate_disparities(models, lattice, epipolar, matches, method)
 
 
 def dsm_from_images(
