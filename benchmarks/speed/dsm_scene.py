@@ -115,7 +115,8 @@ def main(argv=None) -> int:
     env = dict(os.environ)
     tree = pathlib.Path(a.jaxgeo).resolve() if a.jaxgeo else REPO
     env["PYTHONPATH"] = os.pathsep.join([str(tree), env.get("PYTHONPATH", "")])
-    cli = [sys.executable, "-m", "jaxgeo.cli"]
+    # -P: not the working directory's jaxgeo first (--jaxgeo names the tree)
+    cli = [sys.executable, "-P", "-m", "jaxgeo.cli"]
     scene = folder / "scene"
     if not (scene / "truth.json").exists():
         simulate = [*cli, "simulate", "stereo-scene", "--size", str(a.size), "--seed",

@@ -3,9 +3,10 @@
 For a pair (reference image, secondary image) and a ROI of the reference image (matched with
 ``CONTEXT_PX`` of context around it; only the ROI's points are kept):
 
-1. Verified tie points (:func:`~jaxgeo.stereo.tie_points`); their heights give the reference
-   elevation of the rectification (median); tie points outside the models' validity cube are
-   an error naming the images (the models do not fit them).
+1. Verified tie points (:func:`~jaxgeo.stereo.tie_points`, SIFT at half resolution on a tile's
+   windows: :mod:`._keypoints`); their heights give the reference elevation of the
+   rectification (median); tie points outside the models' validity cube are an error naming
+   the images (the models do not fit them).
 2. Epipolar grids at that elevation (:mod:`._rectification`) and resampling of both images.
 3. The residual vertical disparity (the models' relative bias across the epipolar lines) is
    measured on the tie points carried into the epipolar frame through the grids (s2p's
@@ -15,8 +16,9 @@ For a pair (reference image, secondary image) and a ROI of the reference image (
    (their 0.5-99.5 percentiles, widened).
 4. Semi-global matching over bands of epipolar rows (:mod:`._dense`), masked where either
    epipolar image has no data, then a correlation refinement of the sub-pixel disparities.
-5. Triangulation of every valid disparity (:mod:`._triangulation`); points outside the models'
-   validity cube are dropped, and most of them outside is an error naming the images.
+5. Triangulation of every valid disparity (:mod:`._triangulation`: interpolated between the
+   exactly triangulated nodes of an epipolar lattice, checked to a millimetre); points outside
+   the models' validity cube are dropped, and most of them outside is an error naming the images.
 
 The N-image DSM pools the points of the pairs (reference, i) and rasterises them (:mod:`._dsm`:
 point footprints against the aliasing of the point lattice and the cells, small holes
@@ -43,12 +45,14 @@ from ._dense import (
     y_shift_at,
 )
 from ._dsm import DSMGrid, local_utm_epsg, point_spacing, rasterize, to_map
-from ._matching import sift_features, stretch_limits, to_uint8
+from ._keypoints import SIFT_COARSE_MIN_PX, reference_features, window_keypoints
+from ._matching import stretch_limits
 from ._rectification import EpipolarGrids, epipolar_grids
 from ._settings import DEFAULT_DSM, DSMSettings
 from ._stages import stage
 from ._ties import MatchSettings, tie_points
 from ._triangulation import (
+    MIN_LATTICE_POINTS,
     StereoError,
     check_ties,
     disparity_lattice,
@@ -61,18 +65,10 @@ from ._uncertainty import Orientation, pair_orientation, point_height_sigmas
 MIN_TIE_POINTS = 10
 CONTEXT_PX = 16
 """Reference-image pixels matched around the ROI (context at its edges; not in the output)."""
-MIN_LATTICE_POINTS = 50_000
-"""Fewer dense matches than this are triangulated one by one (a lattice's nodes would cost as
-much)."""
 TIE_KEYPOINTS = 3000
-"""Reference keypoints matched per pair (a random subset of them when there are more): the tie
-points give the rectification's height, the vertical disparity and the disparity range, for
-which a thousand or two well spread are plenty (a 1 Mpx window has ~60 000 keypoints at full
-resolution; matching 10 000 of them gave ~7 500 ties and cost a quarter of a tile's time)."""
-SIFT_COARSE_MIN_PX = 768
-"""A window at least this large (px, both sides) is searched for SIFT keypoints at half
-resolution (:data:`SIFT_LEVEL`): a quarter of the pixels, still thousands of keypoints."""
-SIFT_LEVEL = 2
+"""Reference keypoints matched per pair (a random subset of them when there are more): the ties
+give the rectification's height, the vertical disparity and the disparity range, for which a
+thousand or two are plenty (10 000 gave ~7 500 ties and cost a quarter of a 1 Mpx tile)."""
 
 
 def read_window(path: str | os.PathLike, window: tuple[int, int, int, int]) -> np.ndarray:
@@ -152,29 +148,6 @@ def _sec_window(ref, sec, window, h_range, size, paths, margin=64):
     return c0, r0, c1 - c0, r1 - r0
 
 
-def _window_keypoints(image, origin, limits, most=None):
-    """SIFT keypoints (raster px) and descriptors of a window already read (``image``, its
-    upper-left pixel at ``origin``; ``limits``: its uint8 stretch): at half resolution
-    (:data:`SIFT_LEVEL`) when it is :data:`SIFT_COARSE_MIN_PX` or larger (the ties fix the
-    rectification's height, the vertical disparity and the disparity range: a quarter-pixel
-    keypoint is precise enough, and the window's SIFT costs a quarter); a random subset
-    (seeded) of ``most`` when there are more."""
-    import cv2
-
-    image8 = to_uint8(image, limits)
-    level = SIFT_LEVEL if min(image8.shape) >= SIFT_COARSE_MIN_PX else 1
-    if level > 1:  # whole blocks: a size not a multiple of the level would stretch the scale
-        h, w = (n - n % level for n in image8.shape)
-        image8 = cv2.resize(image8[:h, :w], (w // level, h // level), interpolation=cv2.INTER_AREA)
-    xy, desc = sift_features(image8)
-    # a coarse pixel's centre is the centre of the level x level block it averages
-    xy = (xy + 0.5) * level - 0.5 + np.asarray(origin, dtype=float)
-    if most is not None and len(xy) > most:
-        pick = np.sort(np.random.default_rng(0).choice(len(xy), most, replace=False))
-        xy, desc = xy[pick], desc[pick]
-    return xy, desc
-
-
 def _in_window(xy, window):
     """``(n,)`` True where pixel ``xy`` falls in ``window = (col, row, w, h)`` (pixel edges)."""
     col, row, w, h = window
@@ -241,21 +214,21 @@ def stereo_pair(
     stats: dict = {}
     h_valid = los_heights(ref)
     win2 = _sec_window(ref, sec, data_win, h_valid, sec_size, paths)
+    with stage("sift"):  # the reference's window, stretch and keypoints: once per tile
+        img1, lim1, features1 = reference_features(ref_path, data_win, read_window, TIE_KEYPOINTS)
     with stage("reading"):
-        img1, img2 = read_window(ref_path, data_win), read_window(sec_path, win2)
-        lims = (stretch_limits(img1[::2, ::2]), stretch_limits(img2[::2, ::2]))
+        img2 = read_window(sec_path, win2)
+        lims = (lim1, stretch_limits(img2[::2, ::2]))
     log("tie points")
-    with stage("sift"):
-        # the secondary's keypoints where the ties' heights put the ROI (all heights when the
-        # ties' range comes from a DEM or a coarse matching: it is not known yet)
-        ties_h = settings.heights if settings.heights is not None else h_valid
-        c0, r0, cw, rh = _sec_window(ref, sec, data_win, ties_h, sec_size, paths,
-                                     margin=int(epipolar_tol_px) + 16)  # fmt: skip
-        c0, r0 = max(c0 - win2[0], 0), max(r0 - win2[1], 0)  # within img2 (win2)
-        part2 = img2[r0 : r0 + rh, c0 : c0 + cw]
-        c0, r0 = c0 + win2[0], r0 + win2[1]
-        features1 = _window_keypoints(img1, data_win[:2], lims[0], TIE_KEYPOINTS)
-        features2 = _window_keypoints(part2, (c0, r0), lims[1])
+    features2 = None  # a small window: tie_points' own search (full resolution)
+    if min(data_win[2:]) >= SIFT_COARSE_MIN_PX:
+        with stage("sift"):  # the secondary's, where the ties' heights (else any) put the ROI
+            ties_h = settings.heights if settings.heights is not None else h_valid
+            c, r, cw, rh = _sec_window(ref, sec, data_win, ties_h, sec_size, paths,
+                                       margin=int(epipolar_tol_px) + 16)  # fmt: skip
+            c, r = max(c, win2[0]), max(r, win2[1])  # within img2
+            part2 = img2[r - win2[1] : r - win2[1] + rh, c - win2[0] : c - win2[0] + cw]
+            features2 = window_keypoints(part2, (c, r), lims[1])
     with stage("ties"):
         ties = tie_points(
             ref, sec, ref_path, sec_path, MatchSettings(
@@ -326,14 +299,18 @@ def stereo_pair(
             kept.append((disp, *images))
         if on_band is not None:
             on_band(k + 1, len(starts))
-    stats["disparity_fill"] = float(n_disp / max(n_valid, 1))
-    stats["n_bands"] = len(starts)
+    stats.update(disparity_fill=float(n_disp / max(n_valid, 1)), n_bands=len(starts))
     lap("sgm")
     with stage("triangulation"):
-        points, sigma_h = _triangulate_pair(
-            (ref, sec), grids, shift, (x0, x1, 0, rows_e), np.concatenate(epipolar),
-            np.concatenate(matches), method, stats,
-        )  # fmt: skip
+        epipolar, matches, lattice = np.concatenate(epipolar), np.concatenate(matches), None
+        if len(epipolar) >= MIN_LATTICE_POINTS:  # the points interpolated between exact nodes
+            d, y_of = epipolar[:, 2], lambda xe, ye: ye + y_shift_at(shift, xe, ye)
+            lattice = disparity_lattice((ref, sec), grids, lambda xe, ye: np.stack(
+                [xe, y_of(xe, ye)], -1), (x0, x1, 0, rows_e), (float(d.min()), float(d.max())),
+                method)  # fmt: skip
+            stats.update(triangulation_lattice_error_m=lattice.check_error_m,
+                         triangulation_lattice=lattice.usable)  # fmt: skip
+        points, sigma_h = triangulate_disparities((ref, sec), lattice, epipolar, matches, method)
         stats.update(drop_outside_validity(points, (ref, sec), paths))
     lap("triangulation")
     with stage("sigma"):
@@ -362,27 +339,6 @@ def stereo_pair(
             ties_xy2=ties.xy2,
         )
     return products
-
-
-def _triangulate_pair(models, grids, shift, extent, epipolar, matches, method, stats):
-    """Points ``(n, 3)`` and height sigmas ``(n,)`` of a pair's dense matches (``epipolar``
-    ``(n, 3)``: left epipolar ``(xe, ye)`` and disparity; ``matches`` ``(n, 2, 2)``: left and
-    right sensor points) over ``extent = (x0, x1, y0, y1)`` epipolar px: interpolated on the
-    pair's :func:`~._triangulation.disparity_lattice` over the disparities found (its check
-    and whether it is used in ``stats``), each point on its own where the lattice fails its
-    check (:data:`~._triangulation.LATTICE_TOL_M`)."""
-    lattice = None
-    d = epipolar[:, 2]
-    if len(d) >= MIN_LATTICE_POINTS:
-
-        def right(xe, ye):
-            return np.stack([xe, ye + y_shift_at(shift, xe, ye)], axis=-1)
-
-        lattice = disparity_lattice(models, grids, right, extent,
-                                    (float(d.min()), float(d.max())), method)  # fmt: skip
-        stats["triangulation_lattice_error_m"] = lattice.check_error_m
-        stats["triangulation_lattice"] = lattice.usable
-    return triangulate_disparities(models, lattice, epipolar, matches, method)
 
 
 def dsm_from_images(

@@ -15,10 +15,11 @@ import time
 
 STAGES = ("reading", "sift", "ties", "rectification", "resampling", "sgm", "refinement",
           "triangulation", "sigma", "rasterisation", "writing")  # fmt: skip
-"""The stages in chain order: reading the images' windows, SIFT detection, tie matching and
-verification (the tie points' height range and checks), epipolar grids and vertical disparity,
-resampling of the epipolar bands, dense matching (SGM), sub-pixel refinement, triangulation (and
-the validity check), height sigmas, rasterisation, writing of the tile."""
+"""The stages in chain order: reading the secondary image's window, SIFT detection (with the
+reading of the reference's window, once per tile), tie matching and verification (the tie
+points' height range and checks), epipolar grids and vertical disparity, resampling of the
+epipolar bands, dense matching (SGM), sub-pixel refinement, triangulation (and the validity
+check), height sigmas, rasterisation, writing of the tile."""
 
 _ACTIVE: contextvars.ContextVar[StageTimes | None] = contextvars.ContextVar(
     "jaxgeo_stage_times", default=None

@@ -233,6 +233,9 @@ def triangulate(
     return np.asarray(result.ground), result
 
 
+MIN_LATTICE_POINTS = 50_000
+"""Fewer dense matches than this are triangulated one by one (the lattice's nodes would cost as
+much)."""
 LATTICE_CHUNK = 16384
 """Nodes per triangulation call of :func:`disparity_lattice` (NaN-padded: one compiled shape)."""
 LATTICE_TOL_M = 1e-3

@@ -124,5 +124,5 @@ def test_a_band_without_matches_triangulates_to_no_point():
     TypeError from jax.tree.map): no point, no triangulation."""
     from jaxgeo.stereo._triangulation import triangulate_disparities
 
-    points, sigma = triangulate_disparities(None, None, np.zeros((0, 3)), np.zeros((0, 2, 2)))
+    points, sigma = triangulate_disparities((), None, np.zeros((0, 3)), np.zeros((0, 2, 2)))
     assert points.shape == (0, 3) and sigma.shape == (0,)

@@ -1,7 +1,8 @@
-"""The dense triangulation's lattice (``disparity_lattice``: points interpolated between exactly
-triangulated epipolar nodes) equals the point-by-point intersection to well under a millimetre,
-and falls back to it where it cannot answer; the stage clock of a DSM tile; the sampled point
-spacing; the keypoints of a half-resolution SIFT in full-resolution pixels.
+"""What makes a DSM tile cheap, and keeps it exact: the dense triangulation's lattice
+(``disparity_lattice``: points interpolated between exactly triangulated epipolar nodes) equals
+the point-by-point intersection to well under a millimetre and falls back to it where it cannot
+answer; the stage clock of a tile; the sampled point spacing; the keypoints of a half-resolution
+SIFT in full-resolution pixels; the reference window read and searched once per tile.
 
 Scene: :func:`jaxgeo.simulate.stereo_scene`, 300 x 300 px, seed 5, exact RPCs."""
 
@@ -10,7 +11,7 @@ import pytest
 
 from jaxgeo.io import open_image
 from jaxgeo.simulate import StereoSceneSettings, stereo_scene
-from jaxgeo.stereo import epipolar_grids, triangulate
+from jaxgeo.stereo import epipolar_grids
 from jaxgeo.stereo._dsm import point_spacing
 from jaxgeo.stereo._stages import STAGES, StageTimes, stage
 from jaxgeo.stereo._triangulation import (
@@ -18,6 +19,7 @@ from jaxgeo.stereo._triangulation import (
     disparity_lattice,
     triangulate_disparities,
 )
+from jaxgeo.stereo._triangulation import _exact as exact_triangulation  # one compiled shape
 
 
 @pytest.fixture(scope="module")
@@ -57,11 +59,11 @@ def test_the_lattice_equals_the_exact_intersection(pair):
     epi = _random_epipolar(grids, 5000, (-20.0, 25.0))
     matches = _matches(grids, epi, shift)
     points, sigma = triangulate_disparities(models, lattice, epi, matches)
-    exact, result = triangulate(models, matches)
-    # metres: 1e-5 deg of latitude is ~1.1 m
+    exact, exact_sigma = exact_triangulation(models, matches, "intersect")
+    per_deg = 111_320.0 * np.array([np.cos(np.radians(exact[0, 1])), 1.0])  # m per degree
     dlon, dlat, dh = np.abs(points - exact).max(axis=0)
-    assert dlon * 8e4 < 1e-3 and dlat * 1.1e5 < 1e-3 and dh < 1e-3
-    np.testing.assert_allclose(sigma, np.asarray(result.sigma_enu)[:, 2], rtol=1e-3)
+    assert dlon * per_deg[0] < 1e-3 and dlat * per_deg[1] < 1e-3 and dh < 1e-3
+    np.testing.assert_allclose(sigma, exact_sigma, rtol=1e-3)
     assert np.all(np.isfinite(points))
 
 
@@ -73,7 +75,7 @@ def test_points_the_lattice_cannot_answer_are_triangulated_one_by_one(pair):
     epi[:20, 2] = 40.0  # disparities outside the lattice
     lattice.values[1, 1, 1, :] = np.nan  # a node without a point
     matches = _matches(grids, epi, 0.0)
-    exact, _ = triangulate(models, matches)
+    exact, _ = exact_triangulation(models, matches, "intersect")
     points, _ = triangulate_disparities(models, lattice, epi, matches)
     assert np.isnan(lattice.interpolate(epi[:20, 0], epi[:20, 1], epi[:20, 2])).all()
     np.testing.assert_allclose(points, exact, atol=1e-7)
@@ -122,12 +124,12 @@ def test_half_resolution_keypoints_are_in_full_resolution_pixels(tmp_path):
     import cv2
     from scipy.spatial import cKDTree
 
-    from jaxgeo.stereo._pipeline import SIFT_COARSE_MIN_PX, _window_keypoints
+    from jaxgeo.stereo._keypoints import SIFT_COARSE_MIN_PX, window_keypoints
 
     rng = np.random.default_rng(2)
     size = SIFT_COARSE_MIN_PX + 33  # odd: whole 2 x 2 blocks only
     image = cv2.GaussianBlur(rng.normal(size=(size, size)).astype(np.float32), (0, 0), 3.0)
-    coarse, _ = _window_keypoints(image, (100, 50), (-0.05, 0.05))
+    coarse, _ = window_keypoints(image, (100, 50), (-0.05, 0.05))
     from jaxgeo.stereo import sift_features
     from jaxgeo.stereo._matching import to_uint8
 
@@ -142,3 +144,30 @@ def test_half_resolution_keypoints_are_in_full_resolution_pixels(tmp_path):
     left = coarse[near][:, 0] < size / 2 + 100
     drift = np.median(offset[left], axis=0) - np.median(offset[~left], axis=0)
     assert np.all(np.abs(drift) < 0.1)
+
+
+def test_the_reference_window_is_read_and_searched_once_per_tile(tmp_path):
+    """The pairs of a tile share the reference's window: read and searched once; another window,
+    or the file rewritten, is read again."""
+    import os
+
+    from jaxgeo.stereo._keypoints import reference_features
+
+    path = tmp_path / "ref.tif"
+    path.write_bytes(b"x")
+    reads = []
+    rng = np.random.default_rng(3)
+
+    def read(p, window):
+        reads.append(window)
+        return rng.normal(size=(window[3], window[2])).astype(np.float32)
+
+    a = reference_features(path, (0, 0, 120, 100), read, 500)
+    b = reference_features(path, (0, 0, 120, 100), read, 500)
+    assert len(reads) == 1 and b is a and len(a[2][0]) > 0
+    reference_features(path, (10, 0, 120, 100), read, 500)
+    assert len(reads) == 2
+    st = os.stat(path)
+    os.utime(path, ns=(st.st_atime_ns, st.st_mtime_ns + 10**9))
+    reference_features(path, (10, 0, 120, 100), read, 500)
+    assert len(reads) == 3
