@@ -14,6 +14,13 @@ measures them (the sum over the process tree, dask's scheduler, nannies and work
 Accuracy: the DSM against ``truth_dsm.tif`` on the DSM's cells (nearest truth cell): median and
 NMAD of the height error, the share of the truth's cells with a height (fill), and between the
 worker counts the largest difference (the same tiles: equal to float32 rounding).
+
+Per stage (``stages``): the wall and CPU seconds each tile's work spent in each stage of the chain
+(:data:`jaxgeo.stereo._stages.STAGES`: SIFT, ties, rectification, resampling, SGM, refinement,
+triangulation, sigma, rasterisation, writing; the tiles' ``stages_s``), summed over the tiles,
+with each stage's share of the tiles' CPU seconds, and the share of the dense matcher (SGM and
+its refinement). ``--jaxgeo DIR`` times another checkout of jaxgeo (e.g. the main branch, for a
+before/after in one run; a tree without the per-stage times reports none).
 """
 
 from __future__ import annotations
@@ -65,6 +72,33 @@ def _max_diff(a_path, b_path) -> float:
     return float(np.max(np.abs(a[both] - b[both]), initial=0.0))
 
 
+def stage_shares(tile_stats: dict) -> dict | None:
+    """The tiles' ``stages_s`` summed (wall and CPU s per stage), each stage's share of the
+    CPU seconds, and the dense matcher's (SGM and refinement); ``None`` without them."""
+    wall, cpu = {}, {}
+    tiles = 0
+    for stats in tile_stats.values():
+        stages = stats.get("stages_s") if isinstance(stats, dict) else None
+        if not stages:
+            continue
+        tiles += 1
+        for name, t in stages.items():
+            wall[name] = wall.get(name, 0.0) + t["wall_s"]
+            cpu[name] = cpu.get(name, 0.0) + t["cpu_s"]
+    if not tiles:
+        return None
+    total = sum(cpu.values())
+    return {
+        "tiles": tiles,
+        "wall_s": {k: round(v, 2) for k, v in wall.items()},
+        "cpu_s": {k: round(v, 2) for k, v in cpu.items()},
+        "cpu_share": {k: round(v / total, 3) for k, v in cpu.items()},
+        "tiles_cpu_s": round(total, 2),
+        "dense_matcher_cpu_share": round((cpu.get("sgm", 0) + cpu.get("refinement", 0)) / total, 3),
+        "sgm_cpu_share": round(cpu.get("sgm", 0) / total, 3),
+    }
+
+
 def main(argv=None) -> int:
     p = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     p.add_argument("--size", type=int, default=2000, help="scene size (px, square)")
@@ -73,11 +107,16 @@ def main(argv=None) -> int:
     p.add_argument("--res", type=float, default=None, help="DSM cells, m (default: the GSD)")
     p.add_argument("--workers", type=int, nargs="*", default=[1, 2],
                    help="jaxgeo worker counts to time (0: in this process)")  # fmt: skip
+    p.add_argument("--jaxgeo", default=None,
+                   help="the checkout of jaxgeo to time (default: this one)")  # fmt: skip
+    p.add_argument("--tag", default="", help="suffix of the output names (two trees, one folder)")
     a = p.parse_args(argv)
     folder = pathlib.Path(a.folder)
     env = dict(os.environ)
-    env["PYTHONPATH"] = os.pathsep.join([str(REPO), env.get("PYTHONPATH", "")])
-    cli = [sys.executable, "-m", "jaxgeo.cli"]
+    tree = pathlib.Path(a.jaxgeo).resolve() if a.jaxgeo else REPO
+    env["PYTHONPATH"] = os.pathsep.join([str(tree), env.get("PYTHONPATH", "")])
+    # -P: not the working directory's jaxgeo first (--jaxgeo names the tree)
+    cli = [sys.executable, "-P", "-m", "jaxgeo.cli"]
     scene = folder / "scene"
     if not (scene / "truth.json").exists():
         simulate = [*cli, "simulate", "stereo-scene", "--size", str(a.size), "--seed",
@@ -92,17 +131,18 @@ def main(argv=None) -> int:
     dsm = [*cli, "dsm", left, right, "--res", str(res), "--quiet", "--json", "--overwrite"]
     roi = min(1000, a.size)
     first = measure([*dsm, "--roi", "0", "0", str(roi), str(roi), "-o",
-                     str(folder / "warmup.tif")], env)  # fmt: skip
+                     str(folder / f"warmup{a.tag}.tif")], env)  # fmt: skip
     result = {
         "scene": f"jaxgeo simulate stereo-scene --size {a.size} --seed {a.seed} --exact-rpc "
                  f"(GSD {gsd:.3f} m), DSM at {res} m",
+        "jaxgeo_tree": str(tree),
         "simulate_s": None if sim is None else sim["wall_s"],
         "warmup_roi_px": roi,
         "warmup_s": first["wall_s"],
     }  # fmt: skip
     runs = {}
     for w in a.workers:
-        out = folder / f"dsm_workers{w}.tif"
+        out = folder / f"dsm_workers{w}{a.tag}.tif"
         m = measure([*dsm, "--workers", str(w), "-o", str(out)], env)
         report = json.loads(m.pop("stdout").splitlines()[-1])
         m["report"] = report
@@ -111,13 +151,14 @@ def main(argv=None) -> int:
         m["scene_mpx_per_s"] = a.size * a.size / 1e6 / m["wall_s"]
         m["load_average"] = [round(x, 2) for x in os.getloadavg()]
         m["accuracy"] = accuracy(out, scene / "truth_dsm.tif")
+        m["stages"] = stage_shares(report.get("tile_stats") or {})
         runs[f"workers{w}"] = m
     result["jaxgeo"] = runs
     names = list(runs)
     if len(names) > 1:
-        a0 = folder / f"dsm_{names[0]}.tif"
+        a0 = folder / f"dsm_{names[0]}{a.tag}.tif"
         result["max_abs_difference_between_worker_counts_m"] = max(
-            _max_diff(a0, folder / f"dsm_{n}.tif") for n in names[1:]
+            _max_diff(a0, folder / f"dsm_{n}{a.tag}.tif") for n in names[1:]
         )
     if "workers1" in runs and "workers2" in runs:
         result["scaling_1_to_2_workers"] = runs["workers1"]["wall_s"] / runs["workers2"]["wall_s"]

@@ -25,6 +25,7 @@ import numpy as np
 
 from ._matching import to_uint8
 from ._rectification import EpipolarGrids
+from ._stages import stage
 from ._triangulation import StereoError
 
 YShift = float | Sequence[float]
@@ -458,8 +459,10 @@ class BandMatcher:
         left image or around its match in the right, meets no data has no disparity."""
         rows_e = self.grids.epipolar_shape[0]
         ra, rb = max(r0 - BAND_OVERLAP_ROWS, 0), min(r1 + BAND_OVERLAP_ROWS, rows_e)
-        left, right = self._resample("left", ra, rb), self._resample("right", ra, rb)
-        valid_l, valid_r = np.isfinite(left), np.isfinite(right)
+        with stage("resampling"):
+            left, right = self._resample("left", ra, rb), self._resample("right", ra, rb)
+            valid_l, valid_r = np.isfinite(left), np.isfinite(right)
+            left8, right8 = to_uint8(left, self.lims[0]), to_uint8(right, self.lims[1])
         # a disparity whose matching window (SGBM's block, the refinement's) meets no data in
         # either image is dropped: SGBM sees the fill (0 in uint8) as texture, matches the edge
         # of one image's data to the other's, and its paths carry that into the neighbouring
@@ -472,13 +475,12 @@ class BandMatcher:
         # test of refine_disparity_sigma
         box = (max(b, w + 2), max(b, w + 4)) if w else (b, b)
         whole_l, whole_r = _whole_window(valid_l, box), _whole_window(valid_r, box)
-        disp = sgm_disparity(
-            to_uint8(left, self.lims[0]), to_uint8(right, self.lims[1]), *self.drange, self.sgm,
-            valid=whole_l,
-        )  # fmt: skip
+        with stage("sgm"):
+            disp = sgm_disparity(left8, right8, *self.drange, self.sgm, valid=whole_l)
         sigma = np.where(np.isfinite(disp), UNREFINED_SIGMA_PX, np.nan).astype(np.float32)
         if self.sgm.refine_window:
-            disp, sigma = refine_disparity_sigma(left, right, disp, self.sgm.refine_window)
+            with stage("refinement"):
+                disp, sigma = refine_disparity_sigma(left, right, disp, self.sgm.refine_window)
         x0, x1 = self.x_range
         ye, xe = np.mgrid[0 : rb - ra, x0:x1]
         xr = np.rint(xe + np.nan_to_num(disp)).astype(np.int64) - x0

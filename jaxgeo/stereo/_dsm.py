@@ -115,13 +115,24 @@ def to_map(points: np.ndarray, epsg: int) -> np.ndarray:
 
 
 def point_spacing(xy: np.ndarray, sample: int = 20000) -> float:
-    """Median distance (map units) from a point to its nearest neighbour (a sample of them)."""
+    """Median distance (map units) from a point to its nearest neighbour (a sample of them:
+    with many more points, those of a central square holding about ``4 * sample``, whose inner
+    part is queried; a tree of a million points cost a second)."""
     from scipy.spatial import cKDTree
 
     if xy.shape[0] < 2:
         return 0.0
-    step = max(xy.shape[0] // sample, 1)
-    dist, _ = cKDTree(xy).query(xy[::step], k=2)
+    tree_xy, query = xy, xy
+    if xy.shape[0] > 8 * sample:
+        lo, hi = xy.min(axis=0), xy.max(axis=0)
+        half = 0.5 * np.sqrt(np.prod(hi - lo) * 4 * sample / xy.shape[0])
+        centre = np.median(xy[:: xy.shape[0] // sample], axis=0)
+        off = np.max(np.abs(xy - centre), axis=1)
+        inner = off <= 0.7 * half
+        if inner.sum() >= sample // 4:
+            tree_xy, query = xy[off <= half], xy[inner]
+    step = max(query.shape[0] // sample, 1)
+    dist, _ = cKDTree(tree_xy).query(query[::step], k=2)
     return float(np.median(dist[:, 1]))
 
 
@@ -158,12 +169,20 @@ def _footprint_fill(grids, xyh, origin, res_m, radius_m, k=4, extra=()):
 
     reach = int(np.ceil(radius_m / res_m))
     near = ndimage.binary_dilation(np.isfinite(height), iterations=reach)
-    rows, cols = np.nonzero(near & ~np.isfinite(height))
+    target = near & ~np.isfinite(height)
+    rows, cols = np.nonzero(target)
     if rows.size == 0:
         return
     centres = np.stack([x0 + (cols + 0.5) * res_m, y0 - (rows + 0.5) * res_m], axis=-1)
-    lo, hi = centres.min(axis=0) - radius_m, centres.max(axis=0) + radius_m
-    near_pts = np.all((xyh[:, :2] >= lo) & (xyh[:, :2] <= hi), axis=1)
+    # the points that may lie within the radius of an empty cell's centre: those of the cells
+    # within reach of one (a few where the empty cells are few, not the whole tile's)
+    around = ndimage.binary_dilation(target, np.ones((3, 3), bool), iterations=reach + 1)
+    pr = np.floor((y0 - xyh[:, 1]) / res_m).astype(np.int64)
+    pc = np.floor((xyh[:, 0] - x0) / res_m).astype(np.int64)
+    nr, nc = height.shape
+    on = (pr >= 0) & (pr < nr) & (pc >= 0) & (pc < nc)
+    near_pts = ~on  # points off the grid: kept (a cell at the edge may reach them)
+    near_pts[on] = around[pr[on], pc[on]]
     pts = xyh[near_pts]
     if pts.shape[0] == 0:
         return

@@ -21,6 +21,7 @@ from collections.abc import Sequence
 
 import numpy as np
 
+from .._runtime.progress import say
 from ..io import SensorImage, open_image
 from ..tiles import EmptyProduct, TileError, TileSettings, TileStats, make_product
 from ..tiles.internal import DEFAULT_TILES, WorkerPool
@@ -212,6 +213,9 @@ def make_dsm(
         if orientation is None and any(a is not None and a.known for a in accuracies):
             orientation = vendor_orientation(models, accuracies, [im.name for im in images])
         t_plan = time.perf_counter()
+        if tiles.progress and settings.heights is None:  # tens of seconds on a first run
+            say("jaxgeo dsm: planning: the terrain's height range from tie points in sample "
+                "windows" + (" and the DEM" if dem is not None else ""))  # fmt: skip
         setup = plan_dsm(models, paths, settings, dem=dem, orientation=orientation,
                          tiled=tiled, progress=tiles.progress)  # fmt: skip
         plan, plan_s = setup.plan, time.perf_counter() - t_plan

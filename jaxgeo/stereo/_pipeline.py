@@ -3,9 +3,10 @@
 For a pair (reference image, secondary image) and a ROI of the reference image (matched with
 ``CONTEXT_PX`` of context around it; only the ROI's points are kept):
 
-1. Verified tie points (:func:`~jaxgeo.stereo.tie_points`); their heights give the reference
-   elevation of the rectification (median); tie points outside the models' validity cube are
-   an error naming the images (the models do not fit them).
+1. Verified tie points (:func:`~jaxgeo.stereo.tie_points`, SIFT at half resolution on a tile's
+   windows: :mod:`._keypoints`); their heights give the reference elevation of the
+   rectification (median); tie points outside the models' validity cube are an error naming
+   the images (the models do not fit them).
 2. Epipolar grids at that elevation (:mod:`._rectification`) and resampling of both images.
 3. The residual vertical disparity (the models' relative bias across the epipolar lines) is
    measured on the tie points carried into the epipolar frame through the grids (s2p's
@@ -15,8 +16,9 @@ For a pair (reference image, secondary image) and a ROI of the reference image (
    (their 0.5-99.5 percentiles, widened).
 4. Semi-global matching over bands of epipolar rows (:mod:`._dense`), masked where either
    epipolar image has no data, then a correlation refinement of the sub-pixel disparities.
-5. Triangulation of every valid disparity (:mod:`._triangulation`); points outside the models'
-   validity cube are dropped, and most of them outside is an error naming the images.
+5. Triangulation of every valid disparity (:mod:`._triangulation`: interpolated between the
+   exactly triangulated nodes of an epipolar lattice, checked to a millimetre); points outside
+   the models' validity cube are dropped, and most of them outside is an error naming the images.
 
 The N-image DSM pools the points of the pairs (reference, i) and rasterises them (:mod:`._dsm`:
 point footprints against the aliasing of the point lattice and the cells, small holes
@@ -43,27 +45,30 @@ from ._dense import (
     y_shift_at,
 )
 from ._dsm import DSMGrid, local_utm_epsg, point_spacing, rasterize, to_map
-from ._matching import sift_features_raster, stretch_limits
+from ._keypoints import SIFT_COARSE_MIN_PX, reference_features, window_keypoints
+from ._matching import stretch_limits
 from ._rectification import EpipolarGrids, epipolar_grids
 from ._settings import DEFAULT_DSM, DSMSettings
+from ._stages import stage
 from ._ties import MatchSettings, tie_points
 from ._triangulation import (
+    MIN_LATTICE_POINTS,
     StereoError,
     check_ties,
+    disparity_lattice,
     drop_outside_validity,
     los_heights,
-    triangulate,
+    triangulate_disparities,
 )
 from ._uncertainty import Orientation, pair_orientation, point_height_sigmas
 
 MIN_TIE_POINTS = 10
 CONTEXT_PX = 16
 """Reference-image pixels matched around the ROI (context at its edges; not in the output)."""
-TRIANGULATION_CHUNK = 65536
-TIE_KEYPOINTS = 10_000
-"""Reference keypoints matched per pair (a random subset of them when there are more): the tie
-points give the rectification's height, the vertical disparity and the disparity range, for
-which thousands are plenty (a 1 Mpx window has ~60 000 keypoints; matching them all took 3 s)."""
+TIE_KEYPOINTS = 3000
+"""Reference keypoints matched per pair (a random subset of them when there are more): the ties
+give the rectification's height, the vertical disparity and the disparity range, for which a
+thousand or two are plenty (10 000 gave ~7 500 ties and cost a quarter of a 1 Mpx tile)."""
 
 
 def read_window(path: str | os.PathLike, window: tuple[int, int, int, int]) -> np.ndarray:
@@ -143,16 +148,6 @@ def _sec_window(ref, sec, window, h_range, size, paths, margin=64):
     return c0, r0, c1 - c0, r1 - r0
 
 
-def _reference_keypoints(path, window):
-    """SIFT keypoints of the reference image over ``window``: a random subset (seeded) of
-    :data:`TIE_KEYPOINTS` when there are more."""
-    xy, desc = sift_features_raster(path, window)
-    if len(xy) > TIE_KEYPOINTS:
-        pick = np.sort(np.random.default_rng(0).choice(len(xy), TIE_KEYPOINTS, replace=False))
-        xy, desc = xy[pick], desc[pick]
-    return xy, desc
-
-
 def _in_window(xy, window):
     """``(n,)`` True where pixel ``xy`` falls in ``window = (col, row, w, h)`` (pixel edges)."""
     col, row, w, h = window
@@ -219,13 +214,27 @@ def stereo_pair(
     stats: dict = {}
     h_valid = los_heights(ref)
     win2 = _sec_window(ref, sec, data_win, h_valid, sec_size, paths)
-    img1, img2 = read_window(ref_path, data_win), read_window(sec_path, win2)
+    with stage("sift"):  # the reference's window, stretch and keypoints: once per tile
+        img1, lim1, features1 = reference_features(ref_path, data_win, read_window, TIE_KEYPOINTS)
+    with stage("reading"):
+        img2 = read_window(sec_path, win2)
+        lims = (lim1, stretch_limits(img2[::2, ::2]))
     log("tie points")
-    ties = tie_points(
-        ref, sec, ref_path, sec_path, MatchSettings(
-            roi=data_win, height_range_m=settings.heights, epipolar_tol_px=epipolar_tol_px),
-        dem=dem, features1=_reference_keypoints(ref_path, data_win),
-    )  # fmt: skip
+    features2 = None  # a small window: tie_points' own search (full resolution)
+    if min(data_win[2:]) >= SIFT_COARSE_MIN_PX:
+        with stage("sift"):  # the secondary's, where the ties' heights (else any) put the ROI
+            ties_h = settings.heights if settings.heights is not None else h_valid
+            c, r, cw, rh = _sec_window(ref, sec, data_win, ties_h, sec_size, paths,
+                                       margin=int(epipolar_tol_px) + 16)  # fmt: skip
+            c, r = max(c, win2[0]), max(r, win2[1])  # within img2
+            part2 = img2[r - win2[1] : r - win2[1] + rh, c - win2[0] : c - win2[0] + cw]
+            features2 = window_keypoints(part2, (c, r), lims[1])
+    with stage("ties"):
+        ties = tie_points(
+            ref, sec, ref_path, sec_path, MatchSettings(
+                roi=data_win, height_range_m=settings.heights, epipolar_tol_px=epipolar_tol_px),
+            dem=dem, features1=features1, features2=features2,
+        )  # fmt: skip
     if len(ties) < MIN_TIE_POINTS:
         raise StereoError(
             f"stereo: only {len(ties)} verified tie points between {ref_path} and {sec_path} "
@@ -240,14 +249,16 @@ def stereo_pair(
     )  # fmt: skip
     lap("ties")
     log(f"{len(ties)} tie points, reference height {h0:.1f} m; rectification")
-    grids = epipolar_grids(ref, sec, grid_win, elevation=h0, epi_step=settings.epi_step)
-    # the tie points in the epipolar frame measure the vertical disparity and the disparity
-    # range (s2p's pointing correction from its sensor-space SIFT matches): no second matching
-    shift, vstats, dx = vertical_disparity(
-        grids.to_epipolar("left", ties.xy1), grids.to_epipolar("right", ties.xy2),
-        grids.epipolar_shape, paths, epipolar_tol_px,
-    )  # fmt: skip
-    dmin, dmax = disparity_range(dx)
+    with stage("rectification"):
+        grids = epipolar_grids(ref, sec, grid_win, elevation=h0, epi_step=settings.epi_step)
+        # the tie points in the epipolar frame measure the vertical disparity and the
+        # disparity range (s2p's pointing correction from its sensor-space SIFT matches): no
+        # second matching
+        shift, vstats, dx = vertical_disparity(
+            grids.to_epipolar("left", ties.xy1), grids.to_epipolar("right", ties.xy2),
+            grids.epipolar_shape, paths, epipolar_tol_px,
+        )  # fmt: skip
+        dmin, dmax = disparity_range(dx)
     stats.update(
         vstats,
         disparity_range_px=(dmin, dmax),
@@ -261,47 +272,51 @@ def stereo_pair(
     # edge columns lie outside its own epipolar extent
     rows_e, cols_e = grids.epipolar_shape
     x0, x1 = min(0, int(np.floor(dmin))), cols_e + max(0, int(np.ceil(dmax)))
-    lims = (stretch_limits(img1[::2, ::2]), stretch_limits(img2[::2, ::2]))
     band = rows_e if band_rows is None else max(int(band_rows), 1)
     starts = list(range(0, rows_e, band))
     dense = BandMatcher((img1, img2), (data_win[:2], win2[:2]), grids, shift, (x0, x1), lims,
                         (dmin, dmax), settings.sgm)  # fmt: skip
     matches, kept, n_valid, n_disp = [], [], 0, 0
-    points, sigma_h, sigma_d, direction = [], [], [], []
+    epipolar, sigma_d, direction = [], [], []
     for k, r0 in enumerate(starts):
         r1 = min(r0 + band, rows_e)
         disp, disp_sigma, valid_l, images = dense.band(r0, r1, keep)
-        ye, xe = np.mgrid[r0:r1, x0:x1].astype(float)
-        xl = grids.to_sensor("left", np.stack([xe, ye], axis=-1))
-        in_roi = valid_l & _in_window(xl.reshape(-1, 2), roi).reshape(xe.shape)
-        n_valid += int(in_roi.sum())
-        sel = np.isfinite(disp) & in_roi
-        n_disp += int(sel.sum())
-        xr_e = xe[sel] + disp[sel]
-        yr_e = ye[sel] + y_shift_at(shift, xr_e, ye[sel])
-        xr, along = grids.along("right", np.stack([xr_e, yr_e], axis=-1))
-        direction.append(along)
-        sigma_d.append(disp_sigma[sel])
-        matches.append(np.stack([xl[sel], xr], axis=1))
+        with stage("triangulation"):
+            ye, xe = np.mgrid[r0:r1, x0:x1].astype(float)
+            xl = grids.to_sensor("left", np.stack([xe, ye], axis=-1))
+            in_roi = valid_l & _in_window(xl.reshape(-1, 2), roi).reshape(xe.shape)
+            n_valid += int(in_roi.sum())
+            sel = np.isfinite(disp) & in_roi
+            n_disp += int(sel.sum())
+            xr_e = xe[sel] + disp[sel]
+            yr_e = ye[sel] + y_shift_at(shift, xr_e, ye[sel])
+            xr, along = grids.along("right", np.stack([xr_e, yr_e], axis=-1))
+            direction.append(along)
+            sigma_d.append(disp_sigma[sel])
+            matches.append(np.stack([xl[sel], xr], axis=1))
+            epipolar.append(np.stack([xe[sel], ye[sel], disp[sel]], axis=-1))
         if keep:
             kept.append((disp, *images))
-        pending = sum(len(m) for m in matches)
-        if pending >= TRIANGULATION_CHUNK or k == len(starts) - 1:
-            pts, sig = _triangulate(ref, sec, np.concatenate(matches), method)
-            points.append(pts)
-            sigma_h.append(sig)
-            matches = []
         if on_band is not None:
             on_band(k + 1, len(starts))
-    stats["disparity_fill"] = float(n_disp / max(n_valid, 1))
-    stats["n_bands"] = len(starts)
-    lap("sgm_triangulation")
-    points = np.concatenate(points)
-    sigma_h = np.concatenate(sigma_h)
-    stats.update(drop_outside_validity(points, (ref, sec), paths))
-    match_sigma, orient_sigma = point_height_sigmas(
-        (ref, sec), points, np.concatenate(direction), np.concatenate(sigma_d), orientation
-    )
+    stats.update(disparity_fill=float(n_disp / max(n_valid, 1)), n_bands=len(starts))
+    lap("sgm")
+    with stage("triangulation"):
+        epipolar, matches, lattice = np.concatenate(epipolar), np.concatenate(matches), None
+        if len(epipolar) >= MIN_LATTICE_POINTS:  # the points interpolated between exact nodes
+            d, y_of = epipolar[:, 2], lambda xe, ye: ye + y_shift_at(shift, xe, ye)
+            lattice = disparity_lattice((ref, sec), grids, lambda xe, ye: np.stack(
+                [xe, y_of(xe, ye)], -1), (x0, x1, 0, rows_e), (float(d.min()), float(d.max())),
+                method)  # fmt: skip
+            stats.update(triangulation_lattice_error_m=lattice.check_error_m,
+                         triangulation_lattice=lattice.usable)  # fmt: skip
+        points, sigma_h = triangulate_disparities((ref, sec), lattice, epipolar, matches, method)
+        stats.update(drop_outside_validity(points, (ref, sec), paths))
+    lap("triangulation")
+    with stage("sigma"):
+        match_sigma, orient_sigma = point_height_sigmas(
+            (ref, sec), points, np.concatenate(direction), np.concatenate(sigma_d), orientation
+        )
     if np.isfinite(match_sigma).any():
         stats["median_match_sigma_px"] = float(np.nanmedian(np.concatenate(sigma_d)))
         stats["median_match_sigma_h_m"] = float(np.nanmedian(match_sigma))
@@ -324,22 +339,6 @@ def stereo_pair(
             ties_xy2=ties.xy2,
         )
     return products
-
-
-def _triangulate(ref, sec, matches, method):
-    """Points ``(n, 3)`` and height sigmas ``(n,)`` (NaN for ``los_midpoint``) of ``(n, 2, 2)``
-    matches, in chunks of one size (one compilation whatever the band)."""
-    n = matches.shape[0]
-    if n == 0:  # a last band without a match (its rows outside the ROI)
-        return np.zeros((0, 3)), np.zeros(0)
-    pad = -n % TRIANGULATION_CHUNK
-    if pad:
-        matches = np.concatenate([matches, np.full((pad, 2, 2), np.nan)])
-    points, result = triangulate([ref, sec], matches, method, chunk=TRIANGULATION_CHUNK)
-    sigma_h = np.full(n, np.nan)
-    if result is not None:
-        sigma_h = np.asarray(result.sigma_enu)[:n, 2]
-    return points[:n], sigma_h
 
 
 def dsm_from_images(

@@ -15,10 +15,9 @@ A tile where a pair fails (no texture, water, clouds: too few tie points) keeps 
 a tile where every pair fails is nodata (named in the report), not an error of the scene. With
 three or more images each tile removes its pairs' relative height offsets (as the untiled DSM).
 
-An untiled DSM (a small ROI) is a plan of one tile too (``plan_dsm(..., tiled=False)``): its
-work (:class:`WholeDSMJob`) is the ROI's stereo chain in one piece
-(:func:`~jaxgeo.stereo.dsm_from_images`) on the tile's cells, in this process. Both run through
-:func:`jaxgeo.tiles.make_product` (work folder, tiles, COG, clean-up).
+An untiled DSM (a small ROI) is a plan of one tile (``plan_dsm(..., tiled=False)``) whose work
+(:class:`WholeDSMJob`) is :func:`~jaxgeo.stereo.dsm_from_images` on the ROI, in this process.
+Both run through :func:`jaxgeo.tiles.make_product` (work folder, tiles, COG, clean-up).
 """
 
 from __future__ import annotations
@@ -38,9 +37,18 @@ from ..models import AbstractSensorModel
 from ..tiles import RasterSpec, Tile, TilePlan, plan_tiles
 from ..tiles.internal import NoData, cores, overview_factors, write_tile
 from ._dem_check import check_dem
-from ._dsm import DSM_BANDS, dsm_band_tags, dsm_grid, local_utm_epsg, rasterize, to_map
-from ._pipeline import _height_offsets, _spacing, dsm_from_images, image_size, stereo_pair
+from ._dsm import (
+    DSM_BANDS,
+    dsm_band_tags,
+    dsm_grid,
+    local_utm_epsg,
+    point_spacing,
+    rasterize,
+    to_map,
+)
+from ._pipeline import _height_offsets, dsm_from_images, image_size, stereo_pair
 from ._settings import DEFAULT_DSM, DSMSettings
+from ._stages import StageTimes, stage
 from ._ties import MatchSettings, TieError, footprint_dem_heights, tie_points, validity_heights
 from ._triangulation import StereoError, los_heights
 from ._uncertainty import Orientation, pair_orientation, resolved_orientation, sigma_covers
@@ -103,11 +111,16 @@ class DSMJob:
         return reference_window(self.models[0], self.paths[0], self.epsg, box, self.heights)
 
     def __call__(self, tile: Tile, path) -> dict:
+        with StageTimes() as times:
+            stats = self._run(tile, path)
+        return {**stats, "stages_s": times.as_dict()}
+
+    def _run(self, tile: Tile, path) -> dict:
         roi = self.window(tile)
         if roi is None:
             raise NoData("the reference image does not see this tile")
         ref, ref_path = self.models[0], self.paths[0]
-        kept, sigmas, pairs = [], [], []
+        kept, sigmas, pairs, spacings = [], [], [], []
         xmin, ymin, xmax, ymax = self.box(tile, self.margin_m)
         for i in range(1, len(self.models)):
             name = pathlib.Path(self.paths[i]).name
@@ -122,9 +135,13 @@ class DSMJob:
             except (StereoError, TieError) as err:  # nothing to match here: the others may
                 pairs.append({"image": name, "failed": " ".join(str(err).split())})
                 continue
-            xyh = to_map(pair.points, self.epsg)
-            inside = (np.all(np.isfinite(xyh), axis=1) & (xyh[:, 0] >= xmin)
-                      & (xyh[:, 0] < xmax) & (xyh[:, 1] >= ymin) & (xyh[:, 1] < ymax))  # fmt: skip
+            with stage("rasterisation"):
+                xyh = to_map(pair.points, self.epsg)
+                inside = (np.all(np.isfinite(xyh), axis=1) & (xyh[:, 0] >= xmin)
+                          & (xyh[:, 0] < xmax) & (xyh[:, 1] >= ymin)
+                          & (xyh[:, 1] < ymax))  # fmt: skip
+                # a point's footprint is its own pair's spacing (:func:`_spacing`)
+                spacings.append(point_spacing(xyh[inside, :2]) if inside.sum() > 1 else 0.0)
             kept.append(pair.points[inside])
             sigmas.append((pair.match_sigma_m[inside], pair.orientation_sigma_m[inside]))
             pairs.append({"image": name, **_small(pair.stats), "points": int(inside.sum())})
@@ -134,33 +151,36 @@ class DSMJob:
             raise NoData(reasons or "no point of any pair falls in this tile")
         kept = [kept[k] for k in usable]
         sigmas = [sigmas[k] for k in usable]
-        if self.settings.register and len(kept) > 1:
-            offsets = _height_offsets(kept, self.res_m, self.epsg)
-            for pts, off in zip(kept, offsets, strict=True):
-                pts[:, 2] -= off
-        pad = int(math.ceil(self.margin_m / self.res_m))
-        x0 = self.x0 + (tile.col - pad) * self.res_m
-        y0 = self.y0 - (tile.row - pad) * self.res_m
-        footprint = max(_spacing(p, self.epsg) for p in kept)
-        dsm = rasterize(
-            np.concatenate(kept), self.res_m, epsg=self.epsg, origin=(x0, y0),
-            shape=(tile.rows + 2 * pad, tile.cols + 2 * pad), footprint_m=footprint,
-            max_hole_m=self.settings.max_hole_m,
-            sigmas=tuple(np.concatenate(s) for s in zip(*sigmas, strict=True)),
-        )  # fmt: skip
-        bands = np.stack([b[pad : pad + tile.rows, pad : pad + tile.cols]
-                          for b in dsm.bands().values()])  # fmt: skip
+        with stage("rasterisation"):
+            if self.settings.register and len(kept) > 1:
+                offsets = _height_offsets(kept, self.res_m, self.epsg)
+                for pts, off in zip(kept, offsets, strict=True):
+                    pts[:, 2] -= off
+            pad = int(math.ceil(self.margin_m / self.res_m))
+            x0 = self.x0 + (tile.col - pad) * self.res_m
+            y0 = self.y0 - (tile.row - pad) * self.res_m
+            dsm = rasterize(
+                np.concatenate(kept), self.res_m, epsg=self.epsg, origin=(x0, y0),
+                shape=(tile.rows + 2 * pad, tile.cols + 2 * pad),
+                footprint_m=max(spacings[k] for k in usable),
+                max_hole_m=self.settings.max_hole_m,
+                sigmas=tuple(np.concatenate(s) for s in zip(*sigmas, strict=True)),
+            )  # fmt: skip
+            bands = np.stack([b[pad : pad + tile.rows, pad : pad + tile.cols]
+                              for b in dsm.bands().values()])  # fmt: skip
         valid = int(np.isfinite(bands[0]).sum())
         if valid == 0:
             raise NoData("no cell of this tile got a height")
-        write_tile(path, self.spec, tile.row, tile.col, bands)
+        with stage("writing"):
+            write_tile(path, self.spec, tile.row, tile.col, bands)
         return {"valid_px": valid, "filled_px": int((bands[3] == 1).sum()),
                 "window": list(roi), "pairs": pairs}  # fmt: skip
 
 
 def _small(stats: dict) -> dict:
     """The numbers of a pair's stats worth keeping per tile (JSON)."""
-    keys = ("n_ties", "h_ref_m", "vertical_disparity_px", "disparity_range_px", "disparity_fill")
+    keys = ("n_ties", "h_ref_m", "vertical_disparity_px", "disparity_range_px", "disparity_fill",
+            "triangulation_lattice_error_m")  # fmt: skip
     out = {}
     for k in keys:
         if k in stats:
@@ -207,8 +227,7 @@ def scene_heights(models, paths, roi) -> tuple[float, float] | None:
 
 
 def _sample_windows(roi) -> list[tuple[int, int, int, int]]:
-    """The five windows of :func:`scene_heights` in ``roi`` (the same window more than once
-    where the ROI is smaller than :data:`SAMPLE_WINDOW_PX`)."""
+    """The five windows of :func:`scene_heights` in ``roi`` (repeated in a small ROI)."""
     col, row, w, h = roi
     side = min(SAMPLE_WINDOW_PX, w, h)
     windows = []

@@ -16,7 +16,9 @@ both go through the rectification grids to sensor coordinates.
 
 from __future__ import annotations
 
+import dataclasses
 from collections.abc import Sequence
+from dataclasses import dataclass
 
 import jax
 import jax.numpy as jnp
@@ -46,15 +48,20 @@ def outside_validity(
 ) -> np.ndarray:
     """``(n,)`` True where a finite lon/lat/h point lies outside ``model``'s RPC validity cube
     widened by ``margin`` half-widths (never for a model without an RPC)."""
+    with np.errstate(invalid="ignore"):
+        return _validity_excess(points, model) > 1.0 + margin
+
+
+def _validity_excess(points: np.ndarray, model: AbstractSensorModel) -> np.ndarray:
+    """``(n,)`` the largest of a lon/lat/h point's offsets from ``model``'s RPC validity cube's
+    centre in half-widths (0 for a model without an RPC, NaN for a point that is not finite)."""
     points = np.asarray(points, dtype=float)
     rpc = model.base_rpc()
-    finite = np.all(np.isfinite(points), axis=-1)
     if rpc is None:
-        return np.zeros(points.shape[:-1], bool)
+        return np.where(np.all(np.isfinite(points), axis=-1), 0.0, np.nan)
     offset = np.asarray(rpc.ground_offset, dtype=float)
     scale = np.abs(np.asarray(rpc.ground_scale, dtype=float))
-    normalised = np.abs(points - offset) / scale
-    return finite & np.any(normalised > 1.0 + margin, axis=-1)
+    return np.max(np.abs(points - offset) / scale, axis=-1)
 
 
 def describe_validity(model: AbstractSensorModel) -> str:
@@ -69,12 +76,16 @@ def describe_validity(model: AbstractSensorModel) -> str:
     )
 
 
-def _refuse_outside(points, models, paths, what):
+def _refuse_outside(points, models, paths, what, excess=None):
     """:class:`StereoError` when most of the finite ``points`` lie outside the validity cube of
-    one or both models (named with their images)."""
+    one or both models (named with their images; ``excess``: their :func:`_validity_excess`
+    per model, when known)."""
     finite = np.all(np.isfinite(points), axis=1)
     n = int(finite.sum())
-    counts = [int(outside_validity(points, m).sum()) for m in models]
+    if excess is None:
+        excess = [_validity_excess(points, m) for m in models]
+    with np.errstate(invalid="ignore"):
+        counts = [int((e > 1.0 + VALIDITY_MARGIN).sum()) for e in excess]
     bad = [i for i, c in enumerate(counts) if n and c > 0.5 * n]
     if bad:
         h = points[finite, 2]
@@ -113,8 +124,10 @@ def drop_outside_validity(
     ``BLUNDER_MARGIN`` outside a cube are set to NaN (in place: gross mismatches); returns
     ``n_points`` (kept) and ``n_points_outside_validity`` (dropped)."""
     n = int(np.all(np.isfinite(points), axis=1).sum())
-    _refuse_outside(points, models, paths, "3D points")
-    outside = np.logical_or.reduce([outside_validity(points, m, BLUNDER_MARGIN) for m in models])
+    excess = [_validity_excess(points, m) for m in models]
+    _refuse_outside(points, models, paths, "3D points", excess)
+    with np.errstate(invalid="ignore"):
+        outside = np.logical_or.reduce([e > 1.0 + BLUNDER_MARGIN for e in excess])
     points[outside] = np.nan
     return dict(n_points=n - int(outside.sum()), n_points_outside_validity=int(outside.sum()))
 
@@ -218,3 +231,162 @@ def triangulate(
         parts.append(res)
     result = jax.tree.map(lambda *a: np.concatenate(a), *parts)
     return np.asarray(result.ground), result
+
+
+MIN_LATTICE_POINTS = 50_000
+"""Fewer dense matches than this are triangulated one by one (the lattice's nodes would cost as
+much)."""
+LATTICE_CHUNK = 16384
+"""Nodes per triangulation call of :func:`disparity_lattice` (NaN-padded: one compiled shape)."""
+LATTICE_TOL_M = 1e-3
+"""Largest error (m, any coordinate) of the lattice's interpolation at its check points (the
+centres of its cells, where a trilinear interpolation errs most) for it to be used; beyond it
+every point is triangulated on its own."""
+LATTICE_CHECKS = 2048
+"""Cell centres whose exact triangulation checks the lattice (at most; spread over its cells)."""
+
+
+@dataclass(frozen=True)
+class DisparityLattice:
+    """Triangulated points of a rectified pair on a lattice of epipolar nodes ``(xe, ye, d)``
+    (left epipolar pixel and disparity), interpolated trilinearly in between
+    (:func:`disparity_lattice`).
+
+    Why: a 1 Mpx tile has a million matches, and a million Gauss-Newton intersections cost
+    seconds (the tile's largest stage), while the point is a smooth function of ``(xe, ye, d)``:
+    the grids are bilinear between their nodes (the lattice's ``xe``, ``ye`` nodes are theirs)
+    and the models smooth over a node step. ``values`` ``(nd, ny, nx, 4)``: lon, lat, h minus
+    those of ``centre`` (deg, deg, m: small numbers, interpolated in float64 to 1e-12) and the
+    intersection's height sigma (m; NaN for ``los_midpoint``) at the nodes ``origin + index *
+    step`` (``(xe, ye, d)`` px); ``check_error_m``: the largest difference (m) between the
+    interpolation and the exact triangulation at the check points."""
+
+    origin: tuple[float, float, float]
+    step: tuple[float, float, float]
+    centre: np.ndarray
+    values: np.ndarray
+    check_error_m: float
+
+    @property
+    def usable(self) -> bool:
+        return bool(self.check_error_m <= LATTICE_TOL_M)
+
+    def _coords(self, xe, ye, d):
+        """Fractional node indices ``(3, n)`` in the array order ``(d, ye, xe)``."""
+        (x0, y0, d0), (sx, sy, sd) = self.origin, self.step
+        return np.stack([(np.asarray(d, float) - d0) / sd, (np.asarray(ye, float) - y0) / sy,
+                         (np.asarray(xe, float) - x0) / sx])  # fmt: skip
+
+    def interpolate(self, xe, ye, d) -> np.ndarray:
+        """``(n, 4)`` lon, lat, h minus ``centre``'s and the height sigma at ``(n,)``
+        epipolar points; NaN outside the lattice or next to a node without a point."""
+        from scipy.ndimage import map_coordinates
+
+        coords = self._coords(xe, ye, d)
+        inside = np.all((coords >= 0) & (coords <= np.array(self.values.shape[:3])[:, None] - 1),
+                        axis=0)  # fmt: skip
+        out = np.full((coords.shape[1], 4), np.nan)
+        if inside.any():
+            c = coords[:, inside]
+            out[inside] = np.stack([map_coordinates(self.values[..., k], c, order=1,
+                                                    mode="nearest", prefilter=False)
+                                    for k in range(4)], axis=-1)  # fmt: skip
+        return out
+
+    def points(self, xe, ye, d) -> tuple[np.ndarray, np.ndarray]:
+        """``(n, 3)`` lon/lat/h and ``(n,)`` height sigmas (m) at epipolar points (NaN where
+        :meth:`interpolate` has none)."""
+        value = self.interpolate(xe, ye, d)
+        return value[:, :3] + self.centre, value[:, 3]
+
+
+def _metres_per_unit(centre) -> np.ndarray:
+    """Metres per degree of longitude and latitude, and per metre of height, at ``centre``
+    (a sphere's: for the lattice's check, in metres, of differences of a few 1e-8 degrees)."""
+    per_deg = np.pi / 180.0 * 6_378_137.0
+    return np.array([per_deg * np.cos(np.radians(centre[1])), per_deg, 1.0])
+
+
+def _exact(models, matches, method):
+    """:func:`triangulate` of ``(n, 2, 2)`` matches in NaN-padded chunks of
+    :data:`LATTICE_CHUNK` (one compiled shape): points ``(n, 3)``, height sigmas ``(n,)``."""
+    n = len(matches)
+    pad = -n % LATTICE_CHUNK
+    padded = np.concatenate([matches, np.full((pad, 2, 2), np.nan)])
+    ground, result = triangulate(models, padded, method, chunk=LATTICE_CHUNK)
+    sigma = np.full(n, np.nan) if result is None else np.asarray(result.sigma_enu)[:n, 2]
+    return ground[:n], sigma
+
+
+def disparity_lattice(
+    models: Sequence[AbstractSensorModel],
+    grids: EpipolarGrids,
+    right_epipolar,
+    extent: tuple[int, int, int, int],
+    disparity_range: tuple[float, float],
+    method: str = "intersect",
+) -> DisparityLattice:
+    """The :class:`DisparityLattice` of a rectified pair ``models = (left, right)`` over the
+    left epipolar columns ``extent[0]..extent[1]``, rows ``extent[2]..extent[3]`` (px) and the
+    disparities ``disparity_range`` (px): ``xe`` and ``ye`` nodes those of ``grids`` (every
+    ``grids.step_px``), ``d`` nodes every half step; each node's left sensor point through the
+    grids, its right one at the right epipolar point ``right_epipolar(xe + d, ye)`` (``(n, 2)``:
+    with the vertical disparity's shift), triangulated by :func:`triangulate` (``method``).
+    Checked at up to :data:`LATTICE_CHECKS` cell centres (``check_error_m``)."""
+    x0, x1, y0, y1 = extent
+    step = grids.step_px
+    dstep = step / 2.0
+    xs = step * np.arange(np.floor(x0 / step), np.ceil(x1 / step) + 1)
+    ys = step * np.arange(np.floor(y0 / step), np.ceil(y1 / step) + 1)
+    lo, hi = disparity_range
+    ds = dstep * np.arange(np.floor(lo / dstep) - 1, np.ceil(hi / dstep) + 2)
+    d, y, x = (a.reshape(-1) for a in np.meshgrid(ds, ys, xs, indexing="ij"))
+    rng = np.random.default_rng(0)
+    cells = (len(ds) - 1) * (len(ys) - 1) * (len(xs) - 1)
+    pick = rng.choice(cells, min(LATTICE_CHECKS, cells), replace=False)
+    kd, ky, kx = np.unravel_index(pick, (len(ds) - 1, len(ys) - 1, len(xs) - 1))
+    cd, cy, cx = ds[kd] + dstep / 2, ys[ky] + step / 2, xs[kx] + step / 2
+    ex, ey, ed = np.concatenate([x, cx]), np.concatenate([y, cy]), np.concatenate([d, cd])
+    left = grids.to_sensor("left", np.stack([ex, ey], axis=-1))
+    right = grids.to_sensor("right", right_epipolar(ex + ed, ey))
+    ground, sigma = _exact(models, np.stack([left, right], axis=1), method)
+    finite = np.all(np.isfinite(ground), axis=1)
+    if not finite.any():
+        raise StereoError("stereo: no node of the triangulation lattice triangulates")
+    centre = np.median(ground[finite], axis=0)
+    offsets = np.column_stack([ground - centre, sigma])
+    n = len(x)
+    values = offsets[:n].reshape(len(ds), len(ys), len(xs), 4)
+    lattice = DisparityLattice((float(xs[0]), float(ys[0]), float(ds[0])),
+                               (float(step), float(step), float(dstep)), centre, values,
+                               float("inf"))  # fmt: skip
+    got = lattice.interpolate(cx, cy, cd)[:, :3]
+    both = np.all(np.isfinite(got), axis=1) & finite[n:]
+    diff = (got[both] - offsets[n:][both, :3]) * _metres_per_unit(centre)
+    error = float(np.max(np.abs(diff), initial=0.0))
+    if not both.any():
+        error = float("inf")
+    return dataclasses.replace(lattice, check_error_m=error)
+
+
+def triangulate_disparities(
+    models: Sequence[AbstractSensorModel],
+    lattice: DisparityLattice | None,
+    epipolar: np.ndarray,
+    matches: np.ndarray,
+    method: str = "intersect",
+) -> tuple[np.ndarray, np.ndarray]:
+    """Points ``(n, 3)`` and height sigmas ``(n,)`` of dense matches: ``epipolar`` ``(n, 3)``
+    their left epipolar ``(xe, ye)`` and disparity, ``matches`` ``(n, 2, 2)`` their left and
+    right sensor points. Interpolated in ``lattice`` when it is usable, triangulated one by
+    one (:func:`triangulate`) otherwise and where the lattice has no value."""
+    n = len(matches)
+    if n == 0:
+        return np.zeros((0, 3)), np.zeros(0)
+    if lattice is None or not lattice.usable:
+        return _exact(models, matches, method)
+    points, sigma = lattice.points(epipolar[:, 0], epipolar[:, 1], epipolar[:, 2])
+    missing = ~np.all(np.isfinite(points), axis=1) & np.all(np.isfinite(matches), axis=(1, 2))
+    if missing.any():
+        points[missing], sigma[missing] = _exact(models, matches[missing], method)
+    return points, sigma

@@ -120,9 +120,9 @@ def test_rasterize_median_count_spread_and_gaps(tmp_path):
 
 
 def test_a_band_without_matches_triangulates_to_no_point():
-    """The last band of a ROI's epipolar rows may hold no match after a full chunk was
-    triangulated (a 1000 px ROI of a 2000 px scene failed with a TypeError from jax.tree.map)."""
-    from jaxgeo.stereo._pipeline import _triangulate
+    """A ROI's epipolar rows may hold no match (a 1000 px ROI of a 2000 px scene failed with a
+    TypeError from jax.tree.map): no point, no triangulation."""
+    from jaxgeo.stereo._triangulation import triangulate_disparities
 
-    points, sigma = _triangulate(None, None, np.zeros((0, 2, 2)), "intersect")
+    points, sigma = triangulate_disparities((), None, np.zeros((0, 3)), np.zeros((0, 2, 2)))
     assert points.shape == (0, 3) and sigma.shape == (0,)

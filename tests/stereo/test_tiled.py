@@ -72,6 +72,12 @@ def test_tiled_dsm_equals_the_untiled_one_and_the_truth(scene, setup, tiled, tmp
     # where the time went: the tiles and the mosaic, within the whole
     assert 0 < report.mosaic_s < report.tiles_s < report.seconds
     assert report.tiles_s + report.mosaic_s <= report.seconds
+    # and within each tile, per stage of the chain (the benchmark's shares)
+    for stats in report.tile_stats.values():
+        stages = stats.details["stages_s"]
+        assert {"sift", "ties", "sgm", "triangulation", "rasterisation", "writing"} <= set(stages)
+        assert all(t["wall_s"] >= 0 and t["cpu_s"] >= 0 for t in stages.values())
+        assert stages["sgm"]["wall_s"] > 0
     with rasterio.open(out) as ds:
         assert (
             ds.count == 5

@@ -1,0 +1,173 @@
+"""What makes a DSM tile cheap, and keeps it exact: the dense triangulation's lattice
+(``disparity_lattice``: points interpolated between exactly triangulated epipolar nodes) equals
+the point-by-point intersection to well under a millimetre and falls back to it where it cannot
+answer; the stage clock of a tile; the sampled point spacing; the keypoints of a half-resolution
+SIFT in full-resolution pixels; the reference window read and searched once per tile.
+
+Scene: :func:`jaxgeo.simulate.stereo_scene`, 300 x 300 px, seed 5, exact RPCs."""
+
+import numpy as np
+import pytest
+
+from jaxgeo.io import open_image
+from jaxgeo.simulate import StereoSceneSettings, stereo_scene
+from jaxgeo.stereo import epipolar_grids
+from jaxgeo.stereo._dsm import point_spacing
+from jaxgeo.stereo._stages import STAGES, StageTimes, stage
+from jaxgeo.stereo._triangulation import (
+    LATTICE_TOL_M,
+    disparity_lattice,
+    triangulate_disparities,
+)
+from jaxgeo.stereo._triangulation import _exact as exact_triangulation  # one compiled shape
+
+
+@pytest.fixture(scope="module")
+def pair(tmp_path_factory):
+    folder = tmp_path_factory.mktemp("scene")
+    stereo_scene(folder, 300, 5, StereoSceneSettings(exact_rpc=True))
+    images = [open_image(folder / name) for name in ("left.tif", "right.tif")]
+    models = [im.model for im in images]
+    h0 = float(np.asarray(models[0].reference_ground())[2])
+    grids = epipolar_grids(*models, (0, 0, 300, 300), elevation=h0, epi_step=30)
+    return models, grids
+
+
+def _right(shift):
+    return lambda xe, ye: np.stack([xe, ye + shift], axis=-1)
+
+
+def _matches(grids, epi, shift):
+    left = grids.to_sensor("left", epi[:, :2])
+    right = grids.to_sensor("right", _right(shift)(epi[:, 0] + epi[:, 2], epi[:, 1]))
+    return np.stack([left, right], axis=1)
+
+
+def _random_epipolar(grids, n, d_range, seed=0):
+    rows, cols = grids.epipolar_shape
+    rng = np.random.default_rng(seed)
+    return np.column_stack([rng.uniform(0, cols - 1, n), rng.uniform(0, rows - 1, n),
+                            rng.uniform(*d_range, n)])  # fmt: skip
+
+
+def test_the_lattice_equals_the_exact_intersection(pair):
+    models, grids = pair
+    shift = 0.3  # a vertical disparity removed: the right points sampled off the lines
+    rows, cols = grids.epipolar_shape
+    lattice = disparity_lattice(models, grids, _right(shift), (0, cols, 0, rows), (-20.0, 25.0))
+    assert lattice.usable and lattice.check_error_m < 0.1 * LATTICE_TOL_M
+    epi = _random_epipolar(grids, 5000, (-20.0, 25.0))
+    matches = _matches(grids, epi, shift)
+    points, sigma = triangulate_disparities(models, lattice, epi, matches)
+    exact, exact_sigma = exact_triangulation(models, matches, "intersect")
+    per_deg = 111_320.0 * np.array([np.cos(np.radians(exact[0, 1])), 1.0])  # m per degree
+    dlon, dlat, dh = np.abs(points - exact).max(axis=0)
+    assert dlon * per_deg[0] < 1e-3 and dlat * per_deg[1] < 1e-3 and dh < 1e-3
+    np.testing.assert_allclose(sigma, exact_sigma, rtol=1e-3)
+    assert np.all(np.isfinite(points))
+
+
+def test_points_the_lattice_cannot_answer_are_triangulated_one_by_one(pair):
+    models, grids = pair
+    rows, cols = grids.epipolar_shape
+    lattice = disparity_lattice(models, grids, _right(0.0), (0, cols, 0, rows), (-10.0, 10.0))
+    epi = _random_epipolar(grids, 200, (-10.0, 10.0), seed=1)
+    epi[:20, 2] = 40.0  # disparities outside the lattice
+    lattice.values[1, 1, 1, :] = np.nan  # a node without a point
+    matches = _matches(grids, epi, 0.0)
+    exact, _ = exact_triangulation(models, matches, "intersect")
+    points, _ = triangulate_disparities(models, lattice, epi, matches)
+    assert np.isnan(lattice.interpolate(epi[:20, 0], epi[:20, 1], epi[:20, 2])).all()
+    np.testing.assert_allclose(points, exact, atol=1e-7)
+    # a lattice failing its check is not used at all: every point on its own
+    import dataclasses
+
+    failed = dataclasses.replace(lattice, check_error_m=2 * LATTICE_TOL_M)
+    assert not failed.usable
+    points, _ = triangulate_disparities(models, failed, epi, matches)
+    np.testing.assert_allclose(points, exact, atol=1e-9)
+
+
+def test_stage_times_are_kept_only_while_a_clock_is_active():
+    with stage("sgm"):  # no clock: nothing kept, nothing raised
+        pass
+    with StageTimes() as times:
+        for _ in range(2):
+            with stage("sgm"):
+                sum(range(100_000))
+        with stage("extra"):
+            pass
+    with stage("sgm"):  # after the clock: not counted
+        sum(range(100_000))
+    out = times.as_dict()
+    assert list(out) == ["sgm", "extra"] and "sgm" in STAGES
+    assert out["sgm"]["wall_s"] > 0 and out["sgm"]["cpu_s"] > 0
+
+
+def test_the_sampled_point_spacing_is_the_whole_ones():
+    """Over a million points the spacing comes from a central square of them: the same median
+    nearest-neighbour distance as the tree of all of them (a jittered 0.7 m lattice)."""
+    from scipy.spatial import cKDTree
+
+    rng = np.random.default_rng(0)
+    g = np.mgrid[0:1000, 0:1000].reshape(2, -1).T * 0.7
+    xy = g + rng.normal(scale=0.15, size=g.shape)
+    whole = float(np.median(cKDTree(xy).query(xy[::50], k=2)[0][:, 1]))
+    assert point_spacing(xy) == pytest.approx(whole, rel=0.02)
+    assert point_spacing(xy[:5000]) > 0
+
+
+def test_half_resolution_keypoints_are_in_full_resolution_pixels(tmp_path):
+    """The same texture at full and half resolution: the coarse keypoints, carried to the full
+    image's pixels, lie on the full ones (no stretch of the scale with an odd size, no shift
+    beyond SIFT's own quarter pixel)."""
+    import cv2
+    from scipy.spatial import cKDTree
+
+    from jaxgeo.stereo._keypoints import SIFT_COARSE_MIN_PX, window_keypoints
+
+    rng = np.random.default_rng(2)
+    size = SIFT_COARSE_MIN_PX + 33  # odd: whole 2 x 2 blocks only
+    image = cv2.GaussianBlur(rng.normal(size=(size, size)).astype(np.float32), (0, 0), 3.0)
+    coarse, _ = window_keypoints(image, (100, 50), (-0.05, 0.05))
+    from jaxgeo.stereo import sift_features
+    from jaxgeo.stereo._matching import to_uint8
+
+    full, _ = sift_features(to_uint8(image, (-0.05, 0.05)))
+    full = full + (100, 50)
+    dist, idx = cKDTree(full).query(coarse)
+    near = dist < 1.5
+    assert near.sum() > 200
+    offset = coarse[near] - full[idx[near]]
+    assert np.all(np.abs(np.median(offset, axis=0)) < 0.35)
+    # the same offset at both ends of the image: no drift of the scale
+    left = coarse[near][:, 0] < size / 2 + 100
+    drift = np.median(offset[left], axis=0) - np.median(offset[~left], axis=0)
+    assert np.all(np.abs(drift) < 0.1)
+
+
+def test_the_reference_window_is_read_and_searched_once_per_tile(tmp_path):
+    """The pairs of a tile share the reference's window: read and searched once; another window,
+    or the file rewritten, is read again."""
+    import os
+
+    from jaxgeo.stereo._keypoints import reference_features
+
+    path = tmp_path / "ref.tif"
+    path.write_bytes(b"x")
+    reads = []
+    rng = np.random.default_rng(3)
+
+    def read(p, window):
+        reads.append(window)
+        return rng.normal(size=(window[3], window[2])).astype(np.float32)
+
+    a = reference_features(path, (0, 0, 120, 100), read, 500)
+    b = reference_features(path, (0, 0, 120, 100), read, 500)
+    assert len(reads) == 1 and b is a and len(a[2][0]) > 0
+    reference_features(path, (10, 0, 120, 100), read, 500)
+    assert len(reads) == 2
+    st = os.stat(path)
+    os.utime(path, ns=(st.st_atime_ns, st.st_mtime_ns + 10**9))
+    reference_features(path, (10, 0, 120, 100), read, 500)
+    assert len(reads) == 3
