@@ -20,12 +20,18 @@
 # [`tests/data/real/ventoux/README.md`](../tests/data/real/ventoux/README.md).
 #
 # The notebook takes about a minute of CPU time, most of it compiling (the time is printed at
-# the end); it writes its files in a temporary folder, removed at the end.
+# the end); it writes its files in a temporary folder, removed at the end. The commands can
+# also write each step's figures as one self-contained HTML page, not shown here:
+# `jaxgeo adjust ... -o adjusted --report` writes `adjusted/report.html`, `jaxgeo dsm ... -o
+# dsm.tif --report` writes `dsm.report.html` beside the DSM (`jaxgeo.report.write_*_report`).
 
 # %%
 import json
+import os
 import pathlib
 import shutil
+import subprocess
+import sys
 import tempfile
 import time
 import warnings
@@ -35,11 +41,11 @@ import numpy as np
 import pyproj
 import rasterio
 from matplotlib.colors import LightSource
-from scipy.ndimage import binary_erosion, generic_filter
+from scipy.ndimage import binary_erosion, distance_transform_edt, generic_filter
 
 import jaxgeo
 from jaxgeo.bundle import AdjustSettings, adjust_files
-from jaxgeo.coreg import CoregistrationWarning, coregister, dh_stats
+from jaxgeo.coreg import CoregistrationError, NuthKaab, coregister, dh_stats
 from jaxgeo.intersect import intersect
 from jaxgeo.io import open_image, read_dem
 from jaxgeo.ortho import OrthoSettings, orthorectify
@@ -138,7 +144,7 @@ key_numbers["match"] = {
 # shareloc's tests, not as a stereo pair), a band along the bottom of the left image.
 
 # %%
-fig, axes = plt.subplots(1, 2, figsize=(10, 5))
+fig, axes = plt.subplots(1, 2, figsize=(10, 5), dpi=72)  # quicklooks: texture weighs
 for ax, im in zip(axes, images, strict=True):
     with rasterio.open(im.path) as f:
         pixels = f.read(1)
@@ -267,7 +273,7 @@ key_numbers["adjust"] = {
 # %%
 fig, axes = plt.subplot_mosaic([["left_image before", "right_image before", "hist"],
                                 ["left_image after", "right_image after", "hist"]],
-                               figsize=(16, 9.5), width_ratios=[1, 1, 0.9])  # fmt: skip
+                               figsize=(16, 9.5), width_ratios=[1, 1, 0.9], dpi=72)  # fmt: skip
 scale = {"before": 10.0, "after": 100.0}  # arrows: px of image per px of residual
 for kind in ("before", "after"):
     for im in images:
@@ -359,7 +365,7 @@ key_numbers["ortho"] = {
 }
 
 # %%
-fig, ax = plt.subplots(figsize=(7.5, 7.2))
+fig, ax = plt.subplots(figsize=(7.5, 7.2), dpi=72)
 extent = (ortho_extent.left, ortho_extent.right, ortho_extent.bottom, ortho_extent.top)
 lo, hi = np.nanpercentile(quick, [1, 99])
 ax.imshow(quick, cmap="gray", vmin=lo, vmax=hi, extent=extent)
@@ -432,11 +438,22 @@ outliers = {}
 for where, cells in (("edge", edge), ("inside", has & ~edge)):
     off = (height - local)[cells]
     big = np.abs(off) > 5.0
-    outliers[where] = {"fraction": num(big.mean()), "median_m": num(np.median(off[big])),
-                       "sigma_m": num(np.median(sigma[cells][big]))}  # fmt: skip
-    print(f"{where:6s}: {big.mean():.1%} of {cells.sum()} cells more than 5 m from their "
-          f"neighbours' median (median offset {np.median(off[big]):+.1f} m, median height_sigma "
-          f"{np.median(sigma[cells][big]):.2f} m)")  # fmt: skip
+    outliers[where] = {"fraction": num(big.mean()), "cells": int(cells.sum()),
+                       "count": int(big.sum())}  # fmt: skip
+    print(f"{where:6s}: {big.mean():.2%} of {cells.sum()} cells ({big.sum()}) more than 5 m from "
+          "their neighbours' median")  # fmt: skip
+# the empty ring: the share of the overlap's cells with a height, by their distance (cells of
+# 1 m) from the overlap's edge, where one image's data ends
+depth = distance_transform_edt(both)
+profile = [float(has[both & (depth > k - 1) & (depth <= k)].mean()) for k in range(1, 16)]
+deep = both & (depth > 15)
+ring_m = int(np.argmax(np.array(profile) >= 0.05))  # the metres next to the edge (< 5 % filled)
+print("cells with a height, by distance from the overlap's edge (m): " + ", ".join(
+    f"{k} {v:.0%}" for k, v in enumerate(profile[:10], start=1))
+    + f"; beyond 15 m {has[deep].mean():.1%}")  # fmt: skip
+ring = both & (depth <= ring_m)
+print(f"the first {ring_m} m (under 5 % with a height): {ring.mean() / both.mean():.1%} of the "
+      f"overlap's cells, {(ring & ~has).sum() / (both & ~has).sum():.0%} of its holes")  # fmt: skip
 key_numbers["dsm"] = {
     "res_m": report.res_m,
     "shape": list(dsm_shape),
@@ -445,13 +462,18 @@ key_numbers["dsm"] = {
     "filled_in_overlap": num(has[both].mean()),
     "interpolated_of_heights": num(bands["filled"][has].mean()),
     "outliers": outliers,
+    "fill_by_edge_distance": num(profile),
+    "fill_beyond_15m": num(has[deep].mean()),
+    "ring_m": ring_m,
+    "holes_in_ring": num((ring & ~has).sum() / (both & ~has).sum()),
+    "ring_share": num(ring.mean() / both.mean()),
     "median_sigma_m": num(report.median_height_sigma_m),
     "median_sigma_delivered_m": num(dsms["delivered"].median_height_sigma_m),
     "height_p5_p50_p95_m": num(np.percentile(height[has], [5, 50, 95])),
 }
 
 # %%
-fig, axes = plt.subplots(3, 1, figsize=(10, 12))
+fig, axes = plt.subplots(4, 1, figsize=(10, 14), height_ratios=[1, 1, 1, 0.8], dpi=72)
 window = np.ix_(np.any(both, axis=1), np.any(both, axis=0))  # the cells seen by both images
 dsm_extent = (east[window].min() - 0.5, east[window].max() + 0.5,
               north[window].min() - 0.5, north[window].max() + 0.5)  # fmt: skip
@@ -471,35 +493,48 @@ axes[1].set(title="height")
 im = axes[2].imshow(sigma[window], cmap="magma", extent=dsm_extent, vmin=0, vmax=2)
 fig.colorbar(im, ax=axes[2], label="height_sigma (m)", extend="max")
 axes[2].set(title=f"height_sigma, median {report.median_height_sigma_m:.2f} m")
-for ax in axes:
+for ax in axes[:3]:
     ax.set(xlabel="east (m, UTM 31N)", ylabel="north (m)")
     ax.ticklabel_format(useOffset=False, style="plain")
+axes[3].plot(range(1, 16), 100 * np.array(profile), "o-", color="tab:red")
+axes[3].axhline(100 * has[deep].mean(), color="gray", ls="--", label="beyond 15 m")
+axes[3].axvspan(0.5, ring_m + 0.5, color="tab:red", alpha=0.1,
+                label="the ring: matching windows that meet no data")  # fmt: skip
+axes[3].set(xlabel="distance from the edge of the overlap (m, 1 m cells)",
+            ylabel="cells with a height (%)", ylim=(0, 100), xlim=(0.5, 15.5),
+            title="the overlap's cells with a height, by distance from its edge")  # fmt: skip
+axes[3].legend(loc="lower right")
 fig.tight_layout()
 plt.show()
 
 # %% [markdown]
 # **How to read it.** Only the band seen by both images is drawn. The grid covers the left
 # image's footprint and only 22.0 % of its cells are seen by both images: hence `filled`
-# 20.7 %, the share of the whole grid with a height; read it against the overlap, of which
-# 91.5 % has a height. The **hillshade** (light from the north-west, heights doubled) shows
+# 17.9 %, the share of the whole grid with a height; read it against the overlap, of which
+# 81.1 % has a height. The **hillshade** (light from the north-west, heights doubled) shows
 # the DSM's shape: the terrain rising to the east, the ravines, the tree crowns as a grain; a
 # smooth, blurred patch would be a surface the matcher interpolated, stripes or waves across
 # the whole DSM an orientation problem (jitter). The **holes** (red) are cells without a
-# height, here mostly along the edges of the overlap, where the matching window leaves one
-# image; inside, a few cells in the shadows of the trees. Holes up to a few metres across are
-# interpolated (the `filled` band, cyan: 0.3 % of the heights); larger ones stay NaN, for the
-# next command to fill from another DEM (`--dem-fill`), never silently. The **height_sigma**
-# map is each cell's standard deviation: the matching's (low on texture, high on shadows and
-# steep edges, hence the bright streaks along the ravines) plus the orientation's, the same
-# everywhere. Its median is 0.51 m, against 1.49 m for the DSM of the delivered models with
-# their a priori orientation error: the adjustment's posterior pointing is what makes the
-# heights worth half a metre. A cell with a large sigma is to be used with care, even though
-# it has a height. The sigma does not flag everything: along the edges of the overlap (the
-# dark blue rim of the height map), where the matching window reaches past one of the
-# images, some heights are metres too low: within 3 cells of the edges, 12.2 % of the cells
-# lie more than 5 m from the median of their 9 x 9 neighbours (8.7 m below it, in the
-# median), against 0.2 % inside, and their `height_sigma` (0.75 m in the median) does not say
-# so. Trim the DSM's edges, or check them against `count` and `spread`, before using them.
+# height, inside a few cells in the shadows of the trees, and above all a **ring along the
+# edges of the overlap**, drawn in the last panel: of the overlap's cells within 1, 2 and 3 m
+# of its edge, 0 %, 1 % and 2 % have a height; the share then rises (14 % at 4 m, 92 % at
+# 10 m) to 100 % beyond 15 m, more slowly along the southern edge, where the red band is
+# widest. The first 3 m are 9.6 % of the overlap and hold 51 % of its holes. They are empty
+# all around on purpose: a height there would come from a matching window (SGM's
+# block, and the correlation window that refines it and gives `height_sigma`: about 6 px, 3 m,
+# on each side of the pixel) that reaches past one image's data; the matcher then takes the
+# edge of the data for texture and matches it, and such heights come out metres wrong, with
+# a sigma that does not say so. jaxgeo drops every disparity whose window meets no data: here
+# 0.23 % of the 1708 cells within 3 cells of the DSM's edges lie more than 5 m from the
+# median of their 9 x 9 neighbours, as rare as inside (0.12 %). A hole is not an error: holes
+# up to a few metres across are interpolated (the `filled` band, cyan: 0.2 % of the heights);
+# larger ones, the ring among them, stay NaN, for the next command to fill from another DEM
+# (`--dem-fill`), never silently. The **height_sigma** map is each cell's standard deviation:
+# the matching's (low on texture, high on shadows and steep edges, hence the bright streaks
+# along the ravines) plus the orientation's, the same everywhere. Its median is 0.45 m,
+# against 1.47 m for the DSM of the delivered models with their a priori orientation error:
+# the adjustment's posterior pointing is what makes the heights worth half a metre. A cell
+# with a large sigma is to be used with care, even though it has a height.
 #
 # An independent check of the DSM: the CARS triangulation that shareloc's tests take as a
 # reference (points of this pair triangulated by CARS, with the delivered models, from a
@@ -527,7 +562,7 @@ key_numbers["cars"] = {k: {"cells": s.cells, "median_m": num(s.median_m), "nmad_
 
 # %% [markdown]
 # With the delivered models, the DSM agrees with CARS to +0.06 m (median) and 0.35 m (NMAD)
-# over 13 174 points: the same models and the same pair, matched and triangulated by two
+# over 13 069 points: the same models and the same pair, matched and triangulated by two
 # independent programs, within a third of a metre, tree crowns included. The DSM of the
 # adjusted models sits 3.94 m lower with the same NMAD: the adjustment moved the heights, not
 # their shape. That is the SRTM tie heights at work: the relative shift along the epipolar
@@ -540,16 +575,65 @@ key_numbers["cars"] = {k: {"cells": s.cells, "median_m": num(s.median_m), "nmad_
 # Nuth and Kääb's method: the horizontal shift from the relation between the height
 # differences and the terrain's aspect and slope, iterated, then the vertical offset. SRTM is
 # orthometric: the reference is given as `read_dem(srtm, geoid=...)` (`--geoid egm96`), its
-# heights made ellipsoidal on the DSM's grid. The command-line equivalent:
-# `jaxgeo coregister dsm.tif N44E005_srtm90.tif --geoid egm96 -o dsm_aligned.tif --diff dh.tif`.
+# heights made ellipsoidal on the DSM's grid. First the full fit, as `jaxgeo coregister` runs
+# by default, through the library and through the command.
 
 # %%
-with warnings.catch_warnings(record=True) as caught:
-    warnings.simplefilter("always", CoregistrationWarning)
-    onto_srtm = coregister(WORK / "dsm_adjusted.tif", dem, WORK / "dsm_on_srtm.tif",
-                           diff=WORK / "dh_srtm.tif")  # fmt: skip
-for w in caught:
-    print(f"warning: {w.message}")
+srtm = VENTOUX / "dem/N44E005_srtm90.tif"
+gtx = VENTOUX / "dem/egm96_15_crop_lon3-8_lat42-47.gtx"
+try:  # the full fit (horizontal and vertical), as `jaxgeo coregister` runs by default
+    coregister(WORK / "dsm_adjusted.tif", dem, WORK / "dsm_on_srtm.tif")
+except CoregistrationError as err:
+    refusal = str(err).replace(f"{WORK}/", "").replace(f"{srtm.parent}/", "")  # short names
+    print(f"CoregistrationError: {refusal}")
+else:
+    raise AssertionError("the horizontal fit onto SRTM was not refused")
+# what a user of the command sees: the same message, naming the option, exit status 2
+for path in (srtm, gtx):  # beside the DSM: the command line and its message read short
+    shutil.copy(path, WORK)
+command = ["coregister", "dsm_adjusted.tif", srtm.name, "--geoid", gtx.name,
+           "-o", "dsm_on_srtm.tif"]  # fmt: skip
+cli = subprocess.run([sys.executable, "-c", "import sys; from jaxgeo.cli import main; "
+                      "sys.exit(main(sys.argv[1:]))", *command],
+                     capture_output=True, text=True, cwd=WORK,
+                     env={**os.environ, "PYTHONPATH": str(REAL.parents[2])})  # fmt: skip
+print(f"\n$ jaxgeo {' '.join(command)}\n{cli.stderr.strip()}\n(exit status {cli.returncode})")
+lon_c, lat_c = pyproj.Transformer.from_crs("EPSG:32631", "EPSG:4326", always_xy=True).transform(
+    east[has], north[has])  # fmt: skip
+posts = (np.ptp(lon_c) * 1200, np.ptp(lat_c) * 1200)  # SRTM 3": 1200 posts per degree
+spacing_m = (np.radians(1 / 1200) * 6_378_137 * np.cos(np.radians(np.mean(lat_c))),
+             np.radians(1 / 1200) * 6_378_137)  # fmt: skip
+print(f"\nthe DSM's heights span {posts[0]:.1f} x {posts[1]:.1f} SRTM posts (lon x lat), "
+      f"{spacing_m[0]:.0f} m x {spacing_m[1]:.0f} m apart")  # fmt: skip
+key_numbers["coregister_refused"] = {
+    "exit": cli.returncode,
+    "names_option": "--vertical-only" in cli.stderr,
+    "posts": num(posts),
+    "post_spacing_m": num(spacing_m),
+}
+
+# %% [markdown]
+# **Refused, and rightly.** The DSM's heights span about three SRTM posts east-west and one
+# north-south (3.1 x 0.9): SRTM knows this terrain as a handful of heights 66 m x 93 m apart,
+# bilinearly interpolated, while the DSM sees it at 1 m. The difference is then the terrain
+# itself (the ravine and the ridge that SRTM does not have), not a shift: the aspect-and-slope
+# fit would have nothing stable to find (its increments swing by tens of metres from one
+# iteration to the next, and it stops anywhere). So `coregister` refuses, before any fit, a
+# DSM whose heights span fewer than 10 of the reference's cells in either direction
+# (`NuthKaab(min_ref_cells=10)`): a `CoregistrationError` that names both files, the spans and
+# what to do; the command prints it as one line, naming `--vertical-only`, and exits with
+# status 2, writing nothing. To co-register horizontally, use a DSM many reference cells
+# across (a whole scene against SRTM or the 30 m Copernicus DEM), or a reference of the DSM's
+# resolution (below: the delivered models' DSM).
+#
+# What SRTM can give here is the vertical offset alone: `NuthKaab(vertical_only=True)`
+# (`jaxgeo coregister dsm.tif N44E005_srtm90.tif --geoid egm96 --vertical-only -o
+# dsm_on_srtm.tif --diff dh.tif`), `dz` the median of `DSM - SRTM` over the inliers.
+
+# %%
+vertical = NuthKaab(vertical_only=True)
+onto_srtm = coregister(WORK / "dsm_adjusted.tif", dem, WORK / "dsm_on_srtm.tif",
+                       diff=WORK / "dh_srtm.tif", settings=vertical)  # fmt: skip
 srtm_dh = {}
 srtm_cells = dem(np.stack(pyproj.Transformer.from_crs("EPSG:32631", "EPSG:4326", always_xy=True)
                           .transform(east, north), -1))  # fmt: skip
@@ -557,54 +641,37 @@ srtm_dh["before"] = height - srtm_cells  # SRTM (ellipsoidal) on the DSM's cells
 with rasterio.open(WORK / "dh_srtm.tif") as f:
     srtm_dh["after"] = f.read(1)
 dx, dy, dz = onto_srtm.shift_m
-print(f"shift added to the DSM: dx {dx:+.2f} m, dy {dy:+.2f} m, dz {dz:+.2f} m; "
-      f"{onto_srtm.iterations} iterations, converged: {onto_srtm.converged}")  # fmt: skip
+print(f"shift added to the DSM: dx {dx:+.2f} m, dy {dy:+.2f} m, dz {dz:+.2f} m "
+      f"(vertical only), converged: {onto_srtm.converged}")  # fmt: skip
 for kind, s in (("before", onto_srtm.diff.before), ("after", onto_srtm.diff.after)):
     print(f"DSM - SRTM {kind:6s}: {s.cells} cells, median {s.median_m:+.2f} m, "
           f"NMAD {s.nmad_m:.2f} m, LE90 {s.le90_m:.2f} m")  # fmt: skip
 mine = dh_stats(srtm_dh["before"][np.isfinite(srtm_dh["before"])])
 assert abs(mine.median_m - onto_srtm.diff.before.median_m) < 0.2, (mine, onto_srtm.diff.before)
-lon_c, lat_c = pyproj.Transformer.from_crs("EPSG:32631", "EPSG:4326", always_xy=True).transform(
-    east[has], north[has])  # fmt: skip
-posts = (np.ptp(lon_c) * 1200, np.ptp(lat_c) * 1200)  # SRTM 3": 1200 posts per degree
-spacing_m = (np.radians(1 / 1200) * 6_378_137 * np.cos(np.radians(np.mean(lat_c))),
-             np.radians(1 / 1200) * 6_378_137)  # fmt: skip
-print(f"the DSM's heights span {posts[0]:.1f} x {posts[1]:.1f} SRTM posts (lon x lat), "
-      f"{spacing_m[0]:.0f} m x {spacing_m[1]:.0f} m apart")  # fmt: skip
-with rasterio.open(WORK / "dsm_delivered.tif") as f:
-    dh = f.read(1) - srtm_cells
-delivered_vs_srtm = dh_stats(dh[np.isfinite(dh)])
-print(f"DSM of the delivered models - SRTM: median {delivered_vs_srtm.median_m:+.2f} m")
+delivered_on_srtm = coregister(WORK / "dsm_delivered.tif", dem, settings=vertical)
+print(f"the DSM of the delivered models, vertical only onto SRTM: dz "
+      f"{delivered_on_srtm.shift_m[2]:+.2f} m")  # fmt: skip
 key_numbers["coregister_srtm"] = {
     "converged": bool(onto_srtm.converged),
-    "iterations": onto_srtm.iterations,
     "shift_m": num(onto_srtm.shift_m),
     "before": {"median_m": num(onto_srtm.diff.before.median_m),
                "nmad_m": num(onto_srtm.diff.before.nmad_m), "cells": onto_srtm.diff.before.cells},
     "after": {"median_m": num(onto_srtm.diff.after.median_m),
               "nmad_m": num(onto_srtm.diff.after.nmad_m), "cells": onto_srtm.diff.after.cells},
-    "posts": num(posts),
-    "post_spacing_m": num(spacing_m),
-    "delivered_median_m": num(delivered_vs_srtm.median_m),
+    "delivered_dz_m": num(delivered_on_srtm.shift_m[2]),
 }  # fmt: skip
 
 # %% [markdown]
-# **It does not converge, and it should not.** The DSM's heights span about three SRTM posts
-# east-west and one north-south (3.2 x 1.0): SRTM knows this terrain as a handful of heights
-# 66 m x 93 m apart, bilinearly interpolated, while the DSM sees it at 1 m. The difference is
-# then the terrain itself (the ravine and the ridge that SRTM does not have), not a shift; the
-# aspect-and-slope fit has nothing stable to find and its increments swing by tens of metres
-# from one iteration to the next. jaxgeo says so (the warning; `converged` False; the command
-# exits with status 1) and reports the last shift, (+5.21, -56.88, +11.02) m after 20
-# iterations, which is meaningless: do not apply it. Its "after" statistics (NMAD 6.52 m
-# against 11.07 m) look better only because the shifted DSM keeps 10 249 of its 16 866 cells
-# on the grid. What the comparison does give is the vertical agreement: the adjusted DSM's
-# median is 0.59 m below SRTM (the DSM of the delivered models: 3.15 m above it), with an NMAD
-# of 11 m that is SRTM's resolution, not the DSM's error (the documentation's "DEMs and geoids"
-# says the same: a DSM a few SRTM cells across is too small for this). To co-register
-# horizontally, use a DSM many reference cells across (a whole scene against SRTM or the 30 m
-# Copernicus DEM), or a reference of the DSM's resolution. The second case is shown below: the
-# adjusted DSM onto the delivered models' DSM, both on one grid of 1 m cells.
+# The vertical offset alone: `dz` -0.12 m, the DSM of the adjusted models sits +0.12 m above
+# SRTM (median over the 14 548 cells both have; -0.01 m after). That is not a finding about
+# the DSM: it is the adjustment's datum. Without GCPs, the tie heights taken from SRTM set the
+# block's height (section 3), so the adjusted DSM lies on SRTM by construction, and its `dz`
+# says that the datum came through (the geoid applied, no metres lost); the DSM of the
+# delivered models, which knows nothing of SRTM, needs -3.99 m, the height the adjustment
+# took out (3.94 m against CARS). Before and after are over the same cells, and the NMAD,
+# 10.51 m both times, is SRTM's resolution (the terrain between its posts), not the DSM's
+# error: a constant does not change it. Read `dz` to SRTM's own vertical accuracy, metres,
+# not to the centimetre.
 
 # %%
 onto_delivered = coregister(WORK / "dsm_adjusted.tif", WORK / "dsm_delivered.tif",
@@ -632,8 +699,9 @@ key_numbers["coregister_delivered"] = {
 }  # fmt: skip
 
 # %%
-fig, axes = plt.subplots(2, 3, figsize=(17, 7.5), width_ratios=[1, 1, 0.8])
-rows_drawn = (("DSM - SRTM", srtm_dh, 25.0), ("adjusted - delivered DSM", delivered_dh, 8.0))
+fig, axes = plt.subplots(2, 3, figsize=(17, 7.5), width_ratios=[1, 1, 0.8], dpi=80)
+rows_drawn = (("DSM - SRTM (vertical only)", srtm_dh, 25.0),
+              ("adjusted - delivered DSM", delivered_dh, 8.0))  # fmt: skip
 for row, (title, dh, lim) in enumerate(rows_drawn):
     for col, kind in enumerate(("before", "after")):
         ax = axes[row, col]
@@ -663,13 +731,13 @@ plt.show()
 # uniform colour, a vertical offset.
 #
 # Top row, against SRTM: before, blue in the ravine to the west and red on the ridge to the
-# east: SRTM's smoothed terrain, not a shift, and a histogram with two humps; after
-# the non-converged "shift", the DSM has moved 57 m south and left the grid in part, and the
-# histogram has not become one narrow peak: it is not an alignment. Bottom row, against the
+# east: SRTM's smoothed terrain, not a shift, and a histogram with two humps; after the
+# vertical-only co-registration the same picture, moved by 0.12 m: a vertical offset cannot
+# take out what SRTM does not resolve, and nothing here would. Bottom row, against the
 # delivered models' DSM (same images, same grid): before, a uniform blue, the 4.03 m by which
-# the adjustment lowered the heights (median; NMAD 0.11 m); after, white, the histogram one
-# narrow peak at zero (median +0.00 m, NMAD 0.10 m). The shift found, (+0.05, -0.09, +4.04) m
-# in 8 iterations, is the adjustment's move undone: a height change, and almost no
+# the adjustment lowered the heights (median; NMAD 0.09 m); after, white, the histogram one
+# narrow peak at zero (median +0.00 m, NMAD 0.09 m). The shift found, (+0.04, -0.07, +4.04) m
+# in 9 iterations, is the adjustment's move undone: a height change, and almost no
 # horizontal move, because the two images moved by 1.4 m in opposite directions (section 3),
 # which changes where their rays meet in height, not in plan.
 
@@ -686,12 +754,16 @@ plt.show()
 # | adjust | relative bias shift right - left | (+3.89, +3.98) px, 2.8 m |
 # | adjust | each image's shift on the ground | 1.4 m, in opposite directions |
 # | ortho | pixels with data (the rest: outside the crop) | 90.5 % of 533 x 514 px of 0.5 m |
-# | dsm | cells with a height: of the grid / of the overlap | 20.7 % / 91.5 % |
-# | dsm | median height_sigma, adjusted / delivered models | 0.51 m / 1.49 m |
+# | dsm | cells with a height: of the grid / of the overlap | 17.9 % / 81.1 % |
+# | dsm | the empty ring: overlap cells within 3 m of its edge with a height | 0 %, 1 %, 2 % |
+# | dsm | cells > 5 m off their neighbours: within 3 cells of the edges / inside | 0.23 % / 0.12 % |
+# | dsm | median height_sigma, adjusted / delivered models | 0.45 m / 1.47 m |
 # | dsm | against CARS (delivered models): median, NMAD | +0.06 m, 0.35 m |
-# | coregister onto SRTM | converged; vertical agreement (median), NMAD | no; -0.59 m, 11.07 m |
-# | coregister onto the delivered DSM | shift (E, N, up) | (+0.05, -0.09, +4.04) m |
-# | coregister onto the delivered DSM | NMAD before / after | 0.11 / 0.10 m |
+# | coregister onto SRTM, full fit | 3.1 x 0.9 SRTM posts: refused (exit 2) | `--vertical-only` |
+# | coregister onto SRTM, vertical only | dz: adjusted / delivered DSM | -0.12 m / -3.99 m |
+# | coregister onto SRTM, vertical only | NMAD (SRTM's resolution) | 10.51 m |
+# | coregister onto the delivered DSM | shift (E, N, up) | (+0.04, -0.07, +4.04) m |
+# | coregister onto the delivered DSM | NMAD before / after | 0.09 / 0.09 m |
 #
 # The key numbers as one JSON line: `tests/notebooks/test_notebook_06.py` runs this notebook
 # and checks the statements of the text against them.
