@@ -22,15 +22,24 @@ def check_dem(models, paths, window, dem, dem_range: tuple[float, float]) -> Non
     off by a constant; one window of tie points, searched over the models' validity range)."""
     why = dem_against_model(dem_range, models[0], str(dem.path), str(paths[0]))
     if why is None:
-        try:
-            with warnings.catch_warnings():
-                warnings.simplefilter("ignore")
-                ties = tie_points(models[0], models[1], paths[0], paths[1],
-                                  MatchSettings(roi=window))  # fmt: skip
-        except (TieError, StereoError):  # no texture there: nothing to compare
+        ground = window_ground(models, paths, window)
+        if ground is None:  # no texture there: nothing to compare
             return
-        ground = np.asarray(ties.ground)
         why = dem_against_ties(ground[:, 2], dem.sample(ground[:, :2]), str(dem.path))
     if why is not None:
         raise TieError(f"{why}; a DSM searches the heights the DEM gives: give the right DEM, "
                        "--heights, or no --dem")  # fmt: skip
+
+
+def window_ground(models, paths, window) -> np.ndarray | None:
+    """The ground points ``(n, 3)`` (lon, lat, h) of the tie points of the pair (first, second)
+    in ``window`` ``(col, row, w, h)`` of the reference, quietly; ``None`` where there are too
+    few (no texture, water, clouds)."""
+    try:
+        with warnings.catch_warnings():
+            warnings.simplefilter("ignore")
+            ties = tie_points(models[0], models[1], paths[0], paths[1],
+                              MatchSettings(roi=window))  # fmt: skip
+    except (TieError, StereoError):
+        return None
+    return np.asarray(ties.ground)

@@ -36,7 +36,7 @@ from ..io.internal import file_id
 from ..models import AbstractSensorModel
 from ..tiles import RasterSpec, Tile, TilePlan, plan_tiles
 from ..tiles.internal import NoData, cores, overview_factors, write_tile
-from ._dem_check import check_dem
+from ._dem_check import check_dem, window_ground
 from ._dsm import (
     DSM_BANDS,
     dsm_band_tags,
@@ -49,7 +49,7 @@ from ._dsm import (
 from ._pipeline import _height_offsets, dsm_from_images, image_size, stereo_pair
 from ._settings import DEFAULT_DSM, DSMSettings
 from ._stages import StageTimes, stage
-from ._ties import MatchSettings, TieError, footprint_dem_heights, tie_points, validity_heights
+from ._ties import TieError, footprint_dem_heights, validity_heights
 from ._triangulation import StereoError, los_heights
 from ._uncertainty import Orientation, pair_orientation, resolved_orientation, sigma_covers
 
@@ -244,14 +244,9 @@ def _sampled_heights(models, paths, windows, limits) -> tuple[float, float] | No
     than 20 ties."""
     found = []
     for window in windows:
-        try:
-            with warnings.catch_warnings():
-                warnings.simplefilter("ignore")
-                ties = tie_points(models[0], models[1], paths[0], paths[1],
-                                  MatchSettings(roi=window))  # fmt: skip
-        except (TieError, StereoError):  # no texture there: the other windows
-            continue
-        found.append(np.asarray(ties.ground)[:, 2])
+        ground = window_ground(models, paths, window)
+        if ground is not None:  # else no texture there: the other windows
+            found.append(ground[:, 2])
     heights = np.concatenate(found) if found else np.zeros(0)
     heights = heights[np.isfinite(heights)]
     if heights.size < 20:
