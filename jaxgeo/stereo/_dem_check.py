@@ -22,7 +22,7 @@ def check_dem(models, paths, window, dem, dem_range: tuple[float, float]) -> Non
     off by a constant; one window of tie points, searched over the models' validity range)."""
     why = dem_against_model(dem_range, models[0], str(dem.path), str(paths[0]))
     if why is None:
-        ground = window_ground(models, paths, window)
+        ground = window_tie_ground(models, paths, window)
         if ground is None:  # no texture there: nothing to compare
             return
         why = dem_against_ties(ground[:, 2], dem.sample(ground[:, :2]), str(dem.path))
@@ -31,7 +31,7 @@ def check_dem(models, paths, window, dem, dem_range: tuple[float, float]) -> Non
                        "--heights, or no --dem")  # fmt: skip
 
 
-def window_ground(models, paths, window) -> np.ndarray | None:
+def window_tie_ground(models, paths, window) -> np.ndarray | None:
     """The ground points ``(n, 3)`` (lon, lat, h) of the tie points of the pair (first, second)
     in ``window`` ``(col, row, w, h)`` of the reference, quietly; ``None`` where there are too
     few (no texture, water, clouds)."""

@@ -36,7 +36,7 @@ from ..io.internal import file_id
 from ..models import AbstractSensorModel
 from ..tiles import RasterSpec, Tile, TilePlan, plan_tiles
 from ..tiles.internal import NoData, cores, overview_factors, write_tile
-from ._dem_check import check_dem, window_ground
+from ._dem_check import check_dem, window_tie_ground
 from ._dsm import (
     DSM_BANDS,
     dsm_band_tags,
@@ -244,7 +244,7 @@ def _sampled_heights(models, paths, windows, limits) -> tuple[float, float] | No
     than 20 ties."""
     found = []
     for window in windows:
-        ground = window_ground(models, paths, window)
+        ground = window_tie_ground(models, paths, window)
         if ground is not None:  # else no texture there: the other windows
             found.append(ground[:, 2])
     heights = np.concatenate(found) if found else np.zeros(0)
