@@ -35,7 +35,7 @@ import jax
 import numpy as np
 
 from benchmarks.harness import emit, wait
-from benchmarks.speed.localize_traced import pleiades_rpc
+from benchmarks.speed.localize_traced import interleaved, pleiades_rpc
 
 
 def hills_around(lon0: float, lat0: float, span_deg: float, n: int = 400):
@@ -92,22 +92,15 @@ def make_calls(model, grid, xy, h, jitted, robust_all, options) -> dict:
     }
 
 
-def interleaved(calls: dict, rounds: int) -> tuple[dict, dict]:
-    """First call of each (``first_s``), then ``rounds`` rounds of one timed call each, the
-    order reversed every other round."""
+def first_then_interleaved(calls: dict, rounds: int) -> tuple[dict, dict]:
+    """First call of each (``first_s``: compilation or the kept program's load), then
+    :func:`~benchmarks.speed.localize_traced.interleaved`'s rounds."""
     first = {}
     for name, fn in calls.items():
         t0 = time.perf_counter()
         wait(fn())
         first[name] = time.perf_counter() - t0
-    times: dict[str, list[float]] = {k: [] for k in calls}
-    names = list(calls)
-    for r in range(rounds):
-        for name in names if r % 2 == 0 else names[::-1]:
-            t0 = time.perf_counter()
-            wait(calls[name]())
-            times[name].append(time.perf_counter() - t0)
-    return first, times
+    return first, interleaved(calls, rounds)
 
 
 def main(argv=None) -> dict:
@@ -132,7 +125,7 @@ def main(argv=None) -> dict:
             xy = lo + rng.random((n, 2)) * (hi - lo)
             h = np.full(n, h_mean)
             calls = make_calls(model, grid, xy, h, jitted, robust_all, options)
-            first, times = interleaved(calls, args.rounds)
+            first, times = first_then_interleaved(calls, args.rounds)
             cases = {}
             for case, runs in times.items():
                 ratios = [a / b for a, b in zip(runs, times["localize"], strict=True)]
