@@ -4,12 +4,22 @@ memory.
 
     python -m benchmarks.speed.ortho_scene --size 12000 --folder /tmp/ortho_12000 [--workers 1 2]
     python -m benchmarks.speed.ortho_scene --size 1000 --folder /tmp/ortho_1000 --cold --auto \
-        --workers --repeat 5        # a small product: cold, warm, GDAL
+        --workers --repeat 5 [--baseline main]   # a small product: cold, warm, GDAL (, before)
 
 ``--cold``: the warm-up run starts from an empty compilation cache of its own
 (``JAXGEO_CACHE_DIR=FOLDER/cache``, emptied first), so ``first_run_s`` is a first run on a new
 machine (every program traced and compiled), and every later run is warm (programs loaded from
 that cache, nothing traced); ``ratio_first_vs_gdal_cog`` then compares that cold run with GDAL.
+``--baseline REF``: jaxgeo at the git commit ``REF`` of this repository (``git archive`` into
+``FOLDER/baseline-REF``) is timed too, as the case ``baseline`` (its default settings, like
+``auto``), in the same rounds, with a cache of its own (``FOLDER/cache-baseline``, emptied
+under ``--cold``): before and after a change, under the same load.
+
+Python's bytecode: the commands run without ``PYTHONDONTWRITEBYTECODE`` and each jaxgeo tree
+timed is byte-compiled first (``compileall``, as ``pip install`` does): with that variable set
+(as on some development machines) every run compiled jaxgeo's ~100 modules from source again,
+~0.2 s of CPU a run that no installed jaxgeo pays (site-packages, GDAL's Python side included,
+hold their bytecode already).
 
 The scene (:mod:`benchmarks.speed.ortho_data`): an N x N px uint16 crop of the Ventoux Pleiades
 product with its RPC in the tags, SRTM + EGM96 as an ellipsoidal DEM. jaxgeo runs as users run it
@@ -83,12 +93,13 @@ def _tree_memory(pid: int) -> tuple[int, int]:
     return rss, pss
 
 
-def measure(cmd: list[str], env: dict | None = None, interval: float = 0.2) -> dict:
-    """Run ``cmd``; its wall time, CPU time and the peak memory of its process tree."""
+def measure(cmd: list[str], env: dict | None = None, interval: float = 0.2, cwd=None) -> dict:
+    """Run ``cmd`` (in ``cwd``); its wall time, CPU time and the peak memory of its process
+    tree."""
     before = resource.getrusage(resource.RUSAGE_CHILDREN)
     t0 = time.perf_counter()
     proc = subprocess.Popen(cmd, env=env, stdout=subprocess.PIPE, stderr=subprocess.PIPE,
-                            text=True)  # fmt: skip
+                            text=True, cwd=cwd)  # fmt: skip
     peak = [0, 0]
     stop = threading.Event()
 
@@ -132,6 +143,27 @@ def _mean_abs_diff(a_path, b_path) -> dict:
             "only_jaxgeo": only_a / n, "only_gdal": only_b / n}  # fmt: skip
 
 
+def baseline_tree(ref: str, folder: pathlib.Path) -> pathlib.Path:
+    """jaxgeo's package at git commit ``ref`` of this repository, exported (``git archive``)
+    into ``folder/baseline-<ref>`` (replaced): the tree a baseline case runs."""
+    import shutil
+
+    safe = "".join(c if c.isalnum() or c in "-_." else "_" for c in ref)
+    tree = folder / f"baseline-{safe}"
+    shutil.rmtree(tree, ignore_errors=True)
+    tree.mkdir(parents=True)
+    archive = subprocess.run(["git", "-C", str(REPO), "archive", ref, "jaxgeo"], check=True,
+                             capture_output=True).stdout  # fmt: skip
+    subprocess.run(["tar", "-x", "-C", str(tree)], input=archive, check=True)
+    return tree
+
+
+def byte_compile(tree: pathlib.Path) -> None:
+    """``tree``'s jaxgeo package byte-compiled, as an installed package is."""
+    subprocess.run([sys.executable, "-m", "compileall", "-q", str(tree / "jaxgeo")], check=True,
+                   stdout=subprocess.DEVNULL)  # fmt: skip
+
+
 def main(argv=None) -> int:
     p = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     p.add_argument("--size", type=int, default=2000, help="scene size (px, square)")
@@ -144,22 +176,35 @@ def main(argv=None) -> int:
     p.add_argument("--repeat", type=int, default=1, help="rounds of every case (best kept)")
     p.add_argument("--cold", action="store_true",
                    help="the first run on an empty cache of its own (FOLDER/cache)")  # fmt: skip
+    p.add_argument("--baseline", metavar="REF",
+                   help="also time jaxgeo at git commit REF (e.g. main), same rounds")  # fmt: skip
     a = p.parse_args(argv)
     from benchmarks.speed.ortho_data import make_scene
 
     folder = pathlib.Path(a.folder)
     scene, dem = make_scene(folder, a.size)
-    env = dict(os.environ)
-    env["PYTHONPATH"] = os.pathsep.join([str(REPO), env.get("PYTHONPATH", "")])
-    if a.cold:  # a cache of its own, empty: the first run traces and compiles everything
-        import shutil
+    peer_env = {k: v for k, v in os.environ.items() if k != "PYTHONDONTWRITEBYTECODE"}
+    # ``-m jaxgeo.cli`` imports jaxgeo from the working directory first: each tree runs in its own
+    trees = {"": REPO}
+    if a.baseline:
+        trees["baseline"] = baseline_tree(a.baseline, folder)
+    envs = {}
+    for name, tree in trees.items():
+        byte_compile(tree)
+        env = dict(peer_env)
+        env["PYTHONPATH"] = os.pathsep.join([str(tree), env.get("PYTHONPATH", "")])
+        cache = folder / ("cache" if not name else f"cache-{name}")
+        if a.cold:  # a cache of its own, empty: the first run traces and compiles everything
+            import shutil
 
-        cache = folder / "cache"
-        shutil.rmtree(cache, ignore_errors=True)
-        env["JAXGEO_CACHE_DIR"] = str(cache)
+            shutil.rmtree(cache, ignore_errors=True)
+        if a.cold or name:
+            env["JAXGEO_CACHE_DIR"] = str(cache)
+        envs[name] = env
+    env = envs[""]
     jaxgeo = [sys.executable, "-m", "jaxgeo.cli", "ortho", str(scene), "--dem", str(dem),
               "--quiet", "--json", "--overwrite", "--compress", a.compress]  # fmt: skip
-    first = measure([*jaxgeo, "-o", str(folder / "warmup.tif"), "--workers", "0"], env)
+    first = measure([*jaxgeo, "-o", str(folder / "warmup.tif"), "--workers", "0"], env, cwd=REPO)
     report = json.loads(first["stdout"].splitlines()[-1])
     result = {
         "scene": f"{a.size} x {a.size} px uint16 crop of the Ventoux Pleiades product (RPC in "
@@ -170,21 +215,32 @@ def main(argv=None) -> int:
         "first_run_s": first["wall_s"],
         "first_run_cold": a.cold,
     }  # fmt: skip
+    if a.baseline:
+        base_first = measure([*jaxgeo, "-o", str(folder / "warmup_baseline.tif"), "--workers",
+                              "0"], envs["baseline"], cwd=trees["baseline"])  # fmt: skip
+        result["baseline"] = a.baseline
+        result["baseline_first_run_s"] = base_first["wall_s"]
     threads = str(len(os.sched_getaffinity(0)))
     like = folder / "warmup.tif"  # jaxgeo's grid, for GDAL
     cases = [("auto", [])] if a.auto else []
     cases += [(f"workers{w}", ["--workers", str(w)]) for w in a.workers]
+    if a.baseline:
+        cases.append(("baseline", []))
     commands = {name: [*jaxgeo, "-o", str(folder / f"jaxgeo_{name}.tif"), *extra]
                 for name, extra in cases}  # fmt: skip
+    where = {name: "baseline" if name == "baseline" else "" for name in commands}
     if not a.no_gdal:
         for name, cog in (("gdal_gtiff", "0"), ("gdal_cog", "1")):
             commands[name] = [sys.executable, "-c", PEER, str(scene), str(dem), str(like),
                               str(folder / f"{name}.tif"), threads, cog]  # fmt: skip
+            where[name] = None
     # round robin, best of --repeat: on a shared machine every case meets the same load
     all_runs = {name: [] for name in commands}
     for _ in range(a.repeat):
         for name, cmd in commands.items():
-            m = measure(cmd, env)
+            tree = where[name]
+            m = (measure(cmd, peer_env) if tree is None
+                 else measure(cmd, envs[tree], cwd=trees[tree]))  # fmt: skip
             out = m.pop("stdout")
             if not name.startswith("gdal"):
                 m["report"] = json.loads(out.splitlines()[-1])
@@ -206,6 +262,9 @@ def main(argv=None) -> int:
             m["ratio_vs_gdal_cog"] = peers["gdal_cog"]["wall_s"] / m["wall_s"]
             m["cpu_ratio_vs_gdal_gtiff"] = peers["gdal_gtiff"]["cpu_s"] / m["cpu_s"]
         result["ratio_first_vs_gdal_cog"] = peers["gdal_cog"]["wall_s"] / first["wall_s"]
+    if "baseline" in runs and "auto" in runs:
+        result["speedup_vs_baseline"] = runs["baseline"]["wall_s"] / runs["auto"]["wall_s"]
+        result["cpu_speedup_vs_baseline"] = runs["baseline"]["cpu_s"] / runs["auto"]["cpu_s"]
     if "workers1" in runs and "workers2" in runs:
         result["scaling_1_to_2_workers"] = runs["workers1"]["wall_s"] / runs["workers2"]["wall_s"]
     result["note"] = (
@@ -213,7 +272,8 @@ def main(argv=None) -> int:
         "nannies and workers); jaxgeo writes a DEFLATE COG with overviews, gdal_gtiff an "
         "uncompressed tiled GeoTIFF, gdal_cog the same then a DEFLATE COG; ratio: GDAL's wall "
         "time over jaxgeo's (> 1: jaxgeo faster); the cases run round robin, --repeat rounds, the "
-        "best wall time kept (walls_s: every round); the machine is shared: see load_average"
+        "best wall time kept (walls_s: every round); the machine is shared: see load_average; "
+        "bytecode compiled (no PYTHONDONTWRITEBYTECODE), as installed"
         + ("; first_run_s: cold, an empty compilation cache (every later run warm)"
            if a.cold else "")
     )  # fmt: skip

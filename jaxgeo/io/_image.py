@@ -91,7 +91,9 @@ class SensorImage:
         rpc = self.model.base_rpc()
         if rpc is None:
             return None
-        off, scale = float(rpc.ground_offset[2]), abs(float(rpc.ground_scale[2]))
+        # numpy: indexing the jax arrays would be two eager programs, compiled in every process
+        off = float(np.asarray(rpc.ground_offset)[2])
+        scale = abs(float(np.asarray(rpc.ground_scale)[2]))
         return (off - scale, off + scale)
 
     def check_heights(self, h_min: float, h_max: float, source: str) -> str | None:

@@ -84,7 +84,9 @@ def dem_against_model(dem_h_m, model, source: str, image: str) -> str | None:
     h = h[np.isfinite(h)]
     if rpc is None or h.size == 0:
         return None
-    off, scale = float(rpc.ground_offset[2]), abs(float(rpc.ground_scale[2]))
+    # numpy: indexing the jax arrays would be two eager programs, compiled in every process
+    off = float(np.asarray(rpc.ground_offset)[2])
+    scale = abs(float(np.asarray(rpc.ground_scale)[2]))
     lo, hi = off - scale, off + scale
     med = float(np.median(h))
     margin = max(VALIDITY_MARGIN_M, 0.1 * scale)

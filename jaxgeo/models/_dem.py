@@ -62,6 +62,15 @@ class DEMStatus(enum.IntEnum):
     BAD_INPUT = 4  # non-finite image coordinates
 
 
+def _float64(x) -> Array:
+    """``x`` as a float64 jax array; a numpy (float32) grid converted on the host: jax's own
+    conversion is an eager program, lowered and compiled (or read from the cache) in every
+    process -- a DEM read as float32 cost each ``jaxgeo ortho`` one."""
+    if not isinstance(x, jax.Array):
+        x = np.asarray(x, dtype=float)
+    return jnp.asarray(x, dtype=float)
+
+
 class DEMGrid(eqx.Module):
     """A north-up height grid: ``heights_m[row, col]`` ellipsoidal WGS84 metres, NaN = nodata.
 
@@ -84,9 +93,9 @@ class DEMGrid(eqx.Module):
         step: Float[ArrayLike, "2"],
         utm_zone: int = 0,
     ):
-        self.heights_m = jnp.asarray(heights_m, dtype=float)
-        self.origin = jnp.asarray(origin, dtype=float)
-        self.step = jnp.asarray(step, dtype=float)
+        self.heights_m = _float64(heights_m)
+        self.origin = _float64(origin)
+        self.step = _float64(step)
         self.utm_zone = int(utm_zone)
 
     def __check_init__(self):
