@@ -133,6 +133,59 @@ def test_an_executable_read_from_jax_cache_counts_as_not_compiled_here():
     assert seen == [("compiled", True)]
 
 
+def test_an_executable_from_jax_cache_is_compiled_again_past_it_once_and_kept(cache, monkeypatch):
+    """A program whose key is new but whose XLA program jax's cache holds (jaxgeo upgraded, or
+    its executable evicted) is compiled once more with that cache off, and kept: else every
+    later process lowered it and read it from jax's cache again. One whose executable could
+    not be kept is marked, and not compiled twice again."""
+    monkeypatch.setattr(_exported, "_runners", {})
+    calls, enabled, hit = [], [], [True]
+    real_compile = _exported._compile
+
+    def from_cache_first(e, *a):  # a compilation that "hits" jax's cache while ``hit``
+        calls.append(e.fun_name)
+        enabled.append(jax.config.jax_enable_compilation_cache)
+        if hit[0]:
+            hit[0] = False
+            jax.monitoring.record_event("/jax/compilation_cache/cache_hits")
+        return real_compile(e, *a)
+
+    monkeypatch.setattr(_exported, "_compile", from_cache_first)
+    was = jax.config.jax_enable_compilation_cache
+    jax.config.update("jax_enable_compilation_cache", True)
+    try:
+        x = np.linspace(0.0, 3.0, 7)
+        first = _exported.call(fn, x, 2.0)
+        assert jax.config.jax_enable_compilation_cache  # restored
+    finally:
+        jax.config.update("jax_enable_compilation_cache", was)
+    assert enabled == [True, False]  # compiled again with jax's cache off
+    (exe,) = cache.glob(f"*{_executables.SUFFIX}")  # and kept
+    _exported._loaded.clear()  # as a new process: loaded, neither traced nor compiled
+    _exported._runners.clear()
+    np.testing.assert_array_equal(_exported.call(fn, x, 2.0).value, first.value)
+    assert len(calls) == 2 and TRACES == ["fn"]
+    # an executable that cannot be kept is marked: a cache hit is then used as it is
+    exe.unlink()
+    real_write = _exported._write
+
+    def no_executable(path, blob, suffix=_exported.SUFFIX):
+        if suffix == _executables.SUFFIX:
+            raise OSError("not serializable")
+        real_write(path, blob, suffix)
+
+    monkeypatch.setattr(_exported, "_write", no_executable)
+    calls.clear()
+    _exported._runners.clear()
+    _exported.call(fn, x, 2.0)  # compiled here (no hit): not kept, marked
+    assert len(calls) == 1 and len(list(cache.glob(f"*{_executables.REFUSED}"))) == 1
+    calls.clear()
+    _exported._runners.clear()
+    hit[0] = True
+    _exported.call(fn, x, 2.0)  # a hit now: not compiled again past the cache
+    assert len(calls) == 1 and not list(cache.glob(f"*{_executables.SUFFIX}"))
+
+
 def test_damaged_file_is_traced_again(cache):
     x = np.ones(4)
     _exported.call(fn, x, 1.0)
