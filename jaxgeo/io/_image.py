@@ -146,9 +146,13 @@ def reframed(model: AbstractSensorModel, offset: tuple[float, float]) -> Abstrac
         return model
     if isinstance(model, RPC):
         import equinox as eqx
-        import jax.numpy as jnp
 
-        return eqx.tree_at(lambda m: m.image_offset, model, model.image_offset + jnp.asarray(d))
+        from .._runtime.arrays import device_array
+
+        # the sum on the host, copied to the device: jax's sum and ``jnp.asarray`` would each
+        # be an eager program, compiled in every process
+        moved = device_array(np.asarray(model.image_offset) + d)
+        return eqx.tree_at(lambda m: m.image_offset, model, moved)
     if isinstance(model, Biased):
         inner, bias = model.model, model.bias
         if isinstance(bias, ShiftBias) and not isinstance(inner, RPC | Biased):

@@ -31,6 +31,7 @@ import jax.numpy as jnp
 import numpy as np
 from jaxtyping import Array, ArrayLike, Float, Int
 
+from .._runtime.arrays import device_array
 from ..geodesy import geodetic_to_utm
 from ._base import AbstractSensorModel
 from ._rpc_eval import is_concrete
@@ -62,15 +63,6 @@ class DEMStatus(enum.IntEnum):
     BAD_INPUT = 4  # non-finite image coordinates
 
 
-def _float64(x) -> Array:
-    """``x`` as a float64 jax array; a numpy (float32) grid converted on the host: jax's own
-    conversion is an eager program, lowered and compiled (or read from the cache) in every
-    process -- a DEM read as float32 cost each ``jaxgeo ortho`` one."""
-    if not isinstance(x, jax.Array):
-        x = np.asarray(x, dtype=float)
-    return jnp.asarray(x, dtype=float)
-
-
 class DEMGrid(eqx.Module):
     """A north-up height grid: ``heights_m[row, col]`` ellipsoidal WGS84 metres, NaN = nodata.
 
@@ -93,9 +85,11 @@ class DEMGrid(eqx.Module):
         step: Float[ArrayLike, "2"],
         utm_zone: int = 0,
     ):
-        self.heights_m = _float64(heights_m)
-        self.origin = _float64(origin)
-        self.step = _float64(step)
+        # copied to the device, not converted by jax: a float32 grid (a DEM as read) made an
+        # eager program, lowered and compiled (or read from the cache) in every process
+        self.heights_m = device_array(heights_m, float)
+        self.origin = device_array(origin, float)
+        self.step = device_array(step, float)
         self.utm_zone = int(utm_zone)
 
     def __check_init__(self):
