@@ -374,6 +374,8 @@ def ortho_scene(d: dict) -> list[str]:
     rows = []
     for name, m in {**d.get("jaxgeo", {}), **d.get("gdal", {})}.items():
         label = f"jaxgeo, {name}" if name.startswith("workers") else name
+        if name == "baseline":
+            label = f"jaxgeo at {d.get('baseline')} (before), auto"
         rows.append([label, seconds(m.get("wall_s")), seconds(m.get("cpu_s")),
                      f"{num(m.get('peak_rss_gb'))} GB", f"{num(m.get('peak_pss_gb'))} GB",
                      num(m.get("mpx_per_s")), ratio(m.get("ratio_vs_gdal_gtiff")),
@@ -389,6 +391,13 @@ def ortho_scene(d: dict) -> list[str]:
         "",
         f"Against GDAL: mean |difference| {num(agree.get('mean_abs_diff_dn'))} DN over the "
         f"{num(agree.get('both_valid'))} of the cells both fill.",
+        *([] if "baseline" not in d else [
+            "",
+            f"Before ({d['baseline']}, same rounds): first run "
+            f"{seconds(d.get('baseline_first_run_s'))}; its best warm wall time "
+            f"{ratio(d.get('speedup_vs_baseline'))} this tree's, its CPU time "
+            f"{ratio(d.get('cpu_speedup_vs_baseline'))}.",
+        ]),
     ]  # fmt: skip
 
 
