@@ -73,17 +73,20 @@ def _listen() -> bool:
     return True
 
 
-def compile_here(compile: Callable[[], object], keep: bool = False) -> tuple[object, bool]:
+def compile_here(
+    compile: Callable[[], object], keep: Callable[[], bool] | None = None
+) -> tuple[object, bool]:
     """``compile()`` (a ``jax.stages.Compiled``), and whether XLA compiled it in this call (not
     read from jax's compilation cache, whose executables, serialized again, may not run;
-    ``False`` where that cannot be told). ``keep`` (the executable is :func:`wanted`): one read
-    from jax's cache is compiled again, past the cache, so that it can be kept."""
+    ``False`` where that cannot be told). ``keep``: asked once jax's cache has served the
+    program (:func:`wanted`, bound to it); where it says so, the program is compiled again,
+    past the cache, so that it can be kept."""
     with _listening:
         heard = _listen()
     before = getattr(_hits, "count", 0)
     compiled = compile()
     here = heard and getattr(_hits, "count", 0) == before
-    if heard and not here and keep:
+    if heard and not here and keep is not None and keep():
         before = getattr(_hits, "count", 0)
         compiled = _past_the_cache(compile)
         here = getattr(_hits, "count", 0) == before
@@ -131,9 +134,11 @@ def path(where: Path | None, key: str, device) -> Path | None:
 
 def wanted(where: Path | None, key: str, device, exported) -> bool:
     """Whether :func:`keep` would keep the executable of program ``key`` (``exported``) on
-    ``device``: a CPU and a cache, no custom call, not refused before (:data:`REFUSED`)."""
+    ``device`` and none is kept yet: a CPU and a cache, no custom call, not refused before
+    (:data:`REFUSED`), no file (another process, a dask worker, may have kept it meanwhile: the
+    next process loads that one)."""
     file = path(where, key, device)
-    if file is None or file.with_suffix(REFUSED).exists():
+    if file is None or file.exists() or file.with_suffix(REFUSED).exists():
         return False
     if not os.access(file.parent, os.W_OK):  # a read-only cache: nothing is kept there
         return False
@@ -157,8 +162,10 @@ def load(where: Path | None, key: str, device):
                                         execution_devices=[device])  # fmt: skip
     except FileNotFoundError:
         return None
-    except Exception as err:  # a damaged or foreign file: compiled again, rewritten
+    except Exception as err:  # a damaged or foreign file: removed, compiled again, rewritten
         _log.debug("kept executable %s unreadable (%s): compiling again", file, err)
+        with contextlib.suppress(OSError):
+            file.unlink(missing_ok=True)
         return None
     with contextlib.suppress(OSError):  # recently used (a read-only cache stays as it is)
         os.utime(file)

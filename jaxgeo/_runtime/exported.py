@@ -364,7 +364,7 @@ def _call(
         # partly the first solve's outputs: another 4.7 s); placing them first with
         # ``device_put`` cost 0.45 ms a call (7 leaves), twice the run of a 512-point projection
         place = None if device is None else jax.sharding.SingleDeviceSharding(device)
-        wanted = executables.wanted(where, key, device, exported)
+        wanted = functools.partial(executables.wanted, where, key, device, exported)
         while True:  # compiled at the first call
             try:
                 runner, compiled_here = executables.compile_here(
