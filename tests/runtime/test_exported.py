@@ -165,6 +165,16 @@ def test_an_executable_from_jax_cache_is_compiled_again_past_it_once_and_kept(ca
     _exported._runners.clear()
     np.testing.assert_array_equal(_exported.call(fn, x, 2.0).value, first.value)
     assert len(calls) == 2 and TRACES == ["fn"]
+    # kept meanwhile by another process (a dask worker) after this one found none: the cache
+    # hit is used as it is, the file left to the next process
+    real_load = _executables.load
+    monkeypatch.setattr(_executables, "load", lambda *a: None)
+    calls.clear()
+    _exported._runners.clear()
+    hit[0] = True
+    _exported.call(fn, x, 2.0)
+    assert len(calls) == 1 and exe.exists()
+    monkeypatch.setattr(_executables, "load", real_load)
     # an executable that cannot be kept is marked: a cache hit is then used as it is
     exe.unlink()
     real_write = _exported._write
