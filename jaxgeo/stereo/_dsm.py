@@ -22,6 +22,7 @@ The GeoTIFF is tiled (256 x 256), DEFLATE, written atomically; its bands are nam
 
 from __future__ import annotations
 
+import functools
 import os
 from dataclasses import dataclass
 
@@ -105,68 +106,175 @@ def local_utm_epsg(lon_deg: float, lat_deg: float) -> int:
     return utm_epsg(utm_zone(lon_deg, lat_deg), north=lat_deg >= 0)
 
 
-def to_map(points: np.ndarray, epsg: int) -> np.ndarray:
-    """``(n, 3)`` lon/lat/h -> ``(n, 3)`` map x, y and h."""
+@functools.lru_cache(maxsize=8)
+def _transformer(source: int, target: int):
+    """The pyproj transformer ``source`` -> ``target`` (EPSG codes, x = lon first), built once
+    per process: building one costs milliseconds, a tile calls it per pair."""
     import pyproj
 
-    tr = pyproj.Transformer.from_crs(4326, epsg, always_xy=True)
-    x, y = tr.transform(points[:, 0], points[:, 1])
+    return pyproj.Transformer.from_crs(source, target, always_xy=True)
+
+
+def to_map(points: np.ndarray, epsg: int) -> np.ndarray:
+    """``(n, 3)`` lon/lat/h -> ``(n, 3)`` map x, y and h."""
+    x, y = _transformer(4326, epsg).transform(points[:, 0], points[:, 1])
     return np.stack([np.asarray(x), np.asarray(y), points[:, 2]], axis=-1)
+
+
+def map_points_in_box(
+    points: np.ndarray, epsg: int, box: tuple[float, float, float, float]
+) -> tuple[np.ndarray, tuple[np.ndarray, np.ndarray, np.ndarray]]:
+    """The ``(n, 3)`` lon/lat/h ``points`` whose map coordinates (EPSG ``epsg``) lie in
+    ``box = (xmin, ymin, xmax, ymax)`` (m; ``xmin <= x < xmax``, ``ymin <= y < ymax``), all
+    three coordinates finite: their indices (ascending) and their map ``(x, y, h)`` columns.
+
+    Only the points within the box's geographic bounds (widened by ~10 m) are projected: a
+    tile's window sees its context too, and projecting is most of this function's cost."""
+    xmin, ymin, xmax, ymax = box
+    # the box's outline, densified (a map straight line is not a meridian or a parallel)
+    t = np.linspace(0.0, 1.0, 33)
+    ex = np.concatenate([xmin + (xmax - xmin) * t, np.full(33, xmax),
+                         xmax - (xmax - xmin) * t, np.full(33, xmin)])  # fmt: skip
+    ey = np.concatenate([np.full(33, ymin), ymin + (ymax - ymin) * t,
+                         np.full(33, ymax), ymax - (ymax - ymin) * t])  # fmt: skip
+    lon, lat = (np.asarray(v) for v in _transformer(epsg, 4326).transform(ex, ey))
+    idx = None
+    if np.all(np.isfinite(lon)) and np.all(np.isfinite(lat)):
+        dlat = 1e-4  # ~11 m: far beyond the densified outline's sag
+        dlon = dlat / max(np.cos(np.radians(min(np.max(np.abs(lat)) + dlat, 89.0))), 1e-3)
+        lon_p, lat_p = points[:, 0], points[:, 1]
+        near = (lon_p >= lon.min() - dlon) & (lon_p <= lon.max() + dlon)
+        near &= lat_p >= lat.min() - dlat
+        near &= lat_p <= lat.max() + dlat
+        idx = np.flatnonzero(near)
+    sub = points if idx is None else points[idx]
+    idx = np.arange(points.shape[0]) if idx is None else idx
+    x, y = _transformer(4326, epsg).transform(sub[:, 0], sub[:, 1])
+    x, y, h = np.asarray(x, float), np.asarray(y, float), sub[:, 2]
+    keep = (x >= xmin) & (x < xmax) & (y >= ymin) & (y < ymax) & np.isfinite(h)
+    if keep.all():
+        return idx, (x, y, np.ascontiguousarray(h))
+    return idx[keep], (x[keep], y[keep], h[keep])
 
 
 def point_spacing(xy: np.ndarray, sample: int = 20000) -> float:
     """Median distance (map units) from a point to its nearest neighbour (a sample of them:
     with many more points, those of a central square holding about ``4 * sample``, whose inner
     part is queried; a tree of a million points cost a second)."""
+    return spacing_xy(xy[:, 0], xy[:, 1], sample)
+
+
+def spacing_xy(x: np.ndarray, y: np.ndarray, sample: int = 20000) -> float:
+    """:func:`point_spacing` of the points ``(x, y)`` given as two columns (no ``(n, 2)``
+    copy of a million points)."""
     from scipy.spatial import cKDTree
 
-    if xy.shape[0] < 2:
+    n = x.shape[0]
+    if n < 2:
         return 0.0
-    tree_xy, query = xy, xy
-    if xy.shape[0] > 8 * sample:
-        lo, hi = xy.min(axis=0), xy.max(axis=0)
-        half = 0.5 * np.sqrt(np.prod(hi - lo) * 4 * sample / xy.shape[0])
-        centre = np.median(xy[:: xy.shape[0] // sample], axis=0)
-        off = np.max(np.abs(xy - centre), axis=1)
+    tree_x, tree_y, query_x, query_y = x, y, x, y
+    if n > 8 * sample:
+        lo = np.array([x.min(), y.min()])
+        hi = np.array([x.max(), y.max()])
+        half = 0.5 * np.sqrt(np.prod(hi - lo) * 4 * sample / n)
+        cx, cy = np.median(x[:: n // sample]), np.median(y[:: n // sample])
+        off = np.abs(x - cx)
+        np.maximum(off, np.abs(y - cy), out=off)  # the Chebyshev distance to the centre
         inner = off <= 0.7 * half
-        if inner.sum() >= sample // 4:
-            tree_xy, query = xy[off <= half], xy[inner]
-    step = max(query.shape[0] // sample, 1)
-    dist, _ = cKDTree(tree_xy).query(query[::step], k=2)
+        if np.count_nonzero(inner) >= sample // 4:
+            square = off <= half
+            tree_x, tree_y, query_x, query_y = x[square], y[square], x[inner], y[inner]
+    step = max(query_x.shape[0] // sample, 1)
+    tree = cKDTree(np.stack([tree_x, tree_y], axis=-1))
+    dist, _ = tree.query(np.stack([query_x[::step], query_y[::step]], axis=-1), k=2)
     return float(np.median(dist[:, 1]))
 
 
 def _median_per_cell(cell, h, size):
-    """Median, count and standard deviation of ``h`` per cell index (NaN / 0 where empty)."""
-    order = np.lexsort((h, cell))
-    cell, h = cell[order], h[order]
+    """Median, count and standard deviation of ``h`` per cell index (NaN / 0 where empty).
+
+    Dense matching puts one or two points in most cells: their median is their mean, from the
+    per-cell sums (bit for bit: a sum of one or two values does not depend on their order);
+    only the points of cells with three or more are sorted, and those cells' sums are taken in
+    sorted order (as a sort of every point would)."""
     count = np.bincount(cell, minlength=size)
-    start = np.concatenate([[0], np.cumsum(count)[:-1]])
-    has = count > 0
-    lo = start[has] + (count[has] - 1) // 2
-    hi = start[has] + count[has] // 2
-    median = np.full(size, np.nan)
-    median[has] = 0.5 * (h[lo] + h[hi])
     total = np.bincount(cell, weights=h, minlength=size)
     total2 = np.bincount(cell, weights=h * h, minlength=size)
+    has = count > 0
+    median = np.full(size, np.nan)
+    median[has] = total[has] / count[has]
+    many = np.flatnonzero(count >= 3)
+    if many.size:
+        sel = count[cell] >= 3
+        c, v = cell[sel], h[sel]
+        order = np.lexsort((v, c))
+        v = v[order]
+        k = count[many]
+        start = np.cumsum(k) - k
+        median[many] = 0.5 * (v[start + (k - 1) // 2] + v[start + k // 2])
+        which = np.repeat(np.arange(many.size), k)
+        total[many] = np.bincount(which, weights=v, minlength=many.size)
+        total2[many] = np.bincount(which, weights=v * v, minlength=many.size)
     spread = np.full(size, np.nan)
     mean = total[has] / count[has]
     spread[has] = np.sqrt(np.maximum(total2[has] / count[has] - mean**2, 0.0))
     return median, count, spread
 
 
-def _footprint_fill(grids, xyh, origin, res_m, radius_m, k=4, extra=()):
+def _nearest_within(pxy, cells, grid_shape, targets, centres, k, radius_m, reach):
+    """Per target cell, the (up to) ``k`` nearest points within ``radius_m`` of its centre, as
+    :meth:`scipy.spatial.cKDTree.query` (``k``, ``distance_upper_bound``) gives them: distances
+    ascending (``inf`` past the last one found) and indices (``len(px)`` there), found among
+    the points of the cells within ``reach`` cells (a point within ``radius_m <= reach``
+    cells of a centre lies in one). ``cells``: each point's cell index in ``grid_shape``
+    (-1: off it); ``targets``: the target cells' indices; ``centres``: their centres (x, y).
+    Distances are computed as the tree does (squared sum, compared to ``radius_m**2``, then
+    the square root); ``None`` where the candidates per cell are too many for a table."""
+    px, py = pxy
+    nr, nc = grid_shape
+    on = cells >= 0
+    count = np.bincount(cells[on], minlength=nr * nc)
+    most = int(count.max(initial=0))
+    side = 2 * reach + 1
+    if most == 0 or side * side * most < k or targets.size * side * side * most > 2e7:
+        return None
+    order = np.flatnonzero(on)[np.argsort(cells[on], kind="stable")]  # points by cell
+    start = np.cumsum(count) - count
+    tr, tc = np.divmod(targets, nc)
+    slots = []
+    for dr in range(-reach, reach + 1):
+        for dc in range(-reach, reach + 1):
+            r, c = tr + dr, tc + dc
+            ok = (r >= 0) & (r < nr) & (c >= 0) & (c < nc)
+            cell = np.where(ok, r * nc + c, 0)
+            n = np.where(ok, count[cell], 0)
+            for j in range(most):
+                slots.append(np.where(j < n, start[cell] + j, -1))
+    slot = np.stack(slots, axis=1)  # (targets, candidates): positions in ``order``, -1: none
+    valid = slot >= 0
+    idx = order[np.where(valid, slot, 0)]
+    dx = px[idx] - centres[:, :1]
+    dy = py[idx] - centres[:, 1:]
+    d2 = dx * dx + dy * dy
+    d2[~valid | ~(d2 < radius_m * radius_m)] = np.inf
+    # ties broken by point index (the tree's order among equal distances is its own)
+    pick = np.argsort(d2, axis=1, kind="stable")[:, :k]
+    d2k = np.take_along_axis(d2, pick, axis=1)
+    idxk = np.where(np.isfinite(d2k), np.take_along_axis(idx, pick, axis=1), px.size)
+    return np.sqrt(d2k), idxk
+
+
+def _footprint_fill(grids, xyh, origin, res_m, radius_m, k=4, extra=(), cells=None):
     """Empty cells of ``grids = (height, count, spread)`` (cells of ``res_m``, upper-left
-    corner ``origin = (x0, y0)``) within ``radius_m`` of points ``xyh``: median, count and
-    spread of the (up to ``k``) nearest points within that radius of the cell centre (in
-    place); each ``(grid, values)`` of ``extra`` (per-point values) takes the mean of those
-    points' values."""
+    corner ``origin = (x0, y0)``) within ``radius_m`` of points ``xyh`` (columns x, y, h):
+    median, count and spread of the (up to ``k``) nearest points within that radius of the cell
+    centre (in place); each ``(grid, values)`` of ``extra`` (per-point values) takes the mean of
+    those points' values. ``cells``: the points' ``(row, col)`` on the grid, when known."""
     from scipy import ndimage
 
     height, count, spread = grids
     x0, y0 = origin
-    from scipy.spatial import cKDTree
-
+    x, y, h = xyh
     reach = int(np.ceil(radius_m / res_m))
     near = ndimage.binary_dilation(np.isfinite(height), iterations=reach)
     target = near & ~np.isfinite(height)
@@ -174,31 +282,44 @@ def _footprint_fill(grids, xyh, origin, res_m, radius_m, k=4, extra=()):
     if rows.size == 0:
         return
     centres = np.stack([x0 + (cols + 0.5) * res_m, y0 - (rows + 0.5) * res_m], axis=-1)
-    # the points that may lie within the radius of an empty cell's centre: those of the cells
-    # within reach of one (a few where the empty cells are few, not the whole tile's)
-    around = ndimage.binary_dilation(target, np.ones((3, 3), bool), iterations=reach + 1)
-    pr = np.floor((y0 - xyh[:, 1]) / res_m).astype(np.int64)
-    pc = np.floor((xyh[:, 0] - x0) / res_m).astype(np.int64)
+    if cells is None:
+        cells = (np.floor((y0 - y) / res_m).astype(np.int64),
+                 np.floor((x - x0) / res_m).astype(np.int64))  # fmt: skip
+    # a point within ``radius_m`` (<= ``reach`` cells) of an empty cell's centre lies in a cell
+    # within ``reach`` of it, on the grid or up to ``reach`` cells off it: the candidates are
+    # the points of those cells (few where the empty cells are few, not the whole tile's)
     nr, nc = height.shape
-    on = (pr >= 0) & (pr < nr) & (pc >= 0) & (pc < nc)
-    near_pts = ~on  # points off the grid: kept (a cell at the edge may reach them)
-    near_pts[on] = around[pr[on], pc[on]]
-    pts = xyh[near_pts]
-    if pts.shape[0] == 0:
+    grid = (nr + 2 * reach, nc + 2 * reach)
+    pr, pc = cells[0] + reach, cells[1] + reach
+    on = (pr >= 0) & (pr < grid[0]) & (pc >= 0) & (pc < grid[1])
+    wide = np.zeros(grid, bool)
+    wide[reach : reach + nr, reach : reach + nc] = target
+    around = ndimage.binary_dilation(wide, np.ones((3, 3), bool), iterations=reach)
+    cand = np.flatnonzero(on)
+    cand = cand[around[pr[cand], pc[cand]]]
+    if cand.size == 0:
         return
-    dist, idx = cKDTree(pts[:, :2]).query(centres, k=k, distance_upper_bound=radius_m)
+    targets = (rows + reach) * grid[1] + cols + reach
+    found = _nearest_within((x[cand], y[cand]), pr[cand] * grid[1] + pc[cand], grid, targets,
+                            centres, k, radius_m, reach)  # fmt: skip
+    if found is None:  # too many points in a cell for the table: a tree
+        from scipy.spatial import cKDTree
+
+        tree = cKDTree(np.stack([x[cand], y[cand]], axis=-1))
+        found = tree.query(centres, k=k, distance_upper_bound=radius_m)
+    dist, idx = found
     found = np.isfinite(dist)
     n = found.sum(axis=1)
     some = n > 0
-    h = np.where(found, pts[np.minimum(idx, pts.shape[0] - 1), 2], np.nan)[some]
+    safe = np.minimum(idx, cand.size - 1)[some]
+    heights = np.where(found[some], h[cand[safe]], np.nan)
     r, c = rows[some], cols[some]
-    height[r, c] = np.nanmedian(h, axis=1)
+    height[r, c] = np.nanmedian(heights, axis=1)
     count[r, c] = n[some]
-    spread[r, c] = np.nanstd(h, axis=1)
-    safe = np.minimum(idx, pts.shape[0] - 1)[some]
-    for grid, values in extra:
-        v = np.where(found[some], values[near_pts][safe], np.nan)
-        grid[r, c] = np.nanmean(v, axis=1)
+    spread[r, c] = np.nanstd(heights, axis=1)
+    for grid_values, values in extra:
+        v = np.where(found[some], values[cand[safe]], np.nan)
+        grid_values[r, c] = np.nanmean(v, axis=1)
 
 
 def small_holes(height: np.ndarray, max_cells: float) -> np.ndarray:
@@ -282,44 +403,66 @@ def rasterize(
     good = np.all(np.isfinite(points), axis=1)
     points = points[good]
     if sigmas is not None:
-        sq = [np.nan_to_num(np.asarray(v, float)[good] ** 2, nan=np.inf) for v in sigmas]
+        sigmas = tuple(np.asarray(v, float)[good] for v in sigmas)
     if points.shape[0] == 0:
         raise ValueError("rasterize: no valid 3D point")
     if epsg is None:
         lon, lat = np.median(points[:, 0]), np.median(points[:, 1])
         epsg = local_utm_epsg(float(lon), float(lat))
-    xyh = to_map(points, epsg)
+    x, y = _transformer(4326, epsg).transform(points[:, 0], points[:, 1])
+    xyh = (np.asarray(x, float), np.asarray(y, float), np.ascontiguousarray(points[:, 2]))
+    return rasterize_map(xyh, res_m, epsg, origin, shape, footprint_m, max_hole_m, sigmas)
+
+
+def rasterize_map(
+    xyh: tuple[np.ndarray, np.ndarray, np.ndarray],
+    res_m: float,
+    epsg: int,
+    origin: tuple[float, float] | None = None,
+    shape: tuple[int, int] | None = None,
+    footprint_m: float | None = None,
+    max_hole_m: float = MAX_HOLE_M,
+    sigmas: tuple[np.ndarray, np.ndarray] | None = None,
+) -> DSMGrid:
+    """:func:`rasterize` of points already in the map CRS ``epsg``: ``xyh`` their columns x, y
+    (m) and h (m), all finite (a tile projects its points once, to keep those of its box)."""
+    x, y, h = xyh
     if origin is None:
         origin = (
-            float(np.floor(xyh[:, 0].min() / res_m) * res_m),
-            float(np.ceil(xyh[:, 1].max() / res_m) * res_m),
+            float(np.floor(x.min() / res_m) * res_m),
+            float(np.ceil(y.max() / res_m) * res_m),
         )
     x0, y0 = origin
     if shape is None:
         shape = (
-            int(np.ceil((y0 - xyh[:, 1].min()) / res_m)) + 1,
-            int(np.ceil((xyh[:, 0].max() - x0) / res_m)) + 1,
+            int(np.ceil((y0 - y.min()) / res_m)) + 1,
+            int(np.ceil((x.max() - x0) / res_m)) + 1,
         )
     rows, cols = shape
-    col = np.floor((xyh[:, 0] - x0) / res_m).astype(np.int64)
-    row = np.floor((y0 - xyh[:, 1]) / res_m).astype(np.int64)
+    col = np.floor((x - x0) / res_m).astype(np.int64)
+    row = np.floor((y0 - y) / res_m).astype(np.int64)
     inside = (row >= 0) & (row < rows) & (col >= 0) & (col < cols)
-    median, count, spread = _median_per_cell(
-        row[inside] * cols + col[inside], xyh[inside, 2], rows * cols
-    )
+    every = bool(inside.all())  # a tile's points: no copy of a million rows
+
+    def kept(values):
+        return values if every else values[inside]
+
+    cell = kept(row) * cols + kept(col)
+    median, count, spread = _median_per_cell(cell, kept(h), rows * cols)
     height, count, spread = (a.reshape(shape) for a in (median, count, spread))
     extra = []
     if sigmas is not None:
-        cell = row[inside] * cols + col[inside]
-        n = np.maximum(np.bincount(cell, minlength=rows * cols), 1)
-        for v in sq:
-            mean_sq = np.bincount(cell, v[inside], rows * cols) / n
-            extra.append((mean_sq.reshape(shape), v))
+        n = np.maximum(count.ravel(), 1)
+        for v in sigmas:
+            sq = np.nan_to_num(np.asarray(v, float) ** 2, nan=np.inf)
+            mean_sq = np.bincount(cell, kept(sq), rows * cols) / n
+            extra.append((mean_sq.reshape(shape), sq))
+    del cell
     if footprint_m is None:
-        footprint_m = point_spacing(xyh[inside, :2])
+        footprint_m = spacing_xy(kept(x), kept(y))
     if footprint_m > 0 and np.isfinite(height).any():
         _footprint_fill((height, count, spread), xyh, (x0, y0), res_m, float(footprint_m),
-                        extra=extra)  # fmt: skip
+                        extra=extra, cells=(row, col))  # fmt: skip
     sigma = None
     if sigmas is not None:
         sigma = cell_sigma(extra[0][0], extra[1][0], spread, count, height, res_m)
