@@ -147,10 +147,11 @@ def map_points_in_box(
         near &= lat_p >= lat.min() - dlat
         near &= lat_p <= lat.max() + dlat
         idx = np.flatnonzero(near)
-    sub = points if idx is None else points[idx]
+    # contiguous columns of the points near the box (projected in place: no further copy)
+    lon, lat, h = (points[:, j] if idx is None else points[:, j][idx] for j in range(3))
+    lon, lat = (np.array(v, float, order="C", copy=idx is None) for v in (lon, lat))
+    x, y = _transformer(4326, epsg).transform(lon, lat, inplace=True)
     idx = np.arange(points.shape[0]) if idx is None else idx
-    x, y = _transformer(4326, epsg).transform(sub[:, 0], sub[:, 1])
-    x, y, h = np.asarray(x, float), np.asarray(y, float), sub[:, 2]
     keep = (x >= xmin) & (x < xmax) & (y >= ymin) & (y < ymax) & np.isfinite(h)
     if keep.all():
         return idx, (x, y, np.ascontiguousarray(h))
@@ -200,25 +201,26 @@ def _median_per_cell(cell, h, size):
     count = np.bincount(cell, minlength=size)
     total = np.bincount(cell, weights=h, minlength=size)
     total2 = np.bincount(cell, weights=h * h, minlength=size)
-    has = count > 0
-    median = np.full(size, np.nan)
-    median[has] = total[has] / count[has]
     many = np.flatnonzero(count >= 3)
+    median = None
     if many.size:
         sel = count[cell] >= 3
         c, v = cell[sel], h[sel]
-        order = np.lexsort((v, c))
-        v = v[order]
+        v = v[np.lexsort((v, c))]
         k = count[many]
         start = np.cumsum(k) - k
-        median[many] = 0.5 * (v[start + (k - 1) // 2] + v[start + k // 2])
+        median = 0.5 * (v[start + (k - 1) // 2] + v[start + k // 2])
         which = np.repeat(np.arange(many.size), k)
         total[many] = np.bincount(which, weights=v, minlength=many.size)
         total2[many] = np.bincount(which, weights=v * v, minlength=many.size)
-    spread = np.full(size, np.nan)
-    mean = total[has] / count[has]
-    spread[has] = np.sqrt(np.maximum(total2[has] / count[has] - mean**2, 0.0))
-    return median, count, spread
+    with np.errstate(invalid="ignore", divide="ignore"):  # empty cells: 0 / 0 = NaN
+        mean = total / count
+        spread = total2 / count
+    spread -= mean * mean
+    np.sqrt(np.maximum(spread, 0.0, out=spread), out=spread)  # NaN stays NaN
+    if median is not None:
+        mean[many] = median
+    return mean, count, spread
 
 
 def _nearest_within(pxy, cells, grid_shape, targets, centres, k, radius_m, reach):
