@@ -317,22 +317,26 @@ def _nearest_within(pxy, cells, grid_shape, targets, centres, k, radius_m, reach
     :meth:`scipy.spatial.cKDTree.query` (``k``, ``distance_upper_bound``) gives them: distances
     ascending (``inf`` past the last one found) and indices (``len(px)`` there), found among
     the points of the cells within ``reach`` cells (a point within ``radius_m <= reach``
-    cells of a centre lies in one). ``cells``: each point's cell index in ``grid_shape``
-    (-1: off it); ``targets``: the target cells' indices; ``centres``: their centres (x, y).
-    Distances are computed as the tree does (squared sum, compared to ``radius_m**2``, then
-    the square root); ``None`` where the candidates per cell are too many for a table."""
+    cells of a centre lies in one). ``cells``: each point's cell index in ``grid_shape``;
+    ``targets``: the target cells' indices; ``centres``: their centres (x, y). Distances are
+    computed as the tree does (squared sum, kept if below ``radius_m**2``, then the square
+    root); ``None`` where a cell holds too many points for this cell-by-cell search."""
     px, py = pxy
     nr, nc = grid_shape
-    on = cells >= 0
-    count = np.bincount(cells[on], minlength=nr * nc)
+    count = np.bincount(cells, minlength=nr * nc)
     most = int(count.max(initial=0))
     side = 2 * reach + 1
-    if most == 0 or side * side * most < k or targets.size * side * side * most > 2e7:
+    if most == 0 or side * side * most > 400:
         return None
-    order = np.flatnonzero(on)[np.argsort(cells[on], kind="stable")]  # points by cell
+    order = np.argsort(cells, kind="stable")  # points by cell
     start = np.cumsum(count) - count
     tr, tc = np.divmod(targets, nc)
-    slots = []
+    cx, cy = centres[:, 0], centres[:, 1]
+    bound = radius_m * radius_m
+    # the k best so far per target, ascending: a candidate bubbles down past the larger ones
+    # (a later candidate at an equal distance stays behind: ties go to the first seen)
+    best_d2 = [np.full(targets.size, np.inf) for _ in range(k)]
+    best_i = [np.full(targets.size, px.size) for _ in range(k)]
     for dr in range(-reach, reach + 1):
         for dc in range(-reach, reach + 1):
             r, c = tr + dr, tc + dc
@@ -340,19 +344,24 @@ def _nearest_within(pxy, cells, grid_shape, targets, centres, k, radius_m, reach
             cell = np.where(ok, r * nc + c, 0)
             n = np.where(ok, count[cell], 0)
             for j in range(most):
-                slots.append(np.where(j < n, start[cell] + j, -1))
-    slot = np.stack(slots, axis=1)  # (targets, candidates): positions in ``order``, -1: none
-    valid = slot >= 0
-    idx = order[np.where(valid, slot, 0)]
-    dx = px[idx] - centres[:, :1]
-    dy = py[idx] - centres[:, 1:]
-    d2 = dx * dx + dy * dy
-    d2[~valid | ~(d2 < radius_m * radius_m)] = np.inf
-    # ties broken by point index (the tree's order among equal distances is its own)
-    pick = np.argsort(d2, axis=1, kind="stable")[:, :k]
-    d2k = np.take_along_axis(d2, pick, axis=1)
-    idxk = np.where(np.isfinite(d2k), np.take_along_axis(idx, pick, axis=1), px.size)
-    return np.sqrt(d2k), idxk
+                rows = np.flatnonzero(j < n) if j else None  # few cells hold a 2nd point
+                sub = (lambda a: a) if rows is None else (lambda a, rows=rows: a[rows])
+                i = order[np.minimum(start[sub(cell)] + j, order.size - 1)]
+                dx = px[i] - sub(cx)
+                dy = py[i] - sub(cy)
+                d2 = dx * dx + dy * dy
+                d2[~((j < sub(n)) & (d2 < bound))] = np.inf
+                for p in range(k):
+                    held_d2, held_i = sub(best_d2[p]), sub(best_i[p])
+                    better = d2 < held_d2
+                    new_d2, new_i = np.where(better, d2, held_d2), np.where(better, i, held_i)
+                    d2, i = np.where(better, held_d2, d2), np.where(better, held_i, i)
+                    if rows is None:
+                        best_d2[p], best_i[p] = new_d2, new_i
+                    else:
+                        best_d2[p][rows], best_i[p][rows] = new_d2, new_i
+    d2k, idxk = np.stack(best_d2, axis=1), np.stack(best_i, axis=1)
+    return np.sqrt(d2k), np.where(np.isfinite(d2k), idxk, px.size)
 
 
 def _footprint_fill(grids, xyh, origin, res_m, radius_m, k=4, extra=(), cells=None):
@@ -360,7 +369,8 @@ def _footprint_fill(grids, xyh, origin, res_m, radius_m, k=4, extra=(), cells=No
     corner ``origin = (x0, y0)``) within ``radius_m`` of points ``xyh`` (columns x, y, h):
     median, count and spread of the (up to ``k``) nearest points within that radius of the cell
     centre (in place); each ``(grid, values)`` of ``extra`` (per-point values) takes the mean of
-    those points' values. ``cells``: the points' ``(row, col)`` on the grid, when known."""
+    those points' values. ``cells``: the points' ``(row, col, cell)`` on the grid, when known
+    (``cell``: ``row * cols + col`` where every point is on the grid, else ``None``)."""
     from scipy import ndimage
 
     height, count, spread = grids
@@ -373,26 +383,33 @@ def _footprint_fill(grids, xyh, origin, res_m, radius_m, k=4, extra=(), cells=No
     if rows.size == 0:
         return
     centres = np.stack([x0 + (cols + 0.5) * res_m, y0 - (rows + 0.5) * res_m], axis=-1)
+    nr, nc = height.shape
     if cells is None:
         cells = (np.floor((y0 - y) / res_m).astype(np.int64),
-                 np.floor((x - x0) / res_m).astype(np.int64))  # fmt: skip
+                 np.floor((x - x0) / res_m).astype(np.int64), None)  # fmt: skip
+    row, col, flat = cells
     # a point within ``radius_m`` (<= ``reach`` cells) of an empty cell's centre lies in a cell
     # within ``reach`` of it, on the grid or up to ``reach`` cells off it: the candidates are
     # the points of those cells (few where the empty cells are few, not the whole tile's)
-    nr, nc = height.shape
-    grid = (nr + 2 * reach, nc + 2 * reach)
-    pr, pc = cells[0] + reach, cells[1] + reach
-    on = (pr >= 0) & (pr < grid[0]) & (pc >= 0) & (pc < grid[1])
-    wide = np.zeros(grid, bool)
-    wide[reach : reach + nr, reach : reach + nc] = target
-    around = ndimage.binary_dilation(wide, np.ones((3, 3), bool), iterations=reach)
-    cand = np.flatnonzero(on)
-    cand = cand[around[pr[cand], pc[cand]]]
+    if flat is not None:  # every point on the grid (a tile's): its cells as they are
+        grid, pad, cell = (nr, nc), 0, flat
+        around = ndimage.binary_dilation(target, np.ones((3, 3), bool), iterations=reach)
+        cand = np.flatnonzero(around.ravel()[cell])
+    else:  # the grid widened by ``reach`` cells
+        grid, pad = (nr + 2 * reach, nc + 2 * reach), reach
+        pr, pc = row + pad, col + pad
+        cell = np.where((pr >= 0) & (pr < grid[0]) & (pc >= 0) & (pc < grid[1]),
+                        pr * grid[1] + pc, -1)  # fmt: skip
+        wide = np.zeros(grid, bool)
+        wide[pad : pad + nr, pad : pad + nc] = target
+        around = ndimage.binary_dilation(wide, np.ones((3, 3), bool), iterations=reach)
+        cand = np.flatnonzero(cell >= 0)
+        cand = cand[around.ravel()[cell[cand]]]
     if cand.size == 0:
         return
-    targets = (rows + reach) * grid[1] + cols + reach
-    found = _nearest_within((x[cand], y[cand]), pr[cand] * grid[1] + pc[cand], grid, targets,
-                            centres, k, radius_m, reach)  # fmt: skip
+    targets = (rows + pad) * grid[1] + cols + pad
+    found = _nearest_within((x[cand], y[cand]), cell[cand], grid, targets, centres, k,
+                            radius_m, reach)  # fmt: skip
     if found is None:  # too many points in a cell for the table: a tree
         from scipy.spatial import cKDTree
 
@@ -548,12 +565,11 @@ def rasterize_map(
             sq = np.nan_to_num(np.asarray(v, float) ** 2, nan=np.inf)
             mean_sq = np.bincount(cell, kept(sq), rows * cols) / n
             extra.append((mean_sq.reshape(shape), sq))
-    del cell
     if footprint_m is None:
         footprint_m = spacing_xy(kept(x), kept(y))
     if footprint_m > 0 and np.isfinite(height).any():
         _footprint_fill((height, count, spread), xyh, (x0, y0), res_m, float(footprint_m),
-                        extra=extra, cells=(row, col))  # fmt: skip
+                        extra=extra, cells=(row, col, cell if every else None))  # fmt: skip
     sigma = None
     if sigmas is not None:
         sigma = cell_sigma(extra[0][0], extra[1][0], spread, count, height, res_m)

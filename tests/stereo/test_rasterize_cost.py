@@ -9,6 +9,8 @@ from scipy.spatial import cKDTree
 
 from jaxgeo.stereo import rasterize
 from jaxgeo.stereo._dsm import (
+    MAP_FIT_TOLERANCE_M,
+    _LocalProjection,
     _median_per_cell,
     _nearest_within,
     map_points_in_box,
@@ -65,7 +67,7 @@ def test_nearest_within_is_the_kd_trees_bit_for_bit():
     grid = (shape[0] + 2 * reach, shape[1] + 2 * reach)
     pr, pc = row + reach, col + reach
     on = (pr >= 0) & (pr < grid[0]) & (pc >= 0) & (pc < grid[1])
-    cells = np.where(on, pr * grid[1] + pc, -1)
+    x, y, cells = x[on], y[on], (pr * grid[1] + pc)[on]  # the points that may be in reach
     rows, cols = np.nonzero(rng.uniform(size=shape) < 0.3)
     centres = np.stack([X0 + (cols + 0.5) * res, Y0 - (rows + 0.5) * res], axis=-1)
     targets = (rows + reach) * grid[1] + cols + reach
@@ -85,15 +87,18 @@ def _lonlat(x, y):
     return np.asarray(lon), np.asarray(lat)
 
 
-def test_map_points_in_box_is_every_point_projected_and_tested():
+@pytest.mark.parametrize("size_m", [1000.0, 200_000.0])
+def test_map_points_in_box_is_every_point_projected_and_tested(size_m):
+    """A tile's box (1 km): the projection's cubic, within a micrometre of pyproj; a box too
+    large for a cubic (200 km): pyproj itself."""
     rng = np.random.default_rng(5)
-    x = X0 + rng.uniform(-200.0, 1200.0, 20000)
-    y = Y0 - rng.uniform(-200.0, 1200.0, 20000)
+    x = X0 + rng.uniform(-0.2, 1.2, 20000) * size_m
+    y = Y0 - rng.uniform(-0.2, 1.2, 20000) * size_m
     lon, lat = _lonlat(x, y)
     points = np.stack([lon, lat, rng.normal(100.0, 5.0, x.size)], axis=1)
     points[::97, 2] = np.nan
     points[::89, 0] = np.nan
-    box = (X0 + 10.0, Y0 - 990.0, X0 + 990.0, Y0 - 10.0)
+    box = (X0 + 0.01 * size_m, Y0 - 0.99 * size_m, X0 + 0.99 * size_m, Y0 - 0.01 * size_m)
     before = points.copy()
     idx, (mx, my, mh) = map_points_in_box(points, EPSG, box)
     np.testing.assert_array_equal(points, before)  # the input untouched (projected in place)
@@ -102,7 +107,21 @@ def test_map_points_in_box_is_every_point_projected_and_tested():
               & (xyh[:, 1] >= box[1]) & (xyh[:, 1] < box[3]))  # fmt: skip
     assert 0 < inside.sum() < x.size - 5000
     np.testing.assert_array_equal(idx, np.flatnonzero(inside))
-    np.testing.assert_array_equal(np.stack([mx, my, mh], axis=1), xyh[inside])
+    np.testing.assert_array_equal(mh, xyh[inside, 2])
+    got = np.stack([mx, my], axis=1)
+    if size_m < 10_000:
+        assert np.abs(got - xyh[inside, :2]).max() <= MAP_FIT_TOLERANCE_M
+        assert np.abs(got - xyh[inside, :2]).max() < 1e-7  # measured: ~1e-8 m over 1 km
+    else:
+        np.testing.assert_array_equal(got, xyh[inside, :2])
+
+
+def test_the_projections_cubic_is_refused_where_it_misses():
+    west, south = _lonlat(np.array([X0]), np.array([Y0 - 1000.0]))
+    east, north = _lonlat(np.array([X0 + 1000.0]), np.array([Y0]))
+    small = (west[0], south[0], east[0], north[0])
+    assert _LocalProjection.fit(small, EPSG) is not None
+    assert _LocalProjection.fit((small[0], small[1], small[0] + 3.0, small[1] + 2.0), EPSG) is None
 
 
 def _old_point_spacing(xy, sample=20000):
