@@ -36,15 +36,14 @@ from ..io.internal import file_id
 from ..models import AbstractSensorModel
 from ..tiles import RasterSpec, Tile, TilePlan, plan_tiles
 from ..tiles.internal import NoData, cores, overview_factors, write_tile
+from ._binning import map_points_in_box, spacing_xy
 from ._dem_check import check_dem, window_tie_ground
 from ._dsm import (
     DSM_BANDS,
     dsm_band_tags,
     dsm_grid,
     local_utm_epsg,
-    map_points_in_box,
     rasterize_map,
-    spacing_xy,
 )
 from ._pipeline import _height_offsets, dsm_from_images, image_size, stereo_pair
 from ._settings import DEFAULT_DSM, DSMSettings

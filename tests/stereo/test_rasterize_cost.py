@@ -8,17 +8,16 @@ import pytest
 from scipy.spatial import cKDTree
 
 from jaxgeo.stereo import rasterize
-from jaxgeo.stereo._dsm import (
+from jaxgeo.stereo._binning import (
     MAP_FIT_TOLERANCE_M,
     _LocalProjection,
     _median_per_cell,
     _nearest_within,
     map_points_in_box,
     point_spacing,
-    rasterize_map,
     spacing_xy,
-    to_map,
 )
+from jaxgeo.stereo._dsm import rasterize_map, to_map
 
 EPSG = 32631
 X0, Y0 = 698000.0, 4793000.0
