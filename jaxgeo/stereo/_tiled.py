@@ -175,7 +175,7 @@ class DSMJob:
                 "window": list(roi), "pairs": pairs}  # fmt: skip
 
 
-def _joined(arrays: list[np.ndarray]) -> np.ndarray:
+def _joined(arrays: Sequence[np.ndarray]) -> np.ndarray:
     """The arrays end to end (one array itself: no copy of a million values)."""
     return arrays[0] if len(arrays) == 1 else np.concatenate(arrays)
 
