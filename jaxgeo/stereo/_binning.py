@@ -246,22 +246,19 @@ def _nearest_within(pxy, cells, grid_shape, targets, centres, k, radius_m, reach
             cell = np.where(ok, r * nc + c, 0)
             n = np.where(ok, count[cell], 0)
             for j in range(most):
-                rows = np.flatnonzero(j < n) if j else None  # few cells hold a 2nd point
-                sub = (lambda a: a) if rows is None else (lambda a, rows=rows: a[rows])
-                i = order[np.minimum(start[sub(cell)] + j, order.size - 1)]
-                dx = px[i] - sub(cx)
-                dy = py[i] - sub(cy)
+                # the targets whose neighbour holds a (j+1)-th point (few past the first)
+                rows = slice(None) if j == 0 else np.flatnonzero(j < n)
+                i = order[np.minimum(start[cell[rows]] + j, order.size - 1)]
+                dx = px[i] - cx[rows]
+                dy = py[i] - cy[rows]
                 d2 = dx * dx + dy * dy
-                d2[~((j < sub(n)) & (d2 < bound))] = np.inf
+                d2[~((j < n[rows]) & (d2 < bound))] = np.inf
                 for p in range(k):
-                    held_d2, held_i = sub(best_d2[p]), sub(best_i[p])
+                    held_d2, held_i = best_d2[p][rows], best_i[p][rows]
                     better = d2 < held_d2
                     new_d2, new_i = np.where(better, d2, held_d2), np.where(better, i, held_i)
                     d2, i = np.where(better, held_d2, d2), np.where(better, held_i, i)
-                    if rows is None:
-                        best_d2[p], best_i[p] = new_d2, new_i
-                    else:
-                        best_d2[p][rows], best_i[p][rows] = new_d2, new_i
+                    best_d2[p][rows], best_i[p][rows] = new_d2, new_i
     d2k, idxk = np.stack(best_d2, axis=1), np.stack(best_i, axis=1)
     return np.sqrt(d2k), np.where(np.isfinite(d2k), idxk, px.size)
 
