@@ -30,6 +30,8 @@ import numpy as np
 from ..geodesy import utm_epsg, utm_zone
 from ..io.internal import atomic_output, raster_writer
 from ..tiles import OutputGrid
+from ._binning import _footprint_fill, _median_per_cell, _transformer, spacing_xy
+from ._binning import point_spacing as point_spacing  # :mod:`._pipeline`'s, the tests'
 from ._triangulation import StereoError
 from ._uncertainty import cell_sigma
 
@@ -107,98 +109,8 @@ def local_utm_epsg(lon_deg: float, lat_deg: float) -> int:
 
 def to_map(points: np.ndarray, epsg: int) -> np.ndarray:
     """``(n, 3)`` lon/lat/h -> ``(n, 3)`` map x, y and h."""
-    import pyproj
-
-    tr = pyproj.Transformer.from_crs(4326, epsg, always_xy=True)
-    x, y = tr.transform(points[:, 0], points[:, 1])
+    x, y = _transformer(4326, epsg).transform(points[:, 0], points[:, 1])
     return np.stack([np.asarray(x), np.asarray(y), points[:, 2]], axis=-1)
-
-
-def point_spacing(xy: np.ndarray, sample: int = 20000) -> float:
-    """Median distance (map units) from a point to its nearest neighbour (a sample of them:
-    with many more points, those of a central square holding about ``4 * sample``, whose inner
-    part is queried; a tree of a million points cost a second)."""
-    from scipy.spatial import cKDTree
-
-    if xy.shape[0] < 2:
-        return 0.0
-    tree_xy, query = xy, xy
-    if xy.shape[0] > 8 * sample:
-        lo, hi = xy.min(axis=0), xy.max(axis=0)
-        half = 0.5 * np.sqrt(np.prod(hi - lo) * 4 * sample / xy.shape[0])
-        centre = np.median(xy[:: xy.shape[0] // sample], axis=0)
-        off = np.max(np.abs(xy - centre), axis=1)
-        inner = off <= 0.7 * half
-        if inner.sum() >= sample // 4:
-            tree_xy, query = xy[off <= half], xy[inner]
-    step = max(query.shape[0] // sample, 1)
-    dist, _ = cKDTree(tree_xy).query(query[::step], k=2)
-    return float(np.median(dist[:, 1]))
-
-
-def _median_per_cell(cell, h, size):
-    """Median, count and standard deviation of ``h`` per cell index (NaN / 0 where empty)."""
-    order = np.lexsort((h, cell))
-    cell, h = cell[order], h[order]
-    count = np.bincount(cell, minlength=size)
-    start = np.concatenate([[0], np.cumsum(count)[:-1]])
-    has = count > 0
-    lo = start[has] + (count[has] - 1) // 2
-    hi = start[has] + count[has] // 2
-    median = np.full(size, np.nan)
-    median[has] = 0.5 * (h[lo] + h[hi])
-    total = np.bincount(cell, weights=h, minlength=size)
-    total2 = np.bincount(cell, weights=h * h, minlength=size)
-    spread = np.full(size, np.nan)
-    mean = total[has] / count[has]
-    spread[has] = np.sqrt(np.maximum(total2[has] / count[has] - mean**2, 0.0))
-    return median, count, spread
-
-
-def _footprint_fill(grids, xyh, origin, res_m, radius_m, k=4, extra=()):
-    """Empty cells of ``grids = (height, count, spread)`` (cells of ``res_m``, upper-left
-    corner ``origin = (x0, y0)``) within ``radius_m`` of points ``xyh``: median, count and
-    spread of the (up to ``k``) nearest points within that radius of the cell centre (in
-    place); each ``(grid, values)`` of ``extra`` (per-point values) takes the mean of those
-    points' values."""
-    from scipy import ndimage
-
-    height, count, spread = grids
-    x0, y0 = origin
-    from scipy.spatial import cKDTree
-
-    reach = int(np.ceil(radius_m / res_m))
-    near = ndimage.binary_dilation(np.isfinite(height), iterations=reach)
-    target = near & ~np.isfinite(height)
-    rows, cols = np.nonzero(target)
-    if rows.size == 0:
-        return
-    centres = np.stack([x0 + (cols + 0.5) * res_m, y0 - (rows + 0.5) * res_m], axis=-1)
-    # the points that may lie within the radius of an empty cell's centre: those of the cells
-    # within reach of one (a few where the empty cells are few, not the whole tile's)
-    around = ndimage.binary_dilation(target, np.ones((3, 3), bool), iterations=reach + 1)
-    pr = np.floor((y0 - xyh[:, 1]) / res_m).astype(np.int64)
-    pc = np.floor((xyh[:, 0] - x0) / res_m).astype(np.int64)
-    nr, nc = height.shape
-    on = (pr >= 0) & (pr < nr) & (pc >= 0) & (pc < nc)
-    near_pts = ~on  # points off the grid: kept (a cell at the edge may reach them)
-    near_pts[on] = around[pr[on], pc[on]]
-    pts = xyh[near_pts]
-    if pts.shape[0] == 0:
-        return
-    dist, idx = cKDTree(pts[:, :2]).query(centres, k=k, distance_upper_bound=radius_m)
-    found = np.isfinite(dist)
-    n = found.sum(axis=1)
-    some = n > 0
-    h = np.where(found, pts[np.minimum(idx, pts.shape[0] - 1), 2], np.nan)[some]
-    r, c = rows[some], cols[some]
-    height[r, c] = np.nanmedian(h, axis=1)
-    count[r, c] = n[some]
-    spread[r, c] = np.nanstd(h, axis=1)
-    safe = np.minimum(idx, pts.shape[0] - 1)[some]
-    for grid, values in extra:
-        v = np.where(found[some], values[near_pts][safe], np.nan)
-        grid[r, c] = np.nanmean(v, axis=1)
 
 
 def small_holes(height: np.ndarray, max_cells: float) -> np.ndarray:
@@ -282,44 +194,65 @@ def rasterize(
     good = np.all(np.isfinite(points), axis=1)
     points = points[good]
     if sigmas is not None:
-        sq = [np.nan_to_num(np.asarray(v, float)[good] ** 2, nan=np.inf) for v in sigmas]
+        sigmas = tuple(np.asarray(v, float)[good] for v in sigmas)
     if points.shape[0] == 0:
         raise ValueError("rasterize: no valid 3D point")
     if epsg is None:
         lon, lat = np.median(points[:, 0]), np.median(points[:, 1])
         epsg = local_utm_epsg(float(lon), float(lat))
-    xyh = to_map(points, epsg)
+    x, y = _transformer(4326, epsg).transform(points[:, 0], points[:, 1])
+    xyh = (np.asarray(x, float), np.asarray(y, float), np.ascontiguousarray(points[:, 2]))
+    return rasterize_map(xyh, res_m, epsg, origin, shape, footprint_m, max_hole_m, sigmas)
+
+
+def rasterize_map(
+    xyh: tuple[np.ndarray, np.ndarray, np.ndarray],
+    res_m: float,
+    epsg: int,
+    origin: tuple[float, float] | None = None,
+    shape: tuple[int, int] | None = None,
+    footprint_m: float | None = None,
+    max_hole_m: float = MAX_HOLE_M,
+    sigmas: tuple[np.ndarray, np.ndarray] | None = None,
+) -> DSMGrid:
+    """:func:`rasterize` of points already in the map CRS ``epsg``: ``xyh`` their columns x, y
+    (m) and h (m), all finite (a tile projects its points once, to keep those of its box)."""
+    x, y, h = xyh
     if origin is None:
         origin = (
-            float(np.floor(xyh[:, 0].min() / res_m) * res_m),
-            float(np.ceil(xyh[:, 1].max() / res_m) * res_m),
+            float(np.floor(x.min() / res_m) * res_m),
+            float(np.ceil(y.max() / res_m) * res_m),
         )
     x0, y0 = origin
     if shape is None:
         shape = (
-            int(np.ceil((y0 - xyh[:, 1].min()) / res_m)) + 1,
-            int(np.ceil((xyh[:, 0].max() - x0) / res_m)) + 1,
+            int(np.ceil((y0 - y.min()) / res_m)) + 1,
+            int(np.ceil((x.max() - x0) / res_m)) + 1,
         )
     rows, cols = shape
-    col = np.floor((xyh[:, 0] - x0) / res_m).astype(np.int64)
-    row = np.floor((y0 - xyh[:, 1]) / res_m).astype(np.int64)
+    col = np.floor((x - x0) / res_m).astype(np.int64)
+    row = np.floor((y0 - y) / res_m).astype(np.int64)
     inside = (row >= 0) & (row < rows) & (col >= 0) & (col < cols)
-    median, count, spread = _median_per_cell(
-        row[inside] * cols + col[inside], xyh[inside, 2], rows * cols
-    )
+    every = bool(inside.all())  # a tile's points: no copy of a million rows
+
+    def kept(values):
+        return values if every else values[inside]
+
+    cell = kept(row) * cols + kept(col)
+    median, count, spread = _median_per_cell(cell, kept(h), rows * cols)
     height, count, spread = (a.reshape(shape) for a in (median, count, spread))
     extra = []
     if sigmas is not None:
-        cell = row[inside] * cols + col[inside]
-        n = np.maximum(np.bincount(cell, minlength=rows * cols), 1)
-        for v in sq:
-            mean_sq = np.bincount(cell, v[inside], rows * cols) / n
-            extra.append((mean_sq.reshape(shape), v))
+        n = np.maximum(count.ravel(), 1)
+        for v in sigmas:
+            sq = np.nan_to_num(np.asarray(v, float) ** 2, nan=np.inf)
+            mean_sq = np.bincount(cell, kept(sq), rows * cols) / n
+            extra.append((mean_sq.reshape(shape), sq))
     if footprint_m is None:
-        footprint_m = point_spacing(xyh[inside, :2])
+        footprint_m = spacing_xy(kept(x), kept(y))
     if footprint_m > 0 and np.isfinite(height).any():
         _footprint_fill((height, count, spread), xyh, (x0, y0), res_m, float(footprint_m),
-                        extra=extra)  # fmt: skip
+                        extra=extra, cells=(row, col, cell if every else None))  # fmt: skip
     sigma = None
     if sigmas is not None:
         sigma = cell_sigma(extra[0][0], extra[1][0], spread, count, height, res_m)

@@ -36,15 +36,14 @@ from ..io.internal import file_id
 from ..models import AbstractSensorModel
 from ..tiles import RasterSpec, Tile, TilePlan, plan_tiles
 from ..tiles.internal import NoData, cores, overview_factors, write_tile
+from ._binning import map_points_in_box, spacing_xy
 from ._dem_check import check_dem, window_tie_ground
 from ._dsm import (
     DSM_BANDS,
     dsm_band_tags,
     dsm_grid,
     local_utm_epsg,
-    point_spacing,
-    rasterize,
-    to_map,
+    rasterize_map,
 )
 from ._pipeline import _height_offsets, dsm_from_images, image_size, stereo_pair
 from ._settings import DEFAULT_DSM, DSMSettings
@@ -135,36 +134,35 @@ class DSMJob:
             except (StereoError, TieError) as err:  # nothing to match here: the others may
                 pairs.append({"image": name, "failed": " ".join(str(err).split())})
                 continue
-            with stage("rasterisation"):
-                xyh = to_map(pair.points, self.epsg)
-                inside = (np.all(np.isfinite(xyh), axis=1) & (xyh[:, 0] >= xmin)
-                          & (xyh[:, 0] < xmax) & (xyh[:, 1] >= ymin)
-                          & (xyh[:, 1] < ymax))  # fmt: skip
+            with stage("rasterisation"):  # projected once: the box's points, kept in map m
+                idx, xyh = map_points_in_box(pair.points, self.epsg, (xmin, ymin, xmax, ymax))
                 # a point's footprint is its own pair's spacing (:func:`_spacing`)
-                spacings.append(point_spacing(xyh[inside, :2]) if inside.sum() > 1 else 0.0)
-            kept.append(pair.points[inside])
-            sigmas.append((pair.match_sigma_m[inside], pair.orientation_sigma_m[inside]))
-            pairs.append({"image": name, **_small(pair.stats), "points": int(inside.sum())})
-        usable = [k for k, p in enumerate(kept) if len(p)]
+                spacings.append(spacing_xy(xyh[0], xyh[1]) if idx.size > 1 else 0.0)
+                kept.append((pair.points, idx, xyh))
+                sigmas.append((pair.match_sigma_m[idx], pair.orientation_sigma_m[idx]))
+            pairs.append({"image": name, **_small(pair.stats), "points": int(idx.size)})
+        usable = [k for k, p in enumerate(kept) if p[1].size]
         if not usable:
             reasons = "; ".join(f"{p['image']}: {p['failed']}" for p in pairs if "failed" in p)
             raise NoData(reasons or "no point of any pair falls in this tile")
         kept = [kept[k] for k in usable]
         sigmas = [sigmas[k] for k in usable]
         with stage("rasterisation"):
+            heights = [xyh[2] for _, _, xyh in kept]
             if self.settings.register and len(kept) > 1:
-                offsets = _height_offsets(kept, self.res_m, self.epsg)
-                for pts, off in zip(kept, offsets, strict=True):
-                    pts[:, 2] -= off
+                offsets = _height_offsets([p[i] for p, i, _ in kept], self.res_m, self.epsg)
+                heights = [h - off for h, off in zip(heights, offsets, strict=True)]
             pad = int(math.ceil(self.margin_m / self.res_m))
             x0 = self.x0 + (tile.col - pad) * self.res_m
             y0 = self.y0 - (tile.row - pad) * self.res_m
-            dsm = rasterize(
-                np.concatenate(kept), self.res_m, epsg=self.epsg, origin=(x0, y0),
+            dsm = rasterize_map(
+                (_joined([xyh[0] for _, _, xyh in kept]), _joined([xyh[1] for _, _, xyh in kept]),
+                 _joined(heights)),
+                self.res_m, self.epsg, origin=(x0, y0),
                 shape=(tile.rows + 2 * pad, tile.cols + 2 * pad),
                 footprint_m=max(spacings[k] for k in usable),
                 max_hole_m=self.settings.max_hole_m,
-                sigmas=tuple(np.concatenate(s) for s in zip(*sigmas, strict=True)),
+                sigmas=tuple(_joined(s) for s in zip(*sigmas, strict=True)),
             )  # fmt: skip
             bands = np.stack([b[pad : pad + tile.rows, pad : pad + tile.cols]
                               for b in dsm.bands().values()])  # fmt: skip
@@ -175,6 +173,11 @@ class DSMJob:
             write_tile(path, self.spec, tile.row, tile.col, bands)
         return {"valid_px": valid, "filled_px": int((bands[3] == 1).sum()),
                 "window": list(roi), "pairs": pairs}  # fmt: skip
+
+
+def _joined(arrays: Sequence[np.ndarray]) -> np.ndarray:
+    """The arrays end to end (one array itself: no copy of a million values)."""
+    return arrays[0] if len(arrays) == 1 else np.concatenate(arrays)
 
 
 def _small(stats: dict) -> dict:
