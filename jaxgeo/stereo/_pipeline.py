@@ -282,19 +282,27 @@ def stereo_pair(
         r1 = min(r0 + band, rows_e)
         disp, disp_sigma, valid_l, images = dense.band(r0, r1, keep)
         with stage("triangulation"):
-            ye, xe = np.mgrid[r0:r1, x0:x1].astype(float)
-            xl = grids.to_sensor("left", np.stack([xe, ye], axis=-1))
-            in_roi = valid_l & _in_window(xl.reshape(-1, 2), roi).reshape(xe.shape)
+            # the band's mesh row block by row block, then only the matched pixels: no
+            # (pixels, 2) float64 mesh per band
+            xl = grids.mesh_to_sensor("left", np.arange(x0, x1, dtype=float),
+                                      np.arange(r0, r1, dtype=float))  # fmt: skip
+            in_roi = valid_l & _in_window(xl.reshape(-1, 2), roi).reshape(valid_l.shape)
             n_valid += int(in_roi.sum())
             sel = np.isfinite(disp) & in_roi
             n_disp += int(sel.sum())
-            xr_e = xe[sel] + disp[sel]
-            yr_e = ye[sel] + y_shift_at(shift, xr_e, ye[sel])
-            xr, along = grids.along("right", np.stack([xr_e, yr_e], axis=-1))
+            row, col = np.nonzero(sel)
+            epi = np.empty((len(row), 3))
+            epi[:, 0], epi[:, 1], epi[:, 2] = col + x0, row + r0, disp[sel]
+            right_e = np.empty((len(row), 2))
+            right_e[:, 0] = epi[:, 0] + epi[:, 2]
+            right_e[:, 1] = epi[:, 1] + y_shift_at(shift, right_e[:, 0], epi[:, 1])
+            pair = np.empty((len(row), 2, 2))
+            pair[:, 0] = xl[sel]
+            pair[:, 1], along = grids.along("right", right_e)
             direction.append(along)
             sigma_d.append(disp_sigma[sel])
-            matches.append(np.stack([xl[sel], xr], axis=1))
-            epipolar.append(np.stack([xe[sel], ye[sel], disp[sel]], axis=-1))
+            matches.append(pair)
+            epipolar.append(epi)
         if keep:
             kept.append((disp, *images))
         if on_band is not None:
@@ -310,13 +318,16 @@ def stereo_pair(
                 method)  # fmt: skip
             stats.update(triangulation_lattice_error_m=lattice.check_error_m,
                          triangulation_lattice=lattice.usable)  # fmt: skip
-        points, sigma_h = triangulate_disparities((ref, sec), lattice, epipolar, matches, method)
+        points, sigma_h, up = triangulate_disparities(
+            (ref, sec), lattice, epipolar, matches, method, up_jacobian=True
+        )
         stats.update(drop_outside_validity(points, (ref, sec), paths))
     lap("triangulation")
     with stage("sigma"):
         match_sigma, orient_sigma = point_height_sigmas(
-            (ref, sec), points, np.concatenate(direction), np.concatenate(sigma_d), orientation
-        )
+            (ref, sec), points, np.concatenate(direction), np.concatenate(sigma_d), orientation,
+            up_jacobian=up,
+        )  # fmt: skip
     if np.isfinite(match_sigma).any():
         stats["median_match_sigma_px"] = float(np.nanmedian(np.concatenate(sigma_d)))
         stats["median_match_sigma_h_m"] = float(np.nanmedian(match_sigma))

@@ -29,6 +29,7 @@ from ..geodesy import ecef_to_geodetic, geodetic_to_ecef
 from ..intersect import IntersectResult, intersect
 from ..models import AbstractSensorModel
 from ._rectification import EpipolarGrids
+from ._uncertainty import intersection_jacobian
 
 VALIDITY_MARGIN = 0.1
 """How far past its RPC's validity cube a 3D point still counts as inside, in cube half-widths
@@ -244,6 +245,13 @@ centres of its cells, where a trilinear interpolation errs most) for it to be us
 every point is triangulated on its own."""
 LATTICE_CHECKS = 2048
 """Cell centres whose exact triangulation checks the lattice (at most; spread over its cells)."""
+JACOBIAN_TOL = 1e-3
+"""Largest relative error (of the vector's norm) of the lattice's interpolated ``d up / d xy``
+(:func:`~jaxgeo.stereo._uncertainty.intersection_jacobian`) at its check points for it to be
+used by the height sigmas (0.1 %: the sigmas to well under 1 %); beyond it the sigmas take the
+Jacobian point by point."""
+LATTICE_BLOCK = 4096
+"""Points per block of :meth:`DisparityLattice.interpolate` (its temporaries stay in cache)."""
 
 
 @dataclass(frozen=True)
@@ -255,42 +263,66 @@ class DisparityLattice:
     Why: a 1 Mpx tile has a million matches, and a million Gauss-Newton intersections cost
     seconds (the tile's largest stage), while the point is a smooth function of ``(xe, ye, d)``:
     the grids are bilinear between their nodes (the lattice's ``xe``, ``ye`` nodes are theirs)
-    and the models smooth over a node step. ``values`` ``(nd, ny, nx, 4)``: lon, lat, h minus
-    those of ``centre`` (deg, deg, m: small numbers, interpolated in float64 to 1e-12) and the
-    intersection's height sigma (m; NaN for ``los_midpoint``) at the nodes ``origin + index *
-    step`` (``(xe, ye, d)`` px); ``check_error_m``: the largest difference (m) between the
-    interpolation and the exact triangulation at the check points."""
+    and the models smooth over a node step. So is the intersection's sensitivity to the image
+    coordinates, which the height sigma needs per point (a ``jacfwd`` per point cost as much as
+    the intersections). ``values`` ``(nd, ny, nx, 4 + 2 N)``: lon, lat, h minus those of
+    ``centre`` (deg, deg, m: small numbers, interpolated in float64 to 1e-12), the
+    intersection's height sigma (m; NaN for ``los_midpoint``) and ``d up / d (x, y)`` of each of
+    the ``N`` images (m/px, image-major) at the nodes ``origin + index * step`` (``(xe, ye, d)``
+    px); ``check_error_m``: the largest difference (m) between the interpolation and the exact
+    triangulation at the check points; ``jacobian_check_error``: the largest relative error of
+    the interpolated ``d up / d xy`` there."""
 
     origin: tuple[float, float, float]
     step: tuple[float, float, float]
     centre: np.ndarray
     values: np.ndarray
     check_error_m: float
+    jacobian_check_error: float = float("inf")
 
     @property
     def usable(self) -> bool:
         return bool(self.check_error_m <= LATTICE_TOL_M)
 
-    def _coords(self, xe, ye, d):
-        """Fractional node indices ``(3, n)`` in the array order ``(d, ye, xe)``."""
-        (x0, y0, d0), (sx, sy, sd) = self.origin, self.step
-        return np.stack([(np.asarray(d, float) - d0) / sd, (np.asarray(ye, float) - y0) / sy,
-                         (np.asarray(xe, float) - x0) / sx])  # fmt: skip
+    @property
+    def jacobian_usable(self) -> bool:
+        return bool(self.usable and self.jacobian_check_error <= JACOBIAN_TOL)
 
     def interpolate(self, xe, ye, d) -> np.ndarray:
-        """``(n, 4)`` lon, lat, h minus ``centre``'s and the height sigma at ``(n,)``
-        epipolar points; NaN outside the lattice or next to a node without a point."""
-        from scipy.ndimage import map_coordinates
+        """``(n, 4 + 2 N)`` lon, lat, h minus ``centre``'s, the height sigma and ``d up / d xy``
+        at ``(n,)`` epipolar points; NaN outside the lattice or next to a node without a point.
 
-        coords = self._coords(xe, ye, d)
-        inside = np.all((coords >= 0) & (coords <= np.array(self.values.shape[:3])[:, None] - 1),
-                        axis=0)  # fmt: skip
-        out = np.full((coords.shape[1], 4), np.nan)
-        if inside.any():
-            c = coords[:, inside]
-            out[inside] = np.stack([map_coordinates(self.values[..., k], c, order=1,
-                                                    mode="nearest", prefilter=False)
-                                    for k in range(4)], axis=-1)  # fmt: skip
+        One pass for every channel, in blocks of :data:`LATTICE_BLOCK` points: the eight corner
+        weights are computed once per point (``map_coordinates`` per channel recomputed them
+        and made 1e6-row temporaries)."""
+        xe, ye, d = (np.asarray(a, dtype=float).reshape(-1) for a in (xe, ye, d))
+        (x0, y0, d0), (sx, sy, sd) = self.origin, self.step
+        nd, ny, nx, k = self.values.shape
+        flat = self.values.reshape(-1, k)
+        out = np.full((len(xe), k), np.nan)
+        for s in range(0, len(xe), LATTICE_BLOCK):
+            part = slice(s, s + LATTICE_BLOCK)
+            u = [(d[part] - d0) / sd, (ye[part] - y0) / sy, (xe[part] - x0) / sx]
+            inside = np.ones(len(u[0]), bool)
+            for c, size in zip(u, (nd, ny, nx), strict=True):
+                inside &= (c >= 0) & (c <= size - 1)
+            if not inside.any():
+                continue
+            u = [c[inside] for c in u]
+            # the cell below each point (the last cell for a point on the upper face)
+            cell = [np.minimum(c.astype(np.intp), max(size - 2, 0))
+                    for c, size in zip(u, (nd, ny, nx), strict=True)]  # fmt: skip
+            f = [(c - i)[:, None] for c, i in zip(u, cell, strict=True)]
+            idx = (cell[0] * ny + cell[1]) * nx + cell[2]
+            corner = {}
+            for a in (0, 1):
+                for b in (0, 1):
+                    lo = flat.take(idx + (a * ny + b) * nx, axis=0)
+                    hi = flat.take(idx + (a * ny + b) * nx + 1, axis=0)
+                    corner[a, b] = lo + (hi - lo) * f[2]
+            lo = corner[0, 0] + (corner[0, 1] - corner[0, 0]) * f[1]
+            hi = corner[1, 0] + (corner[1, 1] - corner[1, 0]) * f[1]
+            out[np.flatnonzero(inside) + s] = lo + (hi - lo) * f[0]
         return out
 
     def points(self, xe, ye, d) -> tuple[np.ndarray, np.ndarray]:
@@ -354,19 +386,23 @@ def disparity_lattice(
     if not finite.any():
         raise StereoError("stereo: no node of the triangulation lattice triangulates")
     centre = np.median(ground[finite], axis=0)
-    offsets = np.column_stack([ground - centre, sigma])
+    # d up / d xy at the nodes and the check points (NaN-padded chunks: one compiled shape)
+    up = intersection_jacobian(models, ground, chunk=LATTICE_CHUNK)[:, 2]
+    offsets = np.column_stack([ground - centre, sigma, up.reshape(len(ground), -1)])
     n = len(x)
-    values = offsets[:n].reshape(len(ds), len(ys), len(xs), 4)
+    values = offsets[:n].reshape(len(ds), len(ys), len(xs), offsets.shape[1])
     lattice = DisparityLattice((float(xs[0]), float(ys[0]), float(ds[0])),
                                (float(step), float(step), float(dstep)), centre, values,
                                float("inf"))  # fmt: skip
-    got = lattice.interpolate(cx, cy, cd)[:, :3]
-    both = np.all(np.isfinite(got), axis=1) & finite[n:]
-    diff = (got[both] - offsets[n:][both, :3]) * _metres_per_unit(centre)
-    error = float(np.max(np.abs(diff), initial=0.0))
-    if not both.any():
-        error = float("inf")
-    return dataclasses.replace(lattice, check_error_m=error)
+    got, exact = lattice.interpolate(cx, cy, cd), offsets[n:]
+    both = np.all(np.isfinite(got[:, :3]), axis=1) & finite[n:]
+    diff = (got[both, :3] - exact[both, :3]) * _metres_per_unit(centre)
+    error = float(np.max(np.abs(diff), initial=0.0)) if both.any() else float("inf")
+    both &= np.all(np.isfinite(got[:, 4:]), axis=1) & np.all(np.isfinite(exact[:, 4:]), axis=1)
+    norm = np.linalg.norm(exact[both, 4:], axis=1)
+    rel = np.linalg.norm(got[both, 4:] - exact[both, 4:], axis=1) / norm
+    jac_error = float(np.max(rel, initial=0.0)) if both.any() else float("inf")
+    return dataclasses.replace(lattice, check_error_m=error, jacobian_check_error=jac_error)
 
 
 def triangulate_disparities(
@@ -375,18 +411,31 @@ def triangulate_disparities(
     epipolar: np.ndarray,
     matches: np.ndarray,
     method: str = "intersect",
-) -> tuple[np.ndarray, np.ndarray]:
+    up_jacobian: bool = False,
+) -> tuple[np.ndarray, ...]:
     """Points ``(n, 3)`` and height sigmas ``(n,)`` of dense matches: ``epipolar`` ``(n, 3)``
     their left epipolar ``(xe, ye)`` and disparity, ``matches`` ``(n, 2, 2)`` their left and
     right sensor points. Interpolated in ``lattice`` when it is usable, triangulated one by
-    one (:func:`triangulate`) otherwise and where the lattice has no value."""
+    one (:func:`triangulate`) otherwise and where the lattice has no value.
+
+    ``up_jacobian``: also return the ``(n, 2, 2)`` ``d up / d xy`` of each point for
+    :func:`~jaxgeo.stereo._uncertainty.point_height_sigmas`, interpolated in the lattice when
+    its check passed (:data:`JACOBIAN_TOL`), NaN elsewhere (computed there per point)."""
     n = len(matches)
+    none = (np.full((n, 2, 2), np.nan),) if up_jacobian else ()
     if n == 0:
-        return np.zeros((0, 3)), np.zeros(0)
+        return (np.zeros((0, 3)), np.zeros(0), *none)
     if lattice is None or not lattice.usable:
-        return _exact(models, matches, method)
-    points, sigma = lattice.points(epipolar[:, 0], epipolar[:, 1], epipolar[:, 2])
+        return (*_exact(models, matches, method), *none)
+    value = lattice.interpolate(epipolar[:, 0], epipolar[:, 1], epipolar[:, 2])
+    points, sigma = value[:, :3] + lattice.centre, value[:, 3]
     missing = ~np.all(np.isfinite(points), axis=1) & np.all(np.isfinite(matches), axis=(1, 2))
     if missing.any():
         points[missing], sigma[missing] = _exact(models, matches[missing], method)
-    return points, sigma
+    if not up_jacobian:
+        return points, sigma
+    if not lattice.jacobian_usable:
+        return (points, sigma, *none)
+    up = value[:, 4:].reshape(n, 2, 2)
+    up[missing] = np.nan
+    return points, sigma, up
