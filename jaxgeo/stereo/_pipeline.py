@@ -276,7 +276,20 @@ def stereo_pair(
     starts = list(range(0, rows_e, band))
     dense = BandMatcher((img1, img2), (data_win[:2], win2[:2]), grids, shift, (x0, x1), lims,
                         (dmin, dmax), settings.sgm)  # fmt: skip
-    matches, kept, n_valid, n_disp = [], [], 0, 0
+    kept, n_valid, n_disp = [], 0, 0
+
+    def right_epipolar(epi):  # the right epipolar point of (xe, ye, d), vertical shift included
+        right = np.empty((len(epi), 2))
+        right[:, 0] = epi[:, 0] + epi[:, 2]
+        right[:, 1] = epi[:, 1] + y_shift_at(shift, right[:, 0], epi[:, 1])
+        return right
+
+    def matches_of(rows):  # sensor points of the matches the lattice does not answer
+        pair = np.empty((len(rows), 2, 2))
+        pair[:, 0] = grids.to_sensor("left", epipolar[rows, :2])
+        pair[:, 1] = grids.to_sensor("right", right_epipolar(epipolar[rows]))
+        return pair
+
     epipolar, sigma_d, direction = [], [], []
     for k, r0 in enumerate(starts):
         r1 = min(r0 + band, rows_e)
@@ -293,15 +306,8 @@ def stereo_pair(
             row, col = np.nonzero(sel)
             epi = np.empty((len(row), 3))
             epi[:, 0], epi[:, 1], epi[:, 2] = col + x0, row + r0, disp[sel]
-            right_e = np.empty((len(row), 2))
-            right_e[:, 0] = epi[:, 0] + epi[:, 2]
-            right_e[:, 1] = epi[:, 1] + y_shift_at(shift, right_e[:, 0], epi[:, 1])
-            pair = np.empty((len(row), 2, 2))
-            pair[:, 0] = xl[sel]
-            pair[:, 1], along = grids.along("right", right_e)
-            direction.append(along)
+            direction.append(grids.along("right", right_epipolar(epi))[1])
             sigma_d.append(disp_sigma[sel])
-            matches.append(pair)
             epipolar.append(epi)
         if keep:
             kept.append((disp, *images))
@@ -310,7 +316,7 @@ def stereo_pair(
     stats.update(disparity_fill=float(n_disp / max(n_valid, 1)), n_bands=len(starts))
     lap("sgm")
     with stage("triangulation"):
-        epipolar, matches, lattice = np.concatenate(epipolar), np.concatenate(matches), None
+        epipolar, lattice = np.concatenate(epipolar), None
         if len(epipolar) >= MIN_LATTICE_POINTS:  # the points interpolated between exact nodes
             d, y_of = epipolar[:, 2], lambda xe, ye: ye + y_shift_at(shift, xe, ye)
             lattice = disparity_lattice((ref, sec), grids, lambda xe, ye: np.stack(
@@ -319,7 +325,7 @@ def stereo_pair(
             stats.update(triangulation_lattice_error_m=lattice.check_error_m,
                          triangulation_lattice=lattice.usable)  # fmt: skip
         points, sigma_h, up = triangulate_disparities(
-            (ref, sec), lattice, epipolar, matches, method, up_jacobian=True
+            (ref, sec), lattice, epipolar, matches_of, method, up_jacobian=True
         )
         stats.update(drop_outside_validity(points, (ref, sec), paths))
     lap("triangulation")

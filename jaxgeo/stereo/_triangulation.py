@@ -17,7 +17,7 @@ both go through the rectification grids to sensor coordinates.
 from __future__ import annotations
 
 import dataclasses
-from collections.abc import Sequence
+from collections.abc import Callable, Sequence
 from dataclasses import dataclass
 
 import jax
@@ -36,6 +36,10 @@ VALIDITY_MARGIN = 0.1
 (most points outside: the model does not fit the images)."""
 BLUNDER_MARGIN = 0.5
 """How far past the validity cube a single 3D point is dropped as a blunder (half-widths)."""
+
+
+EXCESS_BLOCK = 16384
+"""Points per block of :func:`_validity_excess` (a DSM tile checks a million points per model)."""
 
 
 class StereoError(JaxgeoError, ValueError):
@@ -62,7 +66,12 @@ def _validity_excess(points: np.ndarray, model: AbstractSensorModel) -> np.ndarr
         return np.where(np.all(np.isfinite(points), axis=-1), 0.0, np.nan)
     offset = np.asarray(rpc.ground_offset, dtype=float)
     scale = np.abs(np.asarray(rpc.ground_scale, dtype=float))
-    return np.max(np.abs(points - offset) / scale, axis=-1)
+    flat = points.reshape(-1, 3)
+    out = np.empty(flat.shape[0])
+    for s in range(0, flat.shape[0], EXCESS_BLOCK):  # temporaries in cache, not 1e6 x 3
+        out[s : s + EXCESS_BLOCK] = np.max(np.abs(flat[s : s + EXCESS_BLOCK] - offset) / scale,
+                                           axis=-1)  # fmt: skip
+    return out.reshape(points.shape[:-1])
 
 
 def describe_validity(model: AbstractSensorModel) -> str:
@@ -290,7 +299,19 @@ class DisparityLattice:
 
     def interpolate(self, xe, ye, d) -> np.ndarray:
         """``(n, 4 + 2 N)`` lon, lat, h minus ``centre``'s, the height sigma and ``d up / d xy``
-        at ``(n,)`` epipolar points; NaN outside the lattice or next to a node without a point.
+        at ``(n,)`` epipolar points; NaN outside the lattice or next to a node without a point
+        (:meth:`blocks`)."""
+        xe = np.asarray(xe, dtype=float).reshape(-1)
+        out = np.full((len(xe), self.values.shape[-1]), np.nan)
+        for rows, value in self.blocks(xe, ye, d):
+            out[rows] = value
+        return out
+
+    def blocks(self, xe, ye, d):
+        """The trilinear interpolation of :meth:`interpolate` block by block: yields ``(rows,
+        values)``, the indices of a block's points inside the lattice and their ``(m, 4 + 2
+        N)`` values, so that a caller writes each channel where it belongs (a 1 Mpx tile's
+        ``(n, 8)`` float64 array and its copies cost page faults).
 
         One pass for every channel, in blocks of :data:`LATTICE_BLOCK` points: the eight corner
         weights are computed once per point (``map_coordinates`` per channel recomputed them
@@ -299,7 +320,6 @@ class DisparityLattice:
         (x0, y0, d0), (sx, sy, sd) = self.origin, self.step
         nd, ny, nx, k = self.values.shape
         flat = self.values.reshape(-1, k)
-        out = np.full((len(xe), k), np.nan)
         for s in range(0, len(xe), LATTICE_BLOCK):
             part = slice(s, s + LATTICE_BLOCK)
             u = [(d[part] - d0) / sd, (ye[part] - y0) / sy, (xe[part] - x0) / sx]
@@ -322,8 +342,7 @@ class DisparityLattice:
                     corner[a, b] = lo + (hi - lo) * f[2]
             lo = corner[0, 0] + (corner[0, 1] - corner[0, 0]) * f[1]
             hi = corner[1, 0] + (corner[1, 1] - corner[1, 0]) * f[1]
-            out[np.flatnonzero(inside) + s] = lo + (hi - lo) * f[0]
-        return out
+            yield np.flatnonzero(inside) + s, lo + (hi - lo) * f[0]
 
     def points(self, xe, ye, d) -> tuple[np.ndarray, np.ndarray]:
         """``(n, 3)`` lon/lat/h and ``(n,)`` height sigmas (m) at epipolar points (NaN where
@@ -409,33 +428,41 @@ def triangulate_disparities(
     models: Sequence[AbstractSensorModel],
     lattice: DisparityLattice | None,
     epipolar: np.ndarray,
-    matches: np.ndarray,
+    matches: np.ndarray | Callable[[np.ndarray], np.ndarray],
     method: str = "intersect",
     up_jacobian: bool = False,
 ) -> tuple[np.ndarray, ...]:
     """Points ``(n, 3)`` and height sigmas ``(n,)`` of dense matches: ``epipolar`` ``(n, 3)``
     their left epipolar ``(xe, ye)`` and disparity, ``matches`` ``(n, 2, 2)`` their left and
-    right sensor points. Interpolated in ``lattice`` when it is usable, triangulated one by
-    one (:func:`triangulate`) otherwise and where the lattice has no value.
+    right sensor points, or a function of row indices ``(m,)`` giving those rows' ``(m, 2,
+    2)`` (made then only for the points the lattice does not answer: a 1 Mpx tile's matches
+    are 32 MB). Interpolated in ``lattice`` when it is usable, triangulated one by one
+    (:func:`triangulate`) otherwise and where the lattice has no value.
 
     ``up_jacobian``: also return the ``(n, 2, 2)`` ``d up / d xy`` of each point for
     :func:`~jaxgeo.stereo._uncertainty.point_height_sigmas`, interpolated in the lattice when
     its check passed (:data:`JACOBIAN_TOL`), NaN elsewhere (computed there per point)."""
-    n = len(matches)
+    n = len(epipolar)
+    if callable(matches):
+        matches_of, known = matches, np.all(np.isfinite(epipolar), axis=1)
+    else:
+        matches_of, known = matches.__getitem__, np.all(np.isfinite(matches), axis=(1, 2))
     none = (np.full((n, 2, 2), np.nan),) if up_jacobian else ()
     if n == 0:
         return (np.zeros((0, 3)), np.zeros(0), *none)
     if lattice is None or not lattice.usable:
-        return (*_exact(models, matches, method), *none)
-    value = lattice.interpolate(epipolar[:, 0], epipolar[:, 1], epipolar[:, 2])
-    points, sigma = value[:, :3] + lattice.centre, value[:, 3]
-    missing = ~np.all(np.isfinite(points), axis=1) & np.all(np.isfinite(matches), axis=(1, 2))
+        return (*_exact(models, matches_of(np.arange(n)), method), *none)
+    points, sigma = np.full((n, 3), np.nan), np.full(n, np.nan)
+    up = none[0] if up_jacobian and lattice.jacobian_usable else None
+    for rows, value in lattice.blocks(epipolar[:, 0], epipolar[:, 1], epipolar[:, 2]):
+        points[rows] = value[:, :3] + lattice.centre
+        sigma[rows] = value[:, 3]
+        if up is not None:
+            up[rows] = value[:, 4:].reshape(-1, 2, 2)
+    missing = ~np.all(np.isfinite(points), axis=1) & known
     if missing.any():
-        points[missing], sigma[missing] = _exact(models, matches[missing], method)
-    if not up_jacobian:
-        return points, sigma
-    if not lattice.jacobian_usable:
-        return (points, sigma, *none)
-    up = value[:, 4:].reshape(n, 2, 2)
-    up[missing] = np.nan
-    return points, sigma, up
+        points[missing], sigma[missing] = _exact(models, matches_of(np.flatnonzero(missing)),
+                                                 method)  # fmt: skip
+        if up is not None:
+            up[missing] = np.nan
+    return (points, sigma, *none)

@@ -62,6 +62,8 @@ from ..models import AbstractSensorModel
 
 CHUNK = 65536
 FALLBACK_CHUNK = 16384
+SIGMA_BLOCK = 16384
+"""Points per block of :func:`point_height_sigmas`' products (temporaries that stay in cache)."""
 """Points per call of :func:`point_height_sigmas`' per-point Jacobians beside interpolated ones
 (NaN-padded: one compiled shape whatever their number, the triangulation lattice's)."""
 
@@ -303,20 +305,31 @@ def point_height_sigmas(
     lattice's nodes: :func:`~jaxgeo.stereo._triangulation.triangulate_disparities`); its NaN
     rows, or all rows when ``None``, are computed here point by point."""
     ground = np.asarray(ground, dtype=float).reshape(-1, 3)
+    n = ground.shape[0]
+    finite = np.all(np.isfinite(ground), axis=1)
     if up_jacobian is None:
         g = intersection_jacobian(models, ground)[:, 2]  # (n, N, 2): d up / d xy
-    else:
-        g = np.array(up_jacobian, dtype=float).reshape(ground.shape[0], len(models), 2)
-        finite = np.all(np.isfinite(ground), axis=1)
-        g[~finite] = np.nan  # a dropped point has no sigma
+        todo = np.zeros(n, bool)
+    else:  # read as given (no copy of a million rows); the rows it lacks computed below
+        g = np.asarray(up_jacobian, dtype=float).reshape(n, len(models), 2)
         todo = ~np.all(np.isfinite(g), axis=(1, 2)) & finite
-        if todo.any():
-            g[todo] = intersection_jacobian(models, ground[todo], FALLBACK_CHUNK)[:, 2]
-    match = np.abs(np.einsum("nc,nc->n", g[:, 1], direction_px)) * np.asarray(sigma_d_px)
+    direction_px = np.asarray(direction_px, dtype=float).reshape(n, 2)
+    sigma_d_px = np.asarray(sigma_d_px).reshape(n)  # float32 promoted per block
     cov = joint_covariance(orientation, len(models))
-    flat = g.reshape(g.shape[0], -1)
-    var = np.maximum(np.einsum("na,ab,nb->n", flat, cov, flat), 0.0)
-    orient = np.where(np.isfinite(match), np.sqrt(var), np.nan)
+    match, orient = np.empty(n), np.empty(n)
+
+    def fill(rows, g):
+        flat = g.reshape(g.shape[0], -1)
+        match[rows] = np.abs(np.einsum("nc,nc->n", g[:, 1], direction_px[rows])) * sigma_d_px[rows]
+        orient[rows] = np.sqrt(np.maximum(np.einsum("na,na->n", flat @ cov, flat), 0.0))
+
+    for s in range(0, n, SIGMA_BLOCK):  # temporaries in cache, not 1e6 x 4
+        fill(slice(s, s + SIGMA_BLOCK), g[s : s + SIGMA_BLOCK])
+    if todo.any():
+        rows = np.flatnonzero(todo)
+        fill(rows, intersection_jacobian(models, ground[rows], FALLBACK_CHUNK)[:, 2])
+    match[~finite] = np.nan  # a dropped point has no sigma
+    orient[~np.isfinite(match)] = np.nan
     return match, orient
 
 

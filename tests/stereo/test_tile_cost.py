@@ -84,6 +84,13 @@ def test_points_the_lattice_cannot_answer_are_triangulated_one_by_one(pair):
     points, _ = triangulate_disparities(models, lattice, epi, matches)
     assert np.isnan(lattice.interpolate(epi[:20, 0], epi[:20, 1], epi[:20, 2])).all()
     np.testing.assert_allclose(points, exact, atol=1e-7)
+    # the matches made on demand (the pipeline's), only for the points the lattice lacks
+    asked = []
+    lazy, _ = triangulate_disparities(
+        models, lattice, epi, lambda rows: asked.append(rows) or matches[rows]
+    )
+    np.testing.assert_array_equal(lazy, points)
+    assert len(np.concatenate(asked)) < 40 and set(range(20)) <= set(np.concatenate(asked))
     # a lattice failing its check is not used at all: every point on its own
     import dataclasses
 
