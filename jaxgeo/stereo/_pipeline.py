@@ -284,12 +284,6 @@ def stereo_pair(
         right[:, 1] = epi[:, 1] + y_shift_at(shift, right[:, 0], epi[:, 1])
         return right
 
-    def matches_of(rows):  # sensor points of the matches the lattice does not answer
-        pair = np.empty((len(rows), 2, 2))
-        pair[:, 0] = grids.to_sensor("left", epipolar[rows, :2])
-        pair[:, 1] = grids.to_sensor("right", right_epipolar(epipolar[rows]))
-        return pair
-
     epipolar, sigma_d, direction = [], [], []
     for k, r0 in enumerate(starts):
         r1 = min(r0 + band, rows_e)
@@ -317,13 +311,21 @@ def stereo_pair(
     lap("sgm")
     with stage("triangulation"):
         epipolar, lattice = np.concatenate(epipolar), None
+
+        def matches_of(rows):  # sensor points of the matches the lattice does not answer
+            pair = np.empty((len(rows), 2, 2))
+            pair[:, 0] = grids.to_sensor("left", epipolar[rows, :2])
+            pair[:, 1] = grids.to_sensor("right", right_epipolar(epipolar[rows]))
+            return pair
+
         if len(epipolar) >= MIN_LATTICE_POINTS:  # the points interpolated between exact nodes
             d, y_of = epipolar[:, 2], lambda xe, ye: ye + y_shift_at(shift, xe, ye)
             lattice = disparity_lattice((ref, sec), grids, lambda xe, ye: np.stack(
                 [xe, y_of(xe, ye)], -1), (x0, x1, 0, rows_e), (float(d.min()), float(d.max())),
                 method)  # fmt: skip
             stats.update(triangulation_lattice_error_m=lattice.check_error_m,
-                         triangulation_lattice=lattice.usable)  # fmt: skip
+                         triangulation_lattice=lattice.usable,
+                         sigma_lattice_jacobian_error=lattice.jacobian_check_error)  # fmt: skip
         points, sigma_h, up = triangulate_disparities(
             (ref, sec), lattice, epipolar, matches_of, method, up_jacobian=True
         )
