@@ -69,8 +69,11 @@ def _validity_excess(points: np.ndarray, model: AbstractSensorModel) -> np.ndarr
     flat = points.reshape(-1, 3)
     out = np.empty(flat.shape[0])
     for s in range(0, flat.shape[0], EXCESS_BLOCK):  # temporaries in cache, not 1e6 x 3
-        out[s : s + EXCESS_BLOCK] = np.max(np.abs(flat[s : s + EXCESS_BLOCK] - offset) / scale,
-                                           axis=-1)  # fmt: skip
+        block, most = flat[s : s + EXCESS_BLOCK], out[s : s + EXCESS_BLOCK]
+        np.abs(block[:, 0] - offset[0], out=most)
+        most /= scale[0]
+        for k in (1, 2):  # NaN propagates through np.maximum
+            np.maximum(most, np.abs(block[:, k] - offset[k]) / scale[k], out=most)
     return out.reshape(points.shape[:-1])
 
 
@@ -447,7 +450,8 @@ def triangulate_disparities(
         matches_of, known = matches, np.all(np.isfinite(epipolar), axis=1)
     else:
         matches_of, known = matches.__getitem__, np.all(np.isfinite(matches), axis=(1, 2))
-    none = (np.full((n, 2, 2), np.nan),) if up_jacobian else ()
+    # float32: d up / d xy to 1e-7 relative for sigmas, half the bytes of a 1 Mpx tile's array
+    none = (np.full((n, 2, 2), np.nan, np.float32),) if up_jacobian else ()
     if n == 0:
         return (np.zeros((0, 3)), np.zeros(0), *none)
     if lattice is None or not lattice.usable:

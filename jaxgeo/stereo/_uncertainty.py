@@ -311,7 +311,7 @@ def point_height_sigmas(
         g = intersection_jacobian(models, ground)[:, 2]  # (n, N, 2): d up / d xy
         todo = np.zeros(n, bool)
     else:  # read as given (no copy of a million rows); the rows it lacks computed below
-        g = np.asarray(up_jacobian, dtype=float).reshape(n, len(models), 2)
+        g = np.asarray(up_jacobian).reshape(n, len(models), 2)  # float32 promoted per block
         todo = ~np.all(np.isfinite(g), axis=(1, 2)) & finite
     direction_px = np.asarray(direction_px, dtype=float).reshape(n, 2)
     sigma_d_px = np.asarray(sigma_d_px).reshape(n)  # float32 promoted per block
