@@ -62,16 +62,16 @@ def resample_epipolar(
     rows, cols = grids.epipolar_shape
     x0, x1 = (0, cols) if x_range is None else x_range
     y0, y1 = (0, rows) if y_range is None else y_range
-    xs = np.arange(x0, x1, dtype=float)
-    xe, ye = np.meshgrid(xs, np.arange(y0, y1, dtype=float))
-    ye = ye + y_shift_at(y_shift_px, xe, ye)
-    sensor = grids.to_sensor(side, np.stack([xe, ye], axis=-1)) - np.asarray(origin_xy)
-    # maps relative to the window are small numbers: float32 keeps 1e-4 px
-    map_x = sensor[..., 0].astype(np.float32)
-    map_y = sensor[..., 1].astype(np.float32)
+    # maps relative to the window are small numbers: float32 keeps 1e-4 px (made row block by
+    # row block: no float64 mesh of the band)
+    sensor = grids.mesh_to_sensor(
+        side, np.arange(x0, x1, dtype=float), np.arange(y0, y1, dtype=float),
+        lambda xe, ye: ye + y_shift_at(y_shift_px, xe, ye), origin_xy, np.float32,
+    )  # fmt: skip
+    map_x, map_y = sensor[..., 0], sensor[..., 1]
     flag = {"linear": cv2.INTER_LINEAR, "cubic": cv2.INTER_CUBIC}[interpolation]
     src = np.asarray(image, dtype=np.float32)
-    out = cv2.remap(src, map_x, map_y, flag, borderMode=cv2.BORDER_CONSTANT, borderValue=np.nan)
+    out = cv2.remap(src, sensor, None, flag, borderMode=cv2.BORDER_CONSTANT, borderValue=np.nan)
     h, w = src.shape
     inside = (map_x >= -0.5) & (map_x <= w - 0.5) & (map_y >= -0.5) & (map_y <= h - 0.5)
     return np.where(inside, out, np.nan).astype(np.float32)

@@ -276,25 +276,33 @@ def stereo_pair(
     starts = list(range(0, rows_e, band))
     dense = BandMatcher((img1, img2), (data_win[:2], win2[:2]), grids, shift, (x0, x1), lims,
                         (dmin, dmax), settings.sgm)  # fmt: skip
-    matches, kept, n_valid, n_disp = [], [], 0, 0
+    kept, n_valid, n_disp = [], 0, 0
+
+    def right_epipolar(epi):  # the right epipolar point of (xe, ye, d), vertical shift included
+        right = np.empty((len(epi), 2))
+        right[:, 0] = epi[:, 0] + epi[:, 2]
+        right[:, 1] = epi[:, 1] + y_shift_at(shift, right[:, 0], epi[:, 1])
+        return right
+
     epipolar, sigma_d, direction = [], [], []
     for k, r0 in enumerate(starts):
         r1 = min(r0 + band, rows_e)
         disp, disp_sigma, valid_l, images = dense.band(r0, r1, keep)
         with stage("triangulation"):
-            ye, xe = np.mgrid[r0:r1, x0:x1].astype(float)
-            xl = grids.to_sensor("left", np.stack([xe, ye], axis=-1))
-            in_roi = valid_l & _in_window(xl.reshape(-1, 2), roi).reshape(xe.shape)
+            # the band's mesh row block by row block, then only the matched pixels: no
+            # (pixels, 2) float64 mesh per band
+            xl = grids.mesh_to_sensor("left", np.arange(x0, x1, dtype=float),
+                                      np.arange(r0, r1, dtype=float))  # fmt: skip
+            in_roi = valid_l & _in_window(xl.reshape(-1, 2), roi).reshape(valid_l.shape)
             n_valid += int(in_roi.sum())
             sel = np.isfinite(disp) & in_roi
             n_disp += int(sel.sum())
-            xr_e = xe[sel] + disp[sel]
-            yr_e = ye[sel] + y_shift_at(shift, xr_e, ye[sel])
-            xr, along = grids.along("right", np.stack([xr_e, yr_e], axis=-1))
-            direction.append(along)
+            row, col = np.nonzero(sel)
+            epi = np.empty((len(row), 3))
+            epi[:, 0], epi[:, 1], epi[:, 2] = col + x0, row + r0, disp[sel]
+            direction.append(grids.along("right", right_epipolar(epi))[1])
             sigma_d.append(disp_sigma[sel])
-            matches.append(np.stack([xl[sel], xr], axis=1))
-            epipolar.append(np.stack([xe[sel], ye[sel], disp[sel]], axis=-1))
+            epipolar.append(epi)
         if keep:
             kept.append((disp, *images))
         if on_band is not None:
@@ -302,21 +310,32 @@ def stereo_pair(
     stats.update(disparity_fill=float(n_disp / max(n_valid, 1)), n_bands=len(starts))
     lap("sgm")
     with stage("triangulation"):
-        epipolar, matches, lattice = np.concatenate(epipolar), np.concatenate(matches), None
+        epipolar, lattice = np.concatenate(epipolar), None
+
+        def matches_of(rows):  # sensor points of the matches the lattice does not answer
+            pair = np.empty((len(rows), 2, 2))
+            pair[:, 0] = grids.to_sensor("left", epipolar[rows, :2])
+            pair[:, 1] = grids.to_sensor("right", right_epipolar(epipolar[rows]))
+            return pair
+
         if len(epipolar) >= MIN_LATTICE_POINTS:  # the points interpolated between exact nodes
             d, y_of = epipolar[:, 2], lambda xe, ye: ye + y_shift_at(shift, xe, ye)
             lattice = disparity_lattice((ref, sec), grids, lambda xe, ye: np.stack(
                 [xe, y_of(xe, ye)], -1), (x0, x1, 0, rows_e), (float(d.min()), float(d.max())),
                 method)  # fmt: skip
             stats.update(triangulation_lattice_error_m=lattice.check_error_m,
-                         triangulation_lattice=lattice.usable)  # fmt: skip
-        points, sigma_h = triangulate_disparities((ref, sec), lattice, epipolar, matches, method)
+                         triangulation_lattice=lattice.usable,
+                         sigma_lattice_jacobian_error=lattice.jacobian_check_error)  # fmt: skip
+        points, sigma_h, up = triangulate_disparities(
+            (ref, sec), lattice, epipolar, matches_of, method, up_jacobian=True
+        )
         stats.update(drop_outside_validity(points, (ref, sec), paths))
     lap("triangulation")
     with stage("sigma"):
         match_sigma, orient_sigma = point_height_sigmas(
-            (ref, sec), points, np.concatenate(direction), np.concatenate(sigma_d), orientation
-        )
+            (ref, sec), points, np.concatenate(direction), np.concatenate(sigma_d), orientation,
+            up_jacobian=up,
+        )  # fmt: skip
     if np.isfinite(match_sigma).any():
         stats["median_match_sigma_px"] = float(np.nanmedian(np.concatenate(sigma_d)))
         stats["median_match_sigma_h_m"] = float(np.nanmedian(match_sigma))

@@ -83,6 +83,13 @@ class EpipolarGrids:
         grid = {"left": self.left, "right": self.right}[side]
         return interpolate_grid(grid, self.step_px, epi_xy)
 
+    def mesh_to_sensor(self, side: str, xs, ys, y_of=None, origin_xy=(0.0, 0.0), dtype=float):
+        """:meth:`to_sensor` on the mesh of epipolar columns ``xs`` and rows ``ys`` (sampled at
+        rows ``y_of(xe, ye)`` when given), minus ``origin_xy``: ``(len(ys), len(xs), 2)`` of
+        ``dtype`` (:func:`interpolate_mesh`)."""
+        grid = {"left": self.left, "right": self.right}[side]
+        return interpolate_mesh(grid, self.step_px, xs, ys, y_of, origin_xy, dtype)
+
     def along(self, side: str, epi_xy: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """:meth:`to_sensor` and the sensor step ``(..., 2)`` per epipolar pixel along the
         lines (the derivative in ``xe``) at the same points."""
@@ -101,6 +108,13 @@ def node_xy(shape: tuple[int, int], step: float) -> np.ndarray:
     xe = step * np.arange(shape[1], dtype=float)
     ye = step * np.arange(shape[0], dtype=float)
     return np.stack(np.meshgrid(xe, ye), axis=-1)
+
+
+GRID_BLOCK = 8192
+"""Points per block of :func:`interpolate_grid`: its dozen temporaries of this many rows stay in
+the cache and are reused, where one pass over a 1 Mpx band made 1e6-row float64 temporaries
+(page faults: ~0.25 s per 100 MB measured on the 2-core VM; 198 calls cost 8.5 CPU-s over a
+9-tile DSM ROI)."""
 
 
 def _bilinear(grid: np.ndarray, step: float, epi_xy: np.ndarray):
@@ -127,11 +141,49 @@ def interpolate_grid(
     """Bilinear interpolation of a ``(rows, cols, k)`` node grid at epipolar ``(..., 2)`` points,
     nodes at ``step * index``; outside the nodes the border cells are extended linearly. NaN
     points give NaN. ``along``: also the derivative along the epipolar lines (per epipolar
-    pixel of ``xe``)."""
+    pixel of ``xe``). Computed in blocks of :data:`GRID_BLOCK` points."""
     epi_xy = np.asarray(epi_xy, dtype=float)
     shape = (*epi_xy.shape[:-1], grid.shape[2])
-    value, d_xe, _ = _bilinear(grid, step, epi_xy.reshape(-1, 2))
+    flat = epi_xy.reshape(-1, 2)
+    value = np.empty((flat.shape[0], grid.shape[2]))
+    d_xe = np.empty_like(value) if along else None
+    for s in range(0, flat.shape[0], GRID_BLOCK):
+        v, dx, _ = _bilinear(grid, step, flat[s : s + GRID_BLOCK])
+        value[s : s + GRID_BLOCK] = v
+        if along:
+            d_xe[s : s + GRID_BLOCK] = dx
     return (value.reshape(shape), d_xe.reshape(shape)) if along else value.reshape(shape)
+
+
+def interpolate_mesh(
+    grid: np.ndarray,
+    step: float,
+    xs: np.ndarray,
+    ys: np.ndarray,
+    y_of: Callable[[np.ndarray, np.ndarray], np.ndarray] | None = None,
+    origin_xy: tuple[float, float] = (0.0, 0.0),
+    dtype: type = np.float64,
+) -> np.ndarray:
+    """:func:`interpolate_grid` of a ``(rows, cols, 2)`` grid on the mesh of epipolar columns
+    ``xs`` ``(m,)`` and rows ``ys`` ``(n,)``, minus ``origin_xy``, as an ``(n, m, 2)`` array of
+    ``dtype``: the same arithmetic, row block by row block, without the mesh's ``(n m, 2)``
+    float64 coordinates and temporaries. ``y_of(xe, ye)``: the epipolar row actually sampled
+    at each mesh point (a vertical shift; ``None``: ``ye``)."""
+    xs, ys = np.asarray(xs, dtype=float), np.asarray(ys, dtype=float)
+    out = np.empty((len(ys), len(xs), grid.shape[2]), dtype)
+    per = max(GRID_BLOCK // max(len(xs), 1), 1)
+    origin = np.asarray(origin_xy, dtype=float)
+    block = np.empty((per, len(xs), 2))
+    for s in range(0, len(ys), per):
+        ye = ys[s : s + per]
+        pts = block[: len(ye)]
+        pts[..., 0] = xs
+        pts[..., 1] = ye[:, None]
+        if y_of is not None:
+            pts[..., 1] = y_of(pts[..., 0], pts[..., 1])
+        value = _bilinear(grid, step, pts.reshape(-1, 2))[0] - origin
+        out[s : s + len(ye)] = value.reshape(len(ye), len(xs), -1)
+    return out
 
 
 def invert_grid(

@@ -17,7 +17,7 @@ both go through the rectification grids to sensor coordinates.
 from __future__ import annotations
 
 import dataclasses
-from collections.abc import Sequence
+from collections.abc import Callable, Sequence
 from dataclasses import dataclass
 
 import jax
@@ -29,12 +29,17 @@ from ..geodesy import ecef_to_geodetic, geodetic_to_ecef
 from ..intersect import IntersectResult, intersect
 from ..models import AbstractSensorModel
 from ._rectification import EpipolarGrids
+from ._uncertainty import intersection_jacobian
 
 VALIDITY_MARGIN = 0.1
 """How far past its RPC's validity cube a 3D point still counts as inside, in cube half-widths
 (most points outside: the model does not fit the images)."""
 BLUNDER_MARGIN = 0.5
 """How far past the validity cube a single 3D point is dropped as a blunder (half-widths)."""
+
+
+EXCESS_BLOCK = 16384
+"""Points per block of :func:`_validity_excess` (a DSM tile checks a million points per model)."""
 
 
 class StereoError(JaxgeoError, ValueError):
@@ -61,7 +66,15 @@ def _validity_excess(points: np.ndarray, model: AbstractSensorModel) -> np.ndarr
         return np.where(np.all(np.isfinite(points), axis=-1), 0.0, np.nan)
     offset = np.asarray(rpc.ground_offset, dtype=float)
     scale = np.abs(np.asarray(rpc.ground_scale, dtype=float))
-    return np.max(np.abs(points - offset) / scale, axis=-1)
+    flat = points.reshape(-1, 3)
+    out = np.empty(flat.shape[0])
+    for s in range(0, flat.shape[0], EXCESS_BLOCK):  # temporaries in cache, not 1e6 x 3
+        block, most = flat[s : s + EXCESS_BLOCK], out[s : s + EXCESS_BLOCK]
+        np.abs(block[:, 0] - offset[0], out=most)
+        most /= scale[0]
+        for k in (1, 2):  # NaN propagates through np.maximum
+            np.maximum(most, np.abs(block[:, k] - offset[k]) / scale[k], out=most)
+    return out.reshape(points.shape[:-1])
 
 
 def describe_validity(model: AbstractSensorModel) -> str:
@@ -244,6 +257,13 @@ centres of its cells, where a trilinear interpolation errs most) for it to be us
 every point is triangulated on its own."""
 LATTICE_CHECKS = 2048
 """Cell centres whose exact triangulation checks the lattice (at most; spread over its cells)."""
+JACOBIAN_TOL = 1e-3
+"""Largest relative error (of the vector's norm) of the lattice's interpolated ``d up / d xy``
+(:func:`~jaxgeo.stereo._uncertainty.intersection_jacobian`) at its check points for it to be
+used by the height sigmas (0.1 %: the sigmas to well under 1 %); beyond it the sigmas take the
+Jacobian point by point."""
+LATTICE_BLOCK = 4096
+"""Points per block of :meth:`DisparityLattice.interpolate` (its temporaries stay in cache)."""
 
 
 @dataclass(frozen=True)
@@ -255,43 +275,77 @@ class DisparityLattice:
     Why: a 1 Mpx tile has a million matches, and a million Gauss-Newton intersections cost
     seconds (the tile's largest stage), while the point is a smooth function of ``(xe, ye, d)``:
     the grids are bilinear between their nodes (the lattice's ``xe``, ``ye`` nodes are theirs)
-    and the models smooth over a node step. ``values`` ``(nd, ny, nx, 4)``: lon, lat, h minus
-    those of ``centre`` (deg, deg, m: small numbers, interpolated in float64 to 1e-12) and the
-    intersection's height sigma (m; NaN for ``los_midpoint``) at the nodes ``origin + index *
-    step`` (``(xe, ye, d)`` px); ``check_error_m``: the largest difference (m) between the
-    interpolation and the exact triangulation at the check points."""
+    and the models smooth over a node step. So is the intersection's sensitivity to the image
+    coordinates, which the height sigma needs per point (a ``jacfwd`` per point cost as much as
+    the intersections). ``values`` ``(nd, ny, nx, 4 + 2 N)``: lon, lat, h minus those of
+    ``centre`` (deg, deg, m: small numbers, interpolated in float64 to 1e-12), the
+    intersection's height sigma (m; NaN for ``los_midpoint``) and ``d up / d (x, y)`` of each of
+    the ``N`` images (m/px, image-major) at the nodes ``origin + index * step`` (``(xe, ye, d)``
+    px); ``check_error_m``: the largest difference (m) between the interpolation and the exact
+    triangulation at the check points; ``jacobian_check_error``: the largest relative error of
+    the interpolated ``d up / d xy`` there."""
 
     origin: tuple[float, float, float]
     step: tuple[float, float, float]
     centre: np.ndarray
     values: np.ndarray
     check_error_m: float
+    jacobian_check_error: float = float("inf")
 
     @property
     def usable(self) -> bool:
         return bool(self.check_error_m <= LATTICE_TOL_M)
 
-    def _coords(self, xe, ye, d):
-        """Fractional node indices ``(3, n)`` in the array order ``(d, ye, xe)``."""
-        (x0, y0, d0), (sx, sy, sd) = self.origin, self.step
-        return np.stack([(np.asarray(d, float) - d0) / sd, (np.asarray(ye, float) - y0) / sy,
-                         (np.asarray(xe, float) - x0) / sx])  # fmt: skip
+    @property
+    def jacobian_usable(self) -> bool:
+        return bool(self.usable and self.jacobian_check_error <= JACOBIAN_TOL)
 
     def interpolate(self, xe, ye, d) -> np.ndarray:
-        """``(n, 4)`` lon, lat, h minus ``centre``'s and the height sigma at ``(n,)``
-        epipolar points; NaN outside the lattice or next to a node without a point."""
-        from scipy.ndimage import map_coordinates
-
-        coords = self._coords(xe, ye, d)
-        inside = np.all((coords >= 0) & (coords <= np.array(self.values.shape[:3])[:, None] - 1),
-                        axis=0)  # fmt: skip
-        out = np.full((coords.shape[1], 4), np.nan)
-        if inside.any():
-            c = coords[:, inside]
-            out[inside] = np.stack([map_coordinates(self.values[..., k], c, order=1,
-                                                    mode="nearest", prefilter=False)
-                                    for k in range(4)], axis=-1)  # fmt: skip
+        """``(n, 4 + 2 N)`` lon, lat, h minus ``centre``'s, the height sigma and ``d up / d xy``
+        at ``(n,)`` epipolar points; NaN outside the lattice or next to a node without a point
+        (:meth:`blocks`)."""
+        xe = np.asarray(xe, dtype=float).reshape(-1)
+        out = np.full((len(xe), self.values.shape[-1]), np.nan)
+        for rows, value in self.blocks(xe, ye, d):
+            out[rows] = value
         return out
+
+    def blocks(self, xe, ye, d):
+        """The trilinear interpolation of :meth:`interpolate` block by block: yields ``(rows,
+        values)``, the indices of a block's points inside the lattice and their ``(m, 4 + 2
+        N)`` values, so that a caller writes each channel where it belongs (a 1 Mpx tile's
+        ``(n, 8)`` float64 array and its copies cost page faults).
+
+        One pass for every channel, in blocks of :data:`LATTICE_BLOCK` points: the eight corner
+        weights are computed once per point (``map_coordinates`` per channel recomputed them
+        and made 1e6-row temporaries)."""
+        xe, ye, d = (np.asarray(a, dtype=float).reshape(-1) for a in (xe, ye, d))
+        (x0, y0, d0), (sx, sy, sd) = self.origin, self.step
+        nd, ny, nx, k = self.values.shape
+        flat = self.values.reshape(-1, k)
+        for s in range(0, len(xe), LATTICE_BLOCK):
+            part = slice(s, s + LATTICE_BLOCK)
+            u = [(d[part] - d0) / sd, (ye[part] - y0) / sy, (xe[part] - x0) / sx]
+            inside = np.ones(len(u[0]), bool)
+            for c, size in zip(u, (nd, ny, nx), strict=True):
+                inside &= (c >= 0) & (c <= size - 1)
+            if not inside.any():
+                continue
+            u = [c[inside] for c in u]
+            # the cell below each point (the last cell for a point on the upper face)
+            cell = [np.minimum(c.astype(np.intp), max(size - 2, 0))
+                    for c, size in zip(u, (nd, ny, nx), strict=True)]  # fmt: skip
+            f = [(c - i)[:, None] for c, i in zip(u, cell, strict=True)]
+            idx = (cell[0] * ny + cell[1]) * nx + cell[2]
+            corner = {}
+            for a in (0, 1):
+                for b in (0, 1):
+                    lo = flat.take(idx + (a * ny + b) * nx, axis=0)
+                    hi = flat.take(idx + (a * ny + b) * nx + 1, axis=0)
+                    corner[a, b] = lo + (hi - lo) * f[2]
+            lo = corner[0, 0] + (corner[0, 1] - corner[0, 0]) * f[1]
+            hi = corner[1, 0] + (corner[1, 1] - corner[1, 0]) * f[1]
+            yield np.flatnonzero(inside) + s, lo + (hi - lo) * f[0]
 
     def points(self, xe, ye, d) -> tuple[np.ndarray, np.ndarray]:
         """``(n, 3)`` lon/lat/h and ``(n,)`` height sigmas (m) at epipolar points (NaN where
@@ -354,39 +408,65 @@ def disparity_lattice(
     if not finite.any():
         raise StereoError("stereo: no node of the triangulation lattice triangulates")
     centre = np.median(ground[finite], axis=0)
-    offsets = np.column_stack([ground - centre, sigma])
+    # d up / d xy at the nodes and the check points (NaN-padded chunks: one compiled shape)
+    up = intersection_jacobian(models, ground, chunk=LATTICE_CHUNK)[:, 2]
+    offsets = np.column_stack([ground - centre, sigma, up.reshape(len(ground), -1)])
     n = len(x)
-    values = offsets[:n].reshape(len(ds), len(ys), len(xs), 4)
+    values = offsets[:n].reshape(len(ds), len(ys), len(xs), offsets.shape[1])
     lattice = DisparityLattice((float(xs[0]), float(ys[0]), float(ds[0])),
                                (float(step), float(step), float(dstep)), centre, values,
                                float("inf"))  # fmt: skip
-    got = lattice.interpolate(cx, cy, cd)[:, :3]
-    both = np.all(np.isfinite(got), axis=1) & finite[n:]
-    diff = (got[both] - offsets[n:][both, :3]) * _metres_per_unit(centre)
-    error = float(np.max(np.abs(diff), initial=0.0))
-    if not both.any():
-        error = float("inf")
-    return dataclasses.replace(lattice, check_error_m=error)
+    got, exact = lattice.interpolate(cx, cy, cd), offsets[n:]
+    both = np.all(np.isfinite(got[:, :3]), axis=1) & finite[n:]
+    diff = (got[both, :3] - exact[both, :3]) * _metres_per_unit(centre)
+    error = float(np.max(np.abs(diff), initial=0.0)) if both.any() else float("inf")
+    both &= np.all(np.isfinite(got[:, 4:]), axis=1) & np.all(np.isfinite(exact[:, 4:]), axis=1)
+    norm = np.linalg.norm(exact[both, 4:], axis=1)
+    rel = np.linalg.norm(got[both, 4:] - exact[both, 4:], axis=1) / norm
+    jac_error = float(np.max(rel, initial=0.0)) if both.any() else float("inf")
+    return dataclasses.replace(lattice, check_error_m=error, jacobian_check_error=jac_error)
 
 
 def triangulate_disparities(
     models: Sequence[AbstractSensorModel],
     lattice: DisparityLattice | None,
     epipolar: np.ndarray,
-    matches: np.ndarray,
+    matches: np.ndarray | Callable[[np.ndarray], np.ndarray],
     method: str = "intersect",
-) -> tuple[np.ndarray, np.ndarray]:
+    up_jacobian: bool = False,
+) -> tuple[np.ndarray, ...]:
     """Points ``(n, 3)`` and height sigmas ``(n,)`` of dense matches: ``epipolar`` ``(n, 3)``
     their left epipolar ``(xe, ye)`` and disparity, ``matches`` ``(n, 2, 2)`` their left and
-    right sensor points. Interpolated in ``lattice`` when it is usable, triangulated one by
-    one (:func:`triangulate`) otherwise and where the lattice has no value."""
-    n = len(matches)
+    right sensor points, or a function of row indices ``(m,)`` giving those rows' ``(m, 2,
+    2)`` (made then only for the points the lattice does not answer: a 1 Mpx tile's matches
+    are 32 MB). Interpolated in ``lattice`` when it is usable, triangulated one by one
+    (:func:`triangulate`) otherwise and where the lattice has no value.
+
+    ``up_jacobian``: also return the ``(n, 2, 2)`` ``d up / d xy`` of each point for
+    :func:`~jaxgeo.stereo._uncertainty.point_height_sigmas`, interpolated in the lattice when
+    its check passed (:data:`JACOBIAN_TOL`), NaN elsewhere (computed there per point)."""
+    n = len(epipolar)
+    if callable(matches):
+        matches_of, known = matches, np.all(np.isfinite(epipolar), axis=1)
+    else:
+        matches_of, known = matches.__getitem__, np.all(np.isfinite(matches), axis=(1, 2))
+    # float32: d up / d xy to 1e-7 relative for sigmas, half the bytes of a 1 Mpx tile's array
+    none = (np.full((n, 2, 2), np.nan, np.float32),) if up_jacobian else ()
     if n == 0:
-        return np.zeros((0, 3)), np.zeros(0)
+        return (np.zeros((0, 3)), np.zeros(0), *none)
     if lattice is None or not lattice.usable:
-        return _exact(models, matches, method)
-    points, sigma = lattice.points(epipolar[:, 0], epipolar[:, 1], epipolar[:, 2])
-    missing = ~np.all(np.isfinite(points), axis=1) & np.all(np.isfinite(matches), axis=(1, 2))
+        return (*_exact(models, matches_of(np.arange(n)), method), *none)
+    points, sigma = np.full((n, 3), np.nan), np.full(n, np.nan)
+    up = none[0] if up_jacobian and lattice.jacobian_usable else None
+    for rows, value in lattice.blocks(epipolar[:, 0], epipolar[:, 1], epipolar[:, 2]):
+        points[rows] = value[:, :3] + lattice.centre
+        sigma[rows] = value[:, 3]
+        if up is not None:
+            up[rows] = value[:, 4:].reshape(-1, 2, 2)
+    missing = ~np.all(np.isfinite(points), axis=1) & known
     if missing.any():
-        points[missing], sigma[missing] = _exact(models, matches[missing], method)
-    return points, sigma
+        points[missing], sigma[missing] = _exact(models, matches_of(np.flatnonzero(missing)),
+                                                 method)  # fmt: skip
+        if up is not None:
+            up[missing] = np.nan
+    return (points, sigma, *none)

@@ -61,6 +61,11 @@ from ..lsq.internal import inv3_spd
 from ..models import AbstractSensorModel
 
 CHUNK = 65536
+FALLBACK_CHUNK = 16384
+SIGMA_BLOCK = 16384
+"""Points per block of :func:`point_height_sigmas`' products (temporaries that stay in cache)."""
+"""Points per call of :func:`point_height_sigmas`' per-point Jacobians beside interpolated ones
+(NaN-padded: one compiled shape whatever their number, the triangulation lattice's)."""
 
 
 @dataclasses.dataclass(frozen=True)
@@ -261,16 +266,19 @@ def _jacobian_flat(models, ground):
     return jnp.where(ok[:, None, None, None], out, jnp.nan)
 
 
-def intersection_jacobian(models: Sequence[AbstractSensorModel], ground: np.ndarray) -> np.ndarray:
+def intersection_jacobian(
+    models: Sequence[AbstractSensorModel], ground: np.ndarray, chunk: int | None = None
+) -> np.ndarray:
     """``(n, 3, N, 2)``: the derivative of the least-squares intersection's east/north/up
     (m) with respect to each image's ``(x, y)`` (px), at the ground points ``(n, 3)``
     ``(lon_deg, lat_deg, h_m)`` (NaN rows give NaN). Computed in chunks of one size (one
-    compilation)."""
+    compilation): ``chunk`` points (NaN-padded), or ``min(n,`` :data:`CHUNK` ``)`` when
+    ``None``."""
     ground = np.asarray(ground, dtype=float).reshape(-1, 3)
     models = tuple(models)
     n = ground.shape[0]
     out = np.full((n, 3, len(models), 2), np.nan)
-    size = min(CHUNK, max(n, 1))
+    size = min(CHUNK, max(n, 1)) if chunk is None else int(chunk)
     for s in range(0, n, size):
         part = ground[s : s + size]
         k = part.shape[0]
@@ -286,18 +294,42 @@ def point_height_sigmas(
     direction_px: np.ndarray,
     sigma_d_px: np.ndarray,
     orientation: Orientation = None,
+    up_jacobian: np.ndarray | None = None,
 ) -> tuple[np.ndarray, np.ndarray]:
     """Height sigmas (m) of dense points of a pair (module docstring): ``(matching,
     orientation)``, each ``(n,)``. ``ground`` ``(n, 3)`` the points, ``direction_px`` ``(n, 2)``
     the second image's sensor displacement per epipolar pixel of disparity, ``sigma_d_px``
     ``(n,)`` the disparity sigmas, ``orientation`` the models' shift covariance
-    (:data:`Orientation`)."""
-    g = intersection_jacobian(models, ground)[:, 2]  # (n, N, 2): d up / d xy
-    match = np.abs(np.einsum("nc,nc->n", g[:, 1], direction_px)) * np.asarray(sigma_d_px)
+    (:data:`Orientation`). ``up_jacobian`` ``(n, N, 2)``: the up row of
+    :func:`intersection_jacobian` where already known (interpolated between the triangulation
+    lattice's nodes: :func:`~jaxgeo.stereo._triangulation.triangulate_disparities`); its NaN
+    rows, or all rows when ``None``, are computed here point by point."""
+    ground = np.asarray(ground, dtype=float).reshape(-1, 3)
+    n = ground.shape[0]
+    finite = np.all(np.isfinite(ground), axis=1)
+    if up_jacobian is None:
+        g = intersection_jacobian(models, ground)[:, 2]  # (n, N, 2): d up / d xy
+        todo = np.zeros(n, bool)
+    else:  # read as given (no copy of a million rows); the rows it lacks computed below
+        g = np.asarray(up_jacobian).reshape(n, len(models), 2)  # float32 promoted per block
+        todo = ~np.all(np.isfinite(g), axis=(1, 2)) & finite
+    direction_px = np.asarray(direction_px, dtype=float).reshape(n, 2)
+    sigma_d_px = np.asarray(sigma_d_px).reshape(n)  # float32 promoted per block
     cov = joint_covariance(orientation, len(models))
-    flat = g.reshape(g.shape[0], -1)
-    var = np.maximum(np.einsum("na,ab,nb->n", flat, cov, flat), 0.0)
-    orient = np.where(np.isfinite(match), np.sqrt(var), np.nan)
+    match, orient = np.empty(n), np.empty(n)
+
+    def fill(rows, g):
+        flat = g.reshape(g.shape[0], -1)
+        match[rows] = np.abs(np.einsum("nc,nc->n", g[:, 1], direction_px[rows])) * sigma_d_px[rows]
+        orient[rows] = np.sqrt(np.maximum(np.einsum("na,na->n", flat @ cov, flat), 0.0))
+
+    for s in range(0, n, SIGMA_BLOCK):  # temporaries in cache, not 1e6 x 4
+        fill(slice(s, s + SIGMA_BLOCK), g[s : s + SIGMA_BLOCK])
+    if todo.any():
+        rows = np.flatnonzero(todo)
+        fill(rows, intersection_jacobian(models, ground[rows], FALLBACK_CHUNK)[:, 2])
+    match[~finite] = np.nan  # a dropped point has no sigma
+    orient[~np.isfinite(match)] = np.nan
     return match, orient
 
 

@@ -1,8 +1,10 @@
 """What makes a DSM tile cheap, and keeps it exact: the dense triangulation's lattice
 (``disparity_lattice``: points interpolated between exactly triangulated epipolar nodes) equals
 the point-by-point intersection to well under a millimetre and falls back to it where it cannot
-answer; the stage clock of a tile; the sampled point spacing; the keypoints of a half-resolution
-SIFT in full-resolution pixels; the reference window read and searched once per tile.
+answer, and so do the height sigmas from its interpolated Jacobian; the grids' blocked and mesh
+interpolation equal the plain bilinear one; the stage clock of a tile; the sampled point
+spacing; the keypoints of a half-resolution SIFT in full-resolution pixels; the reference window
+read and searched once per tile.
 
 Scene: :func:`jaxgeo.simulate.stereo_scene`, 300 x 300 px, seed 5, exact RPCs."""
 
@@ -13,13 +15,16 @@ from jaxgeo.io import open_image
 from jaxgeo.simulate import StereoSceneSettings, stereo_scene
 from jaxgeo.stereo import epipolar_grids
 from jaxgeo.stereo._dsm import point_spacing
+from jaxgeo.stereo._rectification import _bilinear, interpolate_grid, interpolate_mesh
 from jaxgeo.stereo._stages import STAGES, StageTimes, stage
 from jaxgeo.stereo._triangulation import (
+    JACOBIAN_TOL,
     LATTICE_TOL_M,
     disparity_lattice,
     triangulate_disparities,
 )
 from jaxgeo.stereo._triangulation import _exact as exact_triangulation  # one compiled shape
+from jaxgeo.stereo._uncertainty import a_priori_orientation, point_height_sigmas
 
 
 @pytest.fixture(scope="module")
@@ -79,6 +84,13 @@ def test_points_the_lattice_cannot_answer_are_triangulated_one_by_one(pair):
     points, _ = triangulate_disparities(models, lattice, epi, matches)
     assert np.isnan(lattice.interpolate(epi[:20, 0], epi[:20, 1], epi[:20, 2])).all()
     np.testing.assert_allclose(points, exact, atol=1e-7)
+    # the matches made on demand (the pipeline's), only for the points the lattice lacks
+    asked = []
+    lazy, _ = triangulate_disparities(
+        models, lattice, epi, lambda rows: asked.append(rows) or matches[rows]
+    )
+    np.testing.assert_array_equal(lazy, points)
+    assert len(np.concatenate(asked)) < 40 and set(range(20)) <= set(np.concatenate(asked))
     # a lattice failing its check is not used at all: every point on its own
     import dataclasses
 
@@ -86,6 +98,90 @@ def test_points_the_lattice_cannot_answer_are_triangulated_one_by_one(pair):
     assert not failed.usable
     points, _ = triangulate_disparities(models, failed, epi, matches)
     np.testing.assert_allclose(points, exact, atol=1e-9)
+
+
+def test_the_sigmas_from_the_lattice_jacobian_equal_the_point_by_point_ones(pair):
+    """The height sigmas (matching and orientation) with ``d up / d xy`` interpolated in the
+    lattice equal those of a ``jacfwd`` per point to 0.1 %; a point the lattice cannot answer,
+    or a lattice whose Jacobian check fails, takes the per-point Jacobian."""
+    import dataclasses
+
+    models, grids = pair
+    shift = 0.3
+    rows, cols = grids.epipolar_shape
+    lattice = disparity_lattice(models, grids, _right(shift), (0, cols, 0, rows), (-20.0, 25.0))
+    assert lattice.jacobian_usable and lattice.jacobian_check_error < 0.1 * JACOBIAN_TOL
+    epi = _random_epipolar(grids, 3000, (-20.0, 25.0), seed=4)
+    epi[:10, 2] = 60.0  # outside the lattice: NaN Jacobian, computed per point
+    matches = _matches(grids, epi, shift)
+    points, _, up = triangulate_disparities(models, lattice, epi, matches, up_jacobian=True)
+    assert np.isnan(up[:10]).all() and np.isfinite(up[10:]).all()
+    points[20] = np.nan  # a dropped point: no sigma
+    rng = np.random.default_rng(5)
+    direction, sigma_d = rng.normal(size=(len(epi), 2)), rng.uniform(0.1, 0.5, len(epi))
+    orientation = a_priori_orientation(2)
+    fast = point_height_sigmas(models, points, direction, sigma_d, orientation, up_jacobian=up)
+    slow = point_height_sigmas(models, points, direction, sigma_d, orientation)
+    for got, want in zip(fast, slow, strict=True):
+        assert np.isnan(got[20]) and np.isnan(want[20])
+        np.testing.assert_allclose(got, want, rtol=1e-3)
+        np.testing.assert_array_equal(got[:10], want[:10])  # the fallback is the same call
+    failed = dataclasses.replace(lattice, jacobian_check_error=2 * JACOBIAN_TOL)
+    assert failed.usable and not failed.jacobian_usable
+    assert np.isnan(
+        triangulate_disparities(models, failed, epi, matches, up_jacobian=True)[2]
+    ).all()
+
+
+def test_the_lattice_interpolation_is_trilinear():
+    """One pass over every channel equals ``map_coordinates`` of each channel (order 1): inside,
+    on the upper faces, NaN outside, NaN next to a node without a value."""
+    from scipy.ndimage import map_coordinates
+
+    from jaxgeo.stereo._triangulation import LATTICE_BLOCK, DisparityLattice
+
+    rng = np.random.default_rng(6)
+    values = rng.normal(size=(4, 5, 6, 8))
+    lattice = DisparityLattice((10.0, -30.0, -7.5), (30.0, 30.0, 15.0), np.zeros(3), values, 0.0)
+    n = LATTICE_BLOCK + 500  # two blocks
+    d = rng.uniform(-7.5, 37.5, n)
+    ye, xe = rng.uniform(-30.0, 90.0, n), rng.uniform(10.0, 160.0, n)
+    d[:3], ye[3:6], xe[6:9] = 37.5, 90.0, 160.0  # the upper faces
+    got = lattice.interpolate(xe, ye, d)
+    coords = np.stack([(d + 7.5) / 15.0, (ye + 30.0) / 30.0, (xe - 10.0) / 30.0])
+    want = np.stack([map_coordinates(values[..., k], coords, order=1, prefilter=False)
+                     for k in range(8)], axis=-1)  # fmt: skip
+    np.testing.assert_allclose(got, want, rtol=0, atol=1e-12)
+    outside = lattice.interpolate(
+        np.array([9.0, 50.0]), np.array([0.0, 0.0]), np.array([0.0, 38.0])
+    )
+    assert np.isnan(outside).all()
+    values[1, 1, 1, 2] = np.nan
+    near = lattice.interpolate(np.array([40.0 + 5, 200.0 - 60]), np.array([5.0, 5.0]),
+                               np.array([10.0, 10.0]))  # fmt: skip
+    assert np.isnan(near[0, 2]) and np.isfinite(near[0, [0, 1, 3]]).all()
+    assert np.isfinite(near[1]).all()
+
+
+def test_the_blocked_and_mesh_grid_interpolation_equal_the_plain_one(pair):
+    """:func:`interpolate_grid` in blocks and :func:`interpolate_mesh` (row blocks, a vertical
+    shift affine in ``xe`` and ``ye``, an origin, float32 maps) give the plain bilinear values."""
+    _, grids = pair
+    xs, ys = np.arange(-40.0, 340.0), np.arange(-5.0, 310.0)
+    xe, ye = np.meshgrid(xs, ys)
+    shift = (0.4, 2e-3, -1e-3)  # crosses node rows along the lines
+    y_of = lambda x, y: y + shift[0] + shift[1] * x + shift[2] * y  # noqa: E731
+    pts = np.stack([xe, y_of(xe, ye)], axis=-1)
+    plain = _bilinear(grids.right, grids.step_px, pts.reshape(-1, 2))
+    value, along = interpolate_grid(grids.right, grids.step_px, pts, along=True)
+    np.testing.assert_array_equal(value.reshape(-1, 2), plain[0])
+    np.testing.assert_array_equal(along.reshape(-1, 2), plain[1])
+    origin = (12.0, -7.0)
+    mesh = interpolate_mesh(grids.right, grids.step_px, xs, ys, y_of, origin, np.float32)
+    assert mesh.shape == (*xe.shape, 2) and mesh.dtype == np.float32
+    np.testing.assert_array_equal(mesh, (plain[0] - origin).astype(np.float32).reshape(mesh.shape))
+    left = grids.mesh_to_sensor("left", xs, ys)
+    np.testing.assert_array_equal(left, grids.to_sensor("left", np.stack([xe, ye], axis=-1)))
 
 
 def test_stage_times_are_kept_only_while_a_clock_is_active():
