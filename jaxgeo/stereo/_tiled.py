@@ -183,7 +183,7 @@ def _joined(arrays: Sequence[np.ndarray]) -> np.ndarray:
 def _small(stats: dict) -> dict:
     """The numbers of a pair's stats worth keeping per tile (JSON)."""
     keys = ("n_ties", "h_ref_m", "vertical_disparity_px", "disparity_range_px", "disparity_fill",
-            "triangulation_lattice_error_m")  # fmt: skip
+            "triangulation_lattice_error_m", "sigma_lattice_jacobian_error")  # fmt: skip
     out = {}
     for k in keys:
         if k in stats:
