@@ -7,7 +7,8 @@ right ``(x + d, y)``.
 The stages, all integer until the sub-pixel step (costs are counts of differing census bits):
 
 - **Census** of a ``CENSUS_ROWS x CENSUS_COLS`` (7 x 7) window: one bit per neighbour brighter
-  than the centre, 48 bits in a ``uint64``. Why census: it is invariant to the gain and offset
+  than the centre (by more than ``CENSUS_TOLERANCE`` grey levels: a uniform patch's noise sets
+  no bit), 48 bits in a ``uint64``. Why census: it is invariant to the gain and offset
   between two dates or sensors (the uint8 stretches of the two images differ), and it is the
   cost of the GPU matchers that are fast (libSGM, Hirschmueller's own implementations).
 - **Cost volume** ``C[y, x, k] = popcount(census_l[y, x] ^ census_r[y, x + d_k])`` in uint8,
@@ -32,17 +33,18 @@ The stages, all integer until the sub-pixel step (costs are counts of differing 
 
 One program is compiled per (rows, columns, disparities) bucket (:func:`bucket`): bands and
 tiles of nearby sizes share it, padded with edge pixels, their padding cut off afterwards.
+OpenCV's speckle filter (connected components, host-side) is applied to the result by the
+caller (:func:`~jaxgeo.stereo._dense.sgm_disparity`).
 
 **Memory.** The cost volume and the path sums grow as rows x columns x disparities
-(:func:`band_bytes`: ~20 bytes a voxel, ~1.6 GB for 576 x 1088 px at 128 disparities). Before
+(:func:`band_bytes`, 20 bytes a voxel; measured on the CPU, the peak resident set of a
+512 x 1024 px band: 479 MB at 64 disparities, 931 MB at 128, ~14.5 bytes a voxel). Before
 anything runs, :func:`census_sgm` takes the largest chunk of rows whose program fits a budget
 (:func:`memory_budget`: a share of the device's free memory, or the caller's
 ``memory_bytes``), and matches the image chunk by chunk, each with ``CHUNK_OVERLAP_ROWS`` of
 context above and below (the vertical paths' reach), all chunks of one shape (one program);
 when even ``MIN_CHUNK_ROWS`` rows cannot fit it refuses (:class:`SGMMemoryError`) before any
 work, instead of dying in the middle of a scene.
-OpenCV's speckle filter (connected components, host-side) is applied to the result by the
-caller (:func:`~jaxgeo.stereo._dense.sgm_disparity`).
 """
 
 from __future__ import annotations
@@ -61,11 +63,15 @@ CENSUS_ROWS, CENSUS_COLS = 7, 7
 CENSUS_BITS = CENSUS_ROWS * CENSUS_COLS - 1
 CENSUS_TOLERANCE = 4
 """Grey levels (of the uint8 images) by which a neighbour must be brighter than the centre to
-set its census bit. Without it a uniform patch (a road, a roof, a field) gets bits drawn by
-its noise, its costs are noise at every disparity, and the paths carry the wrong disparities
-from its edges into it: on simulated pairs 1.2-1.4 % of the DSM cells > 1 m off truth (OpenCV's
-SGBM: 0.04-0.11 %), in lines along the roads; with a tolerance a uniform patch's census is
-all zeros at every disparity, it costs the same everywhere, and the smoothness term decides."""
+set its census bit. Without it a uniform patch (a road, a roof) gets bits drawn by its noise,
+its costs are noise at every disparity, and the paths carry wrong disparities from its edges
+into it; with it a uniform patch's census is all zeros, it costs the same at every disparity,
+and the smoothness term decides. Measured on simulated 300 px scenes (seeds 23, 5, 41), DSM
+cells > 1 m off truth: 1.43, 1.23, 0.61 % without, 0.11, 0.10, 0.03 % with (OpenCV's SGBM
+0.11, 0.04, 0.00 %), in lines along the scenes' roads; RMS 0.255, 0.218, 0.158 m -> 0.160,
+0.132, 0.095 m (OpenCV 0.167, 0.140, 0.092). Not tuned: 3 and 8 give the same (seed 23: 0.12,
+0.09 %); the real s2p Pleiades pair: fill 0.988 -> 0.990 (OpenCV 0.991), within 1 px of
+OpenCV 98.2 -> 98.3 %."""
 P2_GREY = 48.0
 """Intensity step (grey levels of the uint8 images) that halves ``P2`` along a path."""
 SUBPIXEL_WINDOW = 5
