@@ -155,9 +155,9 @@ def chunk_rows(rows: int, cols: int, n_disp: int, budget_bytes: int, source: str
     if band_bytes(least, cols, n_disp) > budget_bytes:
         need = band_bytes(least, cols, n_disp)
         raise SGMMemoryError(
-            f"the JAX dense matcher needs {need / 2**20:.0f} MB for {MIN_CHUNK_ROWS} rows of "
-            f"{cols} px over {n_disp} disparities, more than its budget of "
-            f"{budget_bytes / 2**20:.0f} MB ({source or 'as given'}): raise it with "
+            f"the JAX dense matcher needs {need / 2**20:.0f} MB for {MIN_CHUNK_ROWS} rows (and "
+            f"{over} rows of context) of {cols} px over {n_disp} disparities, more than its "
+            f"budget of {budget_bytes / 2**20:.0f} MB ({source or 'as given'}): raise it with "
             "SGMSettings(memory_mb=...) (CLI --matcher-memory MB), make the tiles narrower "
             "(--tile) or use --matcher opencv"
         )  # fmt: skip
@@ -379,7 +379,7 @@ def census_sgm(left8, right8, disp_min, disp_max, penalties, checks=(10, 1), n_p
     if memory_bytes is None:
         budget, source = memory_budget()
     else:
-        budget, source = int(memory_bytes), "as given"
+        budget, source = int(memory_bytes), "as set"
     keep = chunk_rows(rows, cols, hi - lo + 1, budget, source)
     if keep >= rows:
         return _one_chunk(left8, right8, lo, hi, penalties, checks, n_paths)
