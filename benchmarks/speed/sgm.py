@@ -122,6 +122,21 @@ def _band_peak_in_a_new_process(rows, cols, n_disp, memory_mb):
     return json.loads(out.stdout.strip().splitlines()[-1])
 
 
+def memory_summary(memory: list[dict]) -> dict:
+    """The memory runs' headline numbers flat (MB): per ``D`` the model, the peak of one band,
+    the peak in chunks and the budget they were given."""
+    out = {}
+    for m in memory:
+        d, mb = m["disparities"], 2.0**20
+        if m["memory_mb"] is None:
+            out[f"band_model_mb_d{d}"] = round(m["model_bytes"] / mb, 1)
+            out[f"band_peak_mb_d{d}"] = round(m["peak_bytes"] / mb, 1)
+        else:
+            out[f"chunks_budget_mb_d{d}"] = round(m["memory_mb"], 1)
+            out[f"chunks_peak_mb_d{d}"] = round(m["peak_bytes"] / mb, 1)
+    return out
+
+
 def main() -> None:
     import jax
 
@@ -179,6 +194,7 @@ def main() -> None:
     for case in cases:
         for key in ("jax_mpx_per_s", "opencv_mpx_per_s", "opencv_over_jax_time", "jax_first_s"):
             summary[f"{key}_d{case['disparities']}"] = round(case[key], 4)
+    summary |= memory_summary(memory)
     emit(
         {
             "benchmark": "sgm_matcher",
