@@ -2,7 +2,7 @@
 ``opencv`` matcher) on one tile, in Mpx/s, same run.
 
     python -m benchmarks.speed.sgm [--rows 512] [--cols 1024] [--disparities 64 128]
-        [--paths 8] [--repeats 3]
+        [--paths 8] [--repeats 3] [--no-memory]
 
 The tile: a rectified pair made of a blurred noise texture (the rendered scenes' kind) and its
 band-limited shift of -``D/3`` px (so that matches exist over the whole range), as uint8. Each
@@ -16,12 +16,22 @@ not in the rate. Prints one JSON object: per ``D``, Mpx/s of each
 matcher (tile pixels / best time) and their ratio, the share of pixels within 1 px of each
 other, each matcher's fill and median error against the known shift. The same file runs on a
 GPU unchanged.
+
+Memory (unless ``--no-memory``): per ``D``, each in a fresh process (an allocator keeps what an
+earlier call freed), the peak memory of one JAX band beyond the process's before it -- resident
+set on a CPU (sampled every 2 ms), the device's ``peak_bytes_in_use`` on a GPU -- against the
+model the matcher sizes its chunks with (``band_bytes``), once as one band and once with a budget
+of a quarter of it (``memory_mb``: matched in chunks of rows), with that run's rate.
 """
 
 from __future__ import annotations
 
 import argparse
 import functools
+import json
+import subprocess
+import sys
+import threading
 import time
 
 import numpy as np
@@ -59,6 +69,74 @@ def best(fn, repeats):
     return min(times), first, out
 
 
+def _rss_bytes() -> int:
+    with open("/proc/self/statm") as f:
+        return int(f.read().split()[1]) * 4096
+
+
+def band_peak(rows: int, cols: int, n_disp: int, memory_mb: float | None) -> dict:
+    """Peak memory (bytes) of one JAX band beyond the process's before it (compiled first), the
+    seconds of that band, and the model's ``band_bytes``; in this process."""
+    import jax
+
+    from jaxgeo.stereo import SGMSettings, sgm_disparity
+    from jaxgeo.stereo._sgm import band_bytes
+
+    left8, right8 = tile(rows, cols, -n_disp / 3.0)
+    drange = (float(-n_disp + 8), 7.0)
+    run = functools.partial(sgm_disparity, left8, right8, *drange,
+                            SGMSettings(matcher="jax", memory_mb=memory_mb))  # fmt: skip
+    device = jax.devices()[0]
+    stats = device.memory_stats() or {}  # (an accelerator's peak counts from here: first run)
+    run()  # compiled, and the host allocator's pools made
+    base, peak, done = _rss_bytes(), [0], threading.Event()
+
+    def sample():
+        while not done.is_set():
+            peak[0] = max(peak[0], _rss_bytes())
+            time.sleep(0.002)
+
+    sampler = threading.Thread(target=sample)
+    sampler.start()
+    t0 = time.perf_counter()
+    run()
+    seconds = time.perf_counter() - t0
+    done.set()
+    sampler.join()
+    if stats.get("peak_bytes_in_use") is not None:  # an accelerator: its own count
+        used = (device.memory_stats() or {}).get("peak_bytes_in_use", 0) - stats.get(
+            "bytes_in_use", 0
+        )
+        kind = "device peak_bytes_in_use"
+    else:
+        used, kind = max(peak[0] - base, 0), "host resident set"
+    return {"disparities": n_disp, "memory_mb": memory_mb, "peak_bytes": int(used),
+            "measured": kind, "model_bytes": band_bytes(rows, cols, n_disp), "seconds": seconds,
+            "mpx_per_s": rows * cols / 1e6 / seconds}  # fmt: skip
+
+
+def _band_peak_in_a_new_process(rows, cols, n_disp, memory_mb):
+    code = ("import json, sys; from benchmarks.speed.sgm import band_peak; "
+            f"print(json.dumps(band_peak({rows}, {cols}, {n_disp}, {memory_mb!r})))")  # fmt: skip
+    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True)
+    return json.loads(out.stdout.strip().splitlines()[-1])
+
+
+def memory_summary(memory: list[dict]) -> dict:
+    """The memory runs' headline numbers flat (MB): per ``D`` the model, the peak of one band,
+    the peak in chunks and the budget they were given."""
+    out = {}
+    for m in memory:
+        d, mb = m["disparities"], 2.0**20
+        if m["memory_mb"] is None:
+            out[f"band_model_mb_d{d}"] = round(m["model_bytes"] / mb, 1)
+            out[f"band_peak_mb_d{d}"] = round(m["peak_bytes"] / mb, 1)
+        else:
+            out[f"chunks_budget_mb_d{d}"] = round(m["memory_mb"], 1)
+            out[f"chunks_peak_mb_d{d}"] = round(m["peak_bytes"] / mb, 1)
+    return out
+
+
 def main() -> None:
     import jax
 
@@ -70,6 +148,7 @@ def main() -> None:
     parser.add_argument("--disparities", type=int, nargs="+", default=[64, 128])
     parser.add_argument("--paths", type=int, default=8, choices=(4, 8))
     parser.add_argument("--repeats", type=int, default=3)
+    parser.add_argument("--no-memory", action="store_true", help="skip the memory runs")
     args = parser.parse_args()
     mpx = args.rows * args.cols / 1e6
     cases = []
@@ -103,10 +182,19 @@ def main() -> None:
                 "median_abs_error_opencv_px": float(np.nanmedian(np.abs(d_cv[core] - shift))),
             }
         )
+    memory = []
+    if not args.no_memory:
+        from jaxgeo.stereo._sgm import band_bytes
+
+        for n_disp in args.disparities:
+            quarter = band_bytes(args.rows, args.cols, n_disp) / 4 / 2**20
+            for memory_mb in (None, quarter):
+                memory.append(_band_peak_in_a_new_process(args.rows, args.cols, n_disp, memory_mb))
     summary = {}  # the headline numbers flat, one key per disparity count (the README's table)
     for case in cases:
         for key in ("jax_mpx_per_s", "opencv_mpx_per_s", "opencv_over_jax_time", "jax_first_s"):
             summary[f"{key}_d{case['disparities']}"] = round(case[key], 4)
+    summary |= memory_summary(memory)
     emit(
         {
             "benchmark": "sgm_matcher",
@@ -115,6 +203,7 @@ def main() -> None:
             "device": str(jax.devices()[0]),
             **summary,
             "cases": cases,
+            "memory": memory,
         }
     )
 

@@ -3,7 +3,7 @@
     jaxgeo dsm IMG1 IMG2 [IMG3 ...] [--model IMG=FILE ...] [--image-origin IMG=COL,ROW ...]
                [--roi X Y W H] [--res M] [--crs EPSG:n] [--like RASTER] [--no-tap]
                [--triangulation {intersect,los_midpoint}]
-               [--no-register] [--matcher {jax,opencv}] [--band-rows N]
+               [--no-register] [--matcher {jax,opencv}] [--matcher-memory MB] [--band-rows N]
                [--orientation adjusted_models.json]
                [--keep DIR] [--quiet] [--json] -o dsm.tif [--overwrite]
 
@@ -90,6 +90,10 @@ def register(sub) -> None:
     arg("--matcher", choices=("jax", "opencv"), default=None,
         help="dense matcher: census SGM in JAX (on JAX's default device) or OpenCV's SGBM "
         "(default: jax when that device is a GPU or TPU, else opencv)")  # fmt: skip
+    arg("--matcher-memory", type=float, default=None, metavar="MB",
+        help="memory a band of the jax matcher may use (default: 80%% of a GPU's free memory, "
+        "25%% of the host's available memory on a CPU); bands are matched in chunks of rows "
+        "that fit")  # fmt: skip
     arg("--band-rows", type=int, default=512, metavar="N",
         help="epipolar rows per band of dense matching (default 512; memory follows "
         "it)")  # fmt: skip
@@ -183,7 +187,8 @@ def _run(args: argparse.Namespace) -> int:
             band_rows=args.band_rows, max_hole_m=args.max_hole,
             triangulation=args.triangulation, register=not args.no_register, keep=args.keep,
             heights=tuple(args.heights) if args.heights else None, tile_px=args.tile,
-            max_cells=args.max_cells, sgm=SGMSettings(matcher=args.matcher),
+            max_cells=args.max_cells,
+            sgm=SGMSettings(matcher=args.matcher, memory_mb=args.matcher_memory),
         )  # fmt: skip
         check_dem_options(args)
         settings = dataclasses.replace(settings, epsg=output_epsg(args.crs))

@@ -29,6 +29,7 @@ from ._rectification import epipolar_grids as epipolar_grids
 from ._report import DSMReport as DSMReport
 from ._settings import DSMSettings as DSMSettings
 from ._settings import DSMSettingsError as DSMSettingsError
+from ._sgm import SGMMemoryError as SGMMemoryError
 from ._ties import TieError as TieError
 from ._ties import TieReport as TieReport
 from ._ties import TieWarning as TieWarning

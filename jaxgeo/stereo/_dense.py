@@ -95,8 +95,9 @@ class SGMSettings:
     :func:`default_matcher`). OpenCV's StereoSGBM (OpenCV names): block size, smoothness
     ``P1 = p1 * block**2`` and ``P2 = p2 * block**2``; the JAX census matcher: ``census_p1``,
     ``census_p2`` (census bits of 48; ``P2`` falls at intensity edges) over ``paths`` (8 or 4)
-    directions. Both: uniqueness ratio (%), left-right tolerance ``disp12_max_diff`` px, speckle
-    filter (window px, range px)."""
+    directions, in chunks of rows that fit ``memory_mb`` (MB; ``None``: from the device,
+    :func:`~._sgm.memory_budget`). Both: uniqueness ratio (%), left-right tolerance
+    ``disp12_max_diff`` px, speckle filter (window px, range px)."""
 
     block_size: int = 5
     p1: int = 8
@@ -112,6 +113,7 @@ class SGMSettings:
     census_p1: int = 16
     census_p2: int = 160
     paths: int = 8
+    memory_mb: float | None = None
 
     def __post_init__(self):
         if self.matcher is not None and self.matcher not in MATCHERS:
@@ -119,6 +121,8 @@ class SGMSettings:
                              "by device)")  # fmt: skip
         if self.paths not in (4, 8):
             raise ValueError(f"paths {self.paths}: expected 8 or 4")
+        if self.memory_mb is not None and not 0 < self.memory_mb < np.inf:
+            raise ValueError(f"memory_mb {self.memory_mb}: expected megabytes > 0 (or None)")
 
 
 DEFAULT_SGM = SGMSettings()
@@ -146,8 +150,9 @@ def sgm_disparity(
         from ._sgm import census_sgm
 
         checks = (settings.uniqueness_ratio, settings.disp12_max_diff)
-        disp = census_sgm(left8, right8, disp_min, disp_max, settings.census_p1,
-                          settings.census_p2, checks, settings.paths)  # fmt: skip
+        memory = None if settings.memory_mb is None else settings.memory_mb * 2**20
+        disp = census_sgm(left8, right8, disp_min, disp_max, (settings.census_p1,
+                          settings.census_p2), checks, settings.paths, memory)  # fmt: skip
         disp = disp.astype(np.float32)
         if settings.speckle_window > 0:  # OpenCV's own way: 1/16 px in int16, in place
             fixed = np.where(np.isfinite(disp), np.rint(16 * np.nan_to_num(disp)), SPECKLE_NONE)

@@ -13,9 +13,20 @@ from jaxgeo.cli import main
 from jaxgeo.stereo import DSMSettings, SGMSettings, sgm_disparity, stereo_pair
 from jaxgeo.stereo._dense import default_matcher
 from jaxgeo.stereo._matching import stretch_limits, to_uint8
-from jaxgeo.stereo._sgm import _costs, _match, bucket, census_sgm
+from jaxgeo.stereo._sgm import (
+    CHUNK_OVERLAP_ROWS,
+    SGMMemoryError,
+    _costs,
+    _match,
+    band_bytes,
+    bucket,
+    census_sgm,
+    chunk_rows,
+    memory_budget,
+)
 
 P1, P2 = SGMSettings().census_p1, SGMSettings().census_p2
+PEN = (P1, P2)
 
 
 def _texture(rows, cols, seed=0):
@@ -41,7 +52,7 @@ def _uint8(*images):
 def test_a_shifted_image_gives_its_disparity(d):
     left = _texture(100, 180, seed=3)
     left8, right8 = _uint8(left, _shifted(left, d))
-    disp = census_sgm(left8, right8, -12.0, 2.0, P1, P2)
+    disp = census_sgm(left8, right8, -12.0, 2.0, PEN)
     assert disp.dtype == np.float64 and disp.shape == left.shape
     core = disp[5:-5, 20:-20]  # (the Fourier shift wraps around at the ends)
     err = np.abs(core - d)
@@ -63,8 +74,8 @@ def test_the_left_right_check_removes_an_occluded_strip():
     right[:, 100 + d_fg : 140 + d_fg] = fg
     left8, right8 = _uint8(left, right)
     occluded = (slice(5, -5), slice(100 + d_fg - d_bg + 1, 99))  # left columns 93..98
-    checked = census_sgm(left8, right8, -16, 0, P1, P2, checks=(0, 1))
-    unchecked = census_sgm(left8, right8, -16, 0, P1, P2, checks=(0, 10_000))
+    checked = census_sgm(left8, right8, -16, 0, PEN, checks=(0, 1))
+    unchecked = census_sgm(left8, right8, -16, 0, PEN, checks=(0, 10_000))
     assert np.isfinite(unchecked[occluded]).mean() > 0.95  # WTA picks something there
     assert np.isfinite(checked[occluded]).mean() < 0.2
     # visible pixels keep their disparities
@@ -78,9 +89,9 @@ def test_bands_of_one_bucket_share_one_program():
     left = _texture(70, 130, seed=1)
     left8, right8 = _uint8(left, _shifted(left, -3.0))
     assert bucket(70, 130, 15) == bucket(64 + 1, 128 + 1, 16) == (128, 192, 16)
-    census_sgm(left8, right8, -10, 4, P1, P2)
+    census_sgm(left8, right8, -10, 4, PEN)
     before = _costs._cache_size(), _match._cache_size()
-    again = census_sgm(left8[:66, :129], right8[:66, :129], -9, 4, P1, P2)
+    again = census_sgm(left8[:66, :129], right8[:66, :129], -9, 4, PEN)
     assert (_costs._cache_size(), _match._cache_size()) == before  # same bucket: no new trace
     assert again.shape == (66, 129)
 
@@ -95,7 +106,47 @@ def test_settings_and_the_default_matcher():
     with pytest.raises(ValueError, match="paths 6"):
         SGMSettings(paths=6)
     with pytest.raises(ValueError, match="one shape"):
-        census_sgm(np.zeros((10, 10), np.uint8), np.zeros((10, 11), np.uint8), 0, 4, P1, P2)
+        census_sgm(np.zeros((10, 10), np.uint8), np.zeros((10, 11), np.uint8), 0, 4, PEN)
+
+
+def test_the_memory_a_band_needs_sets_its_chunks():
+    """The budget in bytes sets the rows of a chunk: all of them when the band fits, else the
+    most whose bucket (with the overlaps) fits; a refusal naming the setting and the CLI option
+    when not even the smallest chunk fits -- before any work."""
+    need = band_bytes(576, 1088, 128)
+    assert 1.2e9 < need < 2.0e9  # ~20 bytes a voxel of the bucket
+    assert band_bytes(576, 1088, 256) > 1.9 * need  # linear in the disparities
+    assert chunk_rows(576, 1088, 128, need) == 576
+    rows = chunk_rows(576, 1088, 128, need // 3)
+    assert 64 <= rows < 576 and band_bytes(rows + 2 * CHUNK_OVERLAP_ROWS, 1088, 128) <= need // 3
+    assert band_bytes(rows + 2 * CHUNK_OVERLAP_ROWS + 64, 1088, 128) > need // 3  # the most
+    with pytest.raises(SGMMemoryError, match=r"memory_mb.*--matcher-memory") as err:
+        chunk_rows(40_000, 40_000, 256, 2**30, "a test budget")
+    assert "a test budget" in str(err.value) and isinstance(err.value, MemoryError)
+    budget, source = memory_budget()
+    assert budget > 0 and "memory" in source
+    with pytest.raises(ValueError, match="memory_mb 0"):
+        SGMSettings(memory_mb=0)
+    left8 = np.zeros((64, 64), np.uint8)
+    with pytest.raises(SGMMemoryError, match="needs"):
+        sgm_disparity(left8, left8, 0, 15, SGMSettings(matcher="jax", memory_mb=0.01))
+
+
+def test_a_band_matched_in_chunks_equals_one_pass():
+    """A budget for a quarter of the band: the chunks (one shape, one program) give the
+    disparities of one pass over the band, up to the vertical paths' reach beyond the overlap."""
+    left = _texture(300, 150, seed=4)
+    left8, right8 = _uint8(left, _shifted(left, -5.4))
+    whole = census_sgm(left8, right8, -12, 3, PEN)
+    budget = band_bytes(128, 150, 16)  # chunks of 64 rows and their overlaps
+    assert chunk_rows(300, 150, 16, budget) == 64
+    before = _match._cache_size()
+    chunked = census_sgm(left8, right8, -12, 3, PEN, memory_bytes=budget)
+    assert _match._cache_size() - before <= 1  # all chunks share one program
+    assert chunked.shape == whole.shape
+    same = np.isclose(chunked, whole, atol=1e-6, equal_nan=True)
+    assert same.mean() > 0.99, same.mean()
+    assert np.nanmedian(np.abs(chunked[:, 20:-20] - (-5.4))) < 0.1
 
 
 @pytest.fixture(scope="module")
@@ -162,10 +213,9 @@ def _height_errors(dsm_path, truth_path):
 
 def test_dsm_matcher_jax_as_accurate_as_opencv(tmp_path):
     """The issue's check on a small simulated scene (~10 s a run: the whole chain twice): the
-    same NMAD and median; NOT the same RMS. Measured since the DSM's edge ring is dropped (the
-    edge errors had dominated both RMS): OpenCV 0.167 m, JAX 0.255 m, from more mismatches of
-    1-4 m spread over the scene (1.4 % of the cells > 1 m off against 0.1 %): a known gap of
-    the JAX matcher, bounded here so that it cannot grow unseen."""
+    same NMAD, median and RMS. Measured (seed 23): RMS OpenCV 0.167 m, JAX 0.160 m; cells > 1 m
+    off 0.11 % and 0.11 %. Before the census's tolerance (``CENSUS_TOLERANCE``) JAX's RMS was
+    0.255 m with 1.4 % of the cells > 1 m off, in lines along the scene's uniform roads."""
     scene = tmp_path / "scene"
     _run("simulate", "stereo-scene", "--size", "300", "--seed", "23", "--exact-rpc",
          "--out", str(scene))  # fmt: skip
@@ -177,8 +227,8 @@ def test_dsm_matcher_jax_as_accurate_as_opencv(tmp_path):
         err[matcher] = _height_errors(out, scene / "truth_dsm.tif") | {"filled": report["filled"]}
     cv, jx = err["opencv"], err["jax"]
     assert cv["n"] > 20_000 and abs(jx["filled"] - cv["filled"]) < 0.02, err
-    assert jx["nmad_m"] <= 1.1 * cv["nmad_m"] and jx["rms_m"] <= 1.75 * cv["rms_m"], err
-    assert jx["over_1m"] < 0.03 and cv["over_1m"] < 0.01, err
+    assert jx["nmad_m"] <= 1.1 * cv["nmad_m"] and jx["rms_m"] <= 1.15 * cv["rms_m"], err
+    assert jx["over_1m"] < 0.004 and cv["over_1m"] < 0.004, err
     assert abs(jx["median_m"]) < 0.1, err
 
 
