@@ -221,16 +221,16 @@ def stereo_pair(
         img2 = read_window(sec_path, win2)
         lims = (lim1, stretch_limits(img2[::2, ::2]))
     log("tie points")
-    with stage("sift"):  # the secondary's, where the ties' heights (else any) put the ROI, at
-        # the reference's level (a small window: both at full resolution), from the pixels read
-        ties_h = settings.heights if settings.heights is not None else h_valid
-        c, r, cw, rh = _sec_window(ref, sec, data_win, ties_h, sec_size, paths,
-                                   margin=int(epipolar_tol_px) + 16)  # fmt: skip
-        c, r = max(c, win2[0]), max(r, win2[1])  # within img2
-        part2 = img2[r - win2[1] : r - win2[1] + rh, c - win2[0] : c - win2[0] + cw]
-        most2 = TIE_KEYPOINTS * part2.size / (data_win[2] * data_win[3])  # the same density
-        features2 = window_keypoints(part2, (c, r), lims[1], int(np.ceil(most2)),
-                                     level=sift_level(data_win[2:]))  # fmt: skip
+    features2 = None  # a small window: tie_points' own search (full resolution)
+    if sift_level(data_win[2:]) > 1:
+        with stage("sift"):  # the secondary's, where the ties' heights (else any) put the ROI
+            ties_h = settings.heights if settings.heights is not None else h_valid
+            c, r, cw, rh = _sec_window(ref, sec, data_win, ties_h, sec_size, paths,
+                                       margin=int(epipolar_tol_px) + 16)  # fmt: skip
+            c, r = max(c, win2[0]), max(r, win2[1])  # within img2
+            part2 = img2[r - win2[1] : r - win2[1] + rh, c - win2[0] : c - win2[0] + cw]
+            most2 = TIE_KEYPOINTS * part2.size / (data_win[2] * data_win[3])  # same density
+            features2 = window_keypoints(part2, (c, r), lims[1], int(np.ceil(most2)), level=2)
     with stage("ties"):
         ties = tie_points(
             ref, sec, ref_path, sec_path, MatchSettings(
