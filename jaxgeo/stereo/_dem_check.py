@@ -13,8 +13,8 @@ from ._ties import MatchSettings, TieError, tie_points
 from ._triangulation import StereoError
 
 WINDOW_KEYPOINTS = 1000
-"""The strongest reference keypoints of a window searched for its ties' heights (a few hundred
-ties give a height range; all of a 512 px window's cost three times as much)."""
+"""The reference keypoints (spread, the strongest) of a window searched for its ties' heights
+(a few hundred ties give a height range; all of a 512 px window's cost three times as much)."""
 
 
 def check_dem(models, paths, window, dem, dem_range: tuple[float, float]) -> None:

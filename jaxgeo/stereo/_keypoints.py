@@ -30,7 +30,7 @@ def window_keypoints(image, origin, limits, most=None, level=None):
     at ``origin``; ``limits``: its uint8 stretch), at half resolution from
     :data:`SIFT_COARSE_MIN_PX` (what the ties fix needs no finer keypoint; a quarter of the
     cost; ``level``: that of another window, the pair's reference, instead of this one's size);
-    the strongest ``most`` (about; ``None``: all)."""
+    about ``most``, spread (:func:`~._matching.sift_features`; ``None``: all)."""
     import cv2
 
     image8 = to_uint8(image, limits)

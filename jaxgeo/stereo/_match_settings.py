@@ -42,9 +42,10 @@ class MatchSettings:
         sigma_px: a priori sigma of the tie observations (``match_images``), px.
         few_ties: fewer ties than this in a pair: a :class:`TieWarning` naming the pair
             (``match_images``; too few to adjust the pair reliably).
-        keypoints: the strongest keypoints of image 1's ROI searched (about; image 2's window
-            keeps as many per pixel); ``None``: all. Where a few hundred ties do (a height
-            range, a rectification) a cap saves most of SIFT's and the matching's cost.
+        keypoints: about this many keypoints of image 1's ROI searched, the strongest of each
+            part of it (image 2's window keeps as many per pixel); ``None``: all. Where a few
+            hundred ties do (a height range, a rectification) a cap saves most of SIFT's and
+            the matching's cost.
     """
 
     roi: Sequence[int] | None = None  # stored as a tuple

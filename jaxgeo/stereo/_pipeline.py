@@ -66,10 +66,10 @@ MIN_TIE_POINTS = 10
 CONTEXT_PX = 16
 """Reference-image pixels matched around the ROI (context at its edges; not in the output)."""
 TIE_KEYPOINTS = 1500
-"""Reference keypoints matched per pair (the strongest; the secondary's window keeps as many per
-reference pixel): the ties give the rectification's height, the vertical disparity and the
-disparity range, for which several hundred are plenty (10 000 gave ~7 500 ties and cost a
-quarter of a 1 Mpx tile; SIFT's cost is mostly the descriptors of the keypoints kept)."""
+"""Reference keypoints matched per pair (the strongest of each part of the window; the
+secondary's window keeps as many per pixel): the ties give the rectification's height, the
+vertical disparity and the disparity range, for which several hundred are plenty (10 000 gave
+~7 500 ties and cost a quarter of a 1 Mpx tile; SIFT's cost is mostly the descriptors)."""
 
 
 def read_window(path: str | os.PathLike, window: tuple[int, int, int, int]) -> np.ndarray:

@@ -432,7 +432,7 @@ def tie_points(
     :class:`jaxgeo.io.DEM`, +- ``settings.dem_margin_m``), else from a coarse matching.
     ``features1``/``features2``: SIFT keypoints and descriptors already detected
     (:func:`~jaxgeo.stereo.sift_features_raster`, raster px) to reuse; by default they are
-    detected over the ROI and the part of image 2 it sees (the strongest: ``keypoints``).
+    detected over the ROI and the part of image 2 it sees (about ``keypoints`` of them).
     """
     settings = MatchSettings() if settings is None else settings
     roi, tol, ratio = settings.roi, float(settings.epipolar_tol_px), settings.ratio

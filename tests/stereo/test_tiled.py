@@ -95,7 +95,7 @@ def test_tiled_dsm_equals_the_untiled_one_and_the_truth(scene, setup, tiled, tmp
     assert both.sum() > 0.8 * np.isfinite(b).sum()
     assert np.median(np.abs(a[both] - b[both])) < 0.15  # SGM's noise at the tiles' edges
     seen = np.isfinite(truth)
-    for h in (a, b):  # measured: 0.906 tiled, 0.900 untiled (0.908, 0.901 with 2-4x the ties)
+    for h in (a, b):  # measured: 0.905 tiled, 0.900 untiled (0.908, 0.901 with 2-4x the ties)
         assert np.isfinite(h[seen]).mean() > 0.895
         ok = seen & np.isfinite(h)
         assert np.median(np.abs(h[ok] - truth[ok])) < 0.5
