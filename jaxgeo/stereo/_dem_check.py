@@ -12,6 +12,10 @@ from ..io.internal import dem_against_model, dem_against_ties
 from ._ties import MatchSettings, TieError, tie_points
 from ._triangulation import StereoError
 
+WINDOW_KEYPOINTS = 1000
+"""The reference keypoints (spread, the strongest) of a window searched for its ties' heights
+(a few hundred ties give a height range; all of a 512 px window's cost three times as much)."""
+
 
 def check_dem(models, paths, window, dem, dem_range: tuple[float, float]) -> None:
     """Refuse (:class:`TieError` naming the file) a DEM whose heights ``dem_range`` over the
@@ -39,7 +43,7 @@ def window_tie_ground(models, paths, window) -> np.ndarray | None:
         with warnings.catch_warnings():
             warnings.simplefilter("ignore")
             ties = tie_points(models[0], models[1], paths[0], paths[1],
-                              MatchSettings(roi=window))  # fmt: skip
+                              MatchSettings(roi=window, keypoints=WINDOW_KEYPOINTS))  # fmt: skip
     except (TieError, StereoError):
         return None
     return np.asarray(ties.ground)

@@ -10,31 +10,36 @@ import numpy as np
 
 from ._matching import sift_features, stretch_limits, to_uint8
 
-SIFT_COARSE_MIN_PX, SIFT_LEVEL = 768, 2
-"""A window this large (px, both sides) is searched for keypoints at 1 / ``SIFT_LEVEL``."""
+SIFT_COARSE_MIN_PX, SIFT_LEVEL = 384, 2
+"""A window this large (px, both sides) is searched for keypoints at 1 / ``SIFT_LEVEL``: at 192
+coarse px a side it still holds thousands of keypoints (a 494 x 564 px edge window at full
+resolution cost as much as a 1 Mpx one at half)."""
 
 _LAST: dict = {}
 """The last reference window read (``key``, ``value``): one per process."""
 
 
-def window_keypoints(image, origin, limits, most=None):
+def sift_level(shape) -> int:
+    """The resolution level (1: full, :data:`SIFT_LEVEL`: half) of a window of ``shape`` (rows,
+    cols, or (w, h): both sides count) searched for keypoints."""
+    return SIFT_LEVEL if min(shape) >= SIFT_COARSE_MIN_PX else 1
+
+
+def window_keypoints(image, origin, limits, most=None, level=None):
     """SIFT keypoints (raster px) and descriptors of a window read (``image``, its first pixel
     at ``origin``; ``limits``: its uint8 stretch), at half resolution from
     :data:`SIFT_COARSE_MIN_PX` (what the ties fix needs no finer keypoint; a quarter of the
-    cost); a random subset (seeded) of ``most`` when there are more."""
+    cost; ``level``: that of another window, the pair's reference, instead of this one's size);
+    about ``most``, spread (:func:`~._matching.sift_features`; ``None``: all)."""
     import cv2
 
     image8 = to_uint8(image, limits)
-    level = SIFT_LEVEL if min(image8.shape) >= SIFT_COARSE_MIN_PX else 1
+    level = sift_level(image8.shape) if level is None else int(level)
     if level > 1:  # whole blocks: a size not a multiple of the level would stretch the scale
         h, w = (n - n % level for n in image8.shape)
         image8 = cv2.resize(image8[:h, :w], (w // level, h // level), interpolation=cv2.INTER_AREA)
-    xy, desc = sift_features(image8)  # a coarse pixel's centre: that of the block it averages
-    xy = (xy + 0.5) * level - 0.5 + np.asarray(origin, dtype=float)
-    if most is not None and len(xy) > most:
-        pick = np.sort(np.random.default_rng(0).choice(len(xy), most, replace=False))
-        xy, desc = xy[pick], desc[pick]
-    return xy, desc
+    xy, desc = sift_features(image8, most=most)  # a coarse pixel's centre: its block's
+    return (xy + 0.5) * level - 0.5 + np.asarray(origin, dtype=float), desc
 
 
 def reference_features(path, window, read, most):
@@ -53,7 +58,7 @@ def reference_features(path, window, read, most):
         return _LAST["value"]
     image = read(path, window)
     limits = stretch_limits(image[::2, ::2])
-    coarse = min(image.shape) >= SIFT_COARSE_MIN_PX
+    coarse = sift_level(image.shape) > 1
     sift_limits = limits if coarse else stretch_limits(image)
     value = (image, limits, window_keypoints(image, window[:2], sift_limits, most))
     _LAST.clear()

@@ -42,6 +42,10 @@ class MatchSettings:
         sigma_px: a priori sigma of the tie observations (``match_images``), px.
         few_ties: fewer ties than this in a pair: a :class:`TieWarning` naming the pair
             (``match_images``; too few to adjust the pair reliably).
+        keypoints: about this many keypoints of image 1's ROI searched, the strongest of each
+            part of it (image 2's window keeps as many per pixel); ``None``: all. Where a few
+            hundred ties do (a height range, a rectification) a cap saves most of SIFT's and
+            the matching's cost.
     """
 
     roi: Sequence[int] | None = None  # stored as a tuple
@@ -51,6 +55,7 @@ class MatchSettings:
     dem_margin_m: float = DEM_MARGIN_M
     sigma_px: float = 0.5
     few_ties: int = 20
+    keypoints: int | None = None
 
     def __post_init__(self):
         def bad(name, need):
@@ -88,3 +93,7 @@ class MatchSettings:
             raise bad("sigma_px", "must be a number > 0 (px)")
         if not (isinstance(self.few_ties, numbers.Integral) and self.few_ties >= 0):
             raise bad("few_ties", "must be an integer >= 0")
+        if self.keypoints is not None and not (
+            isinstance(self.keypoints, numbers.Integral) and self.keypoints > 0
+        ):
+            raise bad("keypoints", "must be an integer > 0, or None (all)")

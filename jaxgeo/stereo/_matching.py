@@ -54,8 +54,37 @@ def _tiles(rows, cols, tile_px):
             yield (r0, c0), (ra, ca, rb, cb)
 
 
-def _detect(sift, tile8, core, offset, tile_px):
-    kps, desc = sift.detectAndCompute(np.ascontiguousarray(tile8), None)
+SPREAD_CELLS = 8
+"""A capped detection keeps the strongest keypoints of each of ``SPREAD_CELLS`` x
+``SPREAD_CELLS`` cells in turn: spread over the image (the strongest of all cluster where the
+texture is strongest; a rectification's vertical disparity and range need them everywhere)."""
+
+
+def _spread(kps, most, shape) -> list:
+    """``most`` of the keypoints ``kps``: the strongest of every cell of a grid over ``shape``,
+    then the second strongest of every cell, and so on."""
+    xy = np.array([k.pt for k in kps]).reshape(-1, 2)
+    response = np.array([k.response for k in kps])
+    step = np.maximum(np.asarray(shape[::-1], float) / SPREAD_CELLS, 1.0)
+    cx, cy = (np.clip(xy // step, 0, SPREAD_CELLS - 1).astype(int)).T
+    cell = cy * SPREAD_CELLS + cx
+    order = np.lexsort((-response, cell))  # by cell, strongest first
+    first = np.searchsorted(cell[order], cell[order])  # each cell's first position
+    rank = np.empty(len(kps), int)
+    rank[order] = np.arange(len(kps)) - first
+    pick = np.lexsort((-response, rank))[:most]
+    return [kps[i] for i in np.sort(pick)]
+
+
+def _detect(sift, tile8, core, offset, tile_px, most=None):
+    tile8 = np.ascontiguousarray(tile8)
+    if most is None:
+        kps, desc = sift.detectAndCompute(tile8, None)
+    else:  # the descriptors (most of the cost) of the keypoints kept only
+        kps = sift.detect(tile8, None)
+        if len(kps) > most:
+            kps = _spread(kps, most, tile8.shape)
+        kps, desc = sift.compute(tile8, kps) if len(kps) else (kps, None)
     if desc is None or len(kps) == 0:  # OpenCV 4: None; OpenCV >= 5: a (0, 128) array
         return np.zeros((0, 2)), np.zeros((0, 128), np.float32)
     # OpenCV keypoints are in pixel-centre-at-0 coordinates like jaxgeo's
@@ -72,24 +101,36 @@ def _concat(parts):
     return np.concatenate([p[0] for p in parts]), np.concatenate([p[1] for p in parts])
 
 
-def sift_features(image8: np.ndarray, tile_px: int = 2048) -> tuple[np.ndarray, np.ndarray]:
+def _share(most, share):
+    """A detection tile's ``share`` (of the whole image's area) of ``most`` keypoints (all:
+    ``None``). Most of SIFT's cost is the descriptors (13 000 of a 0.46 Mpx image: 2/3 of it)."""
+    return None if most is None else max(int(np.ceil(most * share)), 1)
+
+
+def sift_features(
+    image8: np.ndarray, tile_px: int = 2048, most: int | None = None
+) -> tuple[np.ndarray, np.ndarray]:
     """SIFT keypoints ``(n, 2)`` (x, y) and descriptors ``(n, 128)`` float32 of a uint8 image,
-    detected tile by tile (a keypoint is kept by the tile whose core holds it)."""
+    detected tile by tile (a keypoint is kept by the tile whose core holds it); ``most``: about
+    ``most`` of them, the strongest spread over the image (each tile its share by area;
+    ``None``: all)."""
     import cv2
 
     sift = cv2.SIFT_create()
     parts = []
     for core, (ra, ca, rb, cb) in _tiles(*image8.shape, tile_px):
-        parts.append(_detect(sift, image8[ra:rb, ca:cb], core, (ca, ra), tile_px))
+        n = _share(most, (rb - ra) * (cb - ca) / image8.size)
+        parts.append(_detect(sift, image8[ra:rb, ca:cb], core, (ca, ra), tile_px, n))
     return _concat(parts)
 
 
 def sift_features_raster(
-    path, window: Sequence[int] | None = None, tile_px: int = 2048
+    path, window: Sequence[int] | None = None, tile_px: int = 2048, most: int | None = None
 ) -> tuple[np.ndarray, np.ndarray]:
     """:func:`sift_features` of band 1 of a raster file over ``window = (col, row, w, h)``
     (whole image by default), reading one tile at a time (bounded memory for large images);
-    the uint8 stretch comes from a decimated read. Keypoints in full-image pixels."""
+    the uint8 stretch comes from a decimated read. Keypoints in full-image pixels; ``most``:
+    as :func:`sift_features`."""
     import cv2
     from rasterio.windows import Window
 
@@ -102,7 +143,8 @@ def sift_features_raster(
         parts = []
         for core, (ra, ca, rb, cb) in _tiles(h, w, tile_px):
             tile = src.read(1, window=Window(col + ca, row + ra, cb - ca, rb - ra))
-            xy, desc = _detect(sift, to_uint8(tile, limits), core, (ca, ra), tile_px)
+            n = _share(most, tile.size / (w * h))
+            xy, desc = _detect(sift, to_uint8(tile, limits), core, (ca, ra), tile_px, n)
             parts.append((xy + (col, row), desc))
     return _concat(parts)
 

@@ -45,7 +45,7 @@ from ._dense import (
     y_shift_at,
 )
 from ._dsm import DSMGrid, local_utm_epsg, point_spacing, rasterize, to_map
-from ._keypoints import SIFT_COARSE_MIN_PX, reference_features, window_keypoints
+from ._keypoints import reference_features, sift_level, window_keypoints
 from ._matching import stretch_limits
 from ._rectification import EpipolarGrids, epipolar_grids
 from ._settings import DEFAULT_DSM, DSMSettings
@@ -65,10 +65,11 @@ from ._uncertainty import Orientation, pair_orientation, point_height_sigmas
 MIN_TIE_POINTS = 10
 CONTEXT_PX = 16
 """Reference-image pixels matched around the ROI (context at its edges; not in the output)."""
-TIE_KEYPOINTS = 3000
-"""Reference keypoints matched per pair (a random subset of them when there are more): the ties
-give the rectification's height, the vertical disparity and the disparity range, for which a
-thousand or two are plenty (10 000 gave ~7 500 ties and cost a quarter of a 1 Mpx tile)."""
+TIE_KEYPOINTS = 1500
+"""Reference keypoints matched per pair (the strongest of each part of the window; the
+secondary's window keeps as many per pixel): the ties give the rectification's height, the
+vertical disparity and the disparity range, for which several hundred are plenty (10 000 gave
+~7 500 ties and cost a quarter of a 1 Mpx tile; SIFT's cost is mostly the descriptors)."""
 
 
 def read_window(path: str | os.PathLike, window: tuple[int, int, int, int]) -> np.ndarray:
@@ -221,14 +222,15 @@ def stereo_pair(
         lims = (lim1, stretch_limits(img2[::2, ::2]))
     log("tie points")
     features2 = None  # a small window: tie_points' own search (full resolution)
-    if min(data_win[2:]) >= SIFT_COARSE_MIN_PX:
+    if sift_level(data_win[2:]) > 1:
         with stage("sift"):  # the secondary's, where the ties' heights (else any) put the ROI
             ties_h = settings.heights if settings.heights is not None else h_valid
             c, r, cw, rh = _sec_window(ref, sec, data_win, ties_h, sec_size, paths,
                                        margin=int(epipolar_tol_px) + 16)  # fmt: skip
             c, r = max(c, win2[0]), max(r, win2[1])  # within img2
             part2 = img2[r - win2[1] : r - win2[1] + rh, c - win2[0] : c - win2[0] + cw]
-            features2 = window_keypoints(part2, (c, r), lims[1])
+            most2 = TIE_KEYPOINTS * part2.size / (data_win[2] * data_win[3])  # same density
+            features2 = window_keypoints(part2, (c, r), lims[1], int(np.ceil(most2)), level=2)
     with stage("ties"):
         ties = tie_points(
             ref, sec, ref_path, sec_path, MatchSettings(

@@ -432,7 +432,7 @@ def tie_points(
     :class:`jaxgeo.io.DEM`, +- ``settings.dem_margin_m``), else from a coarse matching.
     ``features1``/``features2``: SIFT keypoints and descriptors already detected
     (:func:`~jaxgeo.stereo.sift_features_raster`, raster px) to reuse; by default they are
-    detected over the ROI and the part of image 2 it sees.
+    detected over the ROI and the part of image 2 it sees (about ``keypoints`` of them).
     """
     settings = MatchSettings() if settings is None else settings
     roi, tol, ratio = settings.roi, float(settings.epipolar_tol_px), settings.ratio
@@ -441,8 +441,9 @@ def tie_points(
     h_range, source, validity = _height_range(
         model1, model2, settings.height_range_m, dem, roi1, float(settings.dem_margin_m), path1
     )
+    most = settings.keypoints
     if features1 is None:
-        features1 = sift_features_raster(path1, roi1 if roi is not None else None)
+        features1 = sift_features_raster(path1, roi1 if roi is not None else None, most=most)
     else:
         col, row, w, h = roi1
         xy = np.asarray(features1[0], dtype=float)
@@ -453,7 +454,8 @@ def tie_points(
         win2 = _window2(model1, model2, roi1, size2, h_range or validity, tol + 16)
         if win2 is None:
             raise TieError(f"the ROI of {path1} is not seen in {path2}")
-        features2 = sift_features_raster(path2, win2 if win2 != (0, 0, *size2) else None)
+        most2 = most and int(np.ceil(most * win2[2] * win2[3] / (roi1[2] * roi1[3])))  # per px
+        features2 = sift_features_raster(path2, win2 if win2[2:] != size2 else None, most=most2)
     features2 = (np.asarray(features2[0], dtype=float), np.asarray(features2[1]))
     n_coarse = None
     if h_range is None:

@@ -37,13 +37,20 @@ from ..models import AbstractSensorModel
 from ..tiles import RasterSpec, Tile, TilePlan, plan_tiles
 from ..tiles.internal import NoData, cores, overview_factors, write_tile
 from ._binning import map_points_in_box, spacing_xy
-from ._dem_check import check_dem, window_tie_ground
+from ._dem_check import check_dem
 from ._dsm import (
     DSM_BANDS,
     dsm_band_tags,
     dsm_grid,
     local_utm_epsg,
     rasterize_map,
+)
+from ._heights import (
+    HEIGHT_MARGIN_M,
+    sample_windows,
+    sampled_heights,
+    scene_heights,
+    tile_tie_heights,
 )
 from ._pipeline import _height_offsets, dsm_from_images, image_size, stereo_pair
 from ._settings import DEFAULT_DSM, DSMSettings
@@ -56,10 +63,6 @@ TILE_CELLS = 1024
 """Cells a side of a DSM tile (at 0.5 m cells on a 0.5 m GSD image: about 1 000 image px)."""
 TILED_MIN_PX = 2048
 """A reference window larger than this (px, either side) is made tile by tile by default."""
-SAMPLE_WINDOW_PX = 512
-"""Side (px) of the five reference windows whose tie points give a scene's height range."""
-HEIGHT_MARGIN_M = 50.0
-"""Metres (at least; a quarter of the span if more) added on both sides of the sampled heights."""
 CONTEXT_M = 16.0
 """Metres around a tile's box that its window adds for the matching's context (on top of the
 margin whose points it keeps)."""
@@ -219,47 +222,6 @@ def reference_window(model, path, epsg, box, heights) -> tuple[int, int, int, in
     return c0, r0, c1 - c0, r1 - r0
 
 
-def scene_heights(models, paths, roi) -> tuple[float, float] | None:
-    """The terrain's height range (m) under ``roi = (col, row, w, h)`` of the first image, from
-    the tie points of the pair (first, second) in five windows of :data:`SAMPLE_WINDOW_PX` (the
-    centre and the four quarters' centres): their 0.5-99.5 percentiles widened by
-    :data:`HEIGHT_MARGIN_M` or a quarter of the span; ``None`` with fewer than 20 ties. A tile's
-    reference window is projected at these heights: the models' whole validity range instead
-    (hundreds of metres) widens every window by its parallax (a 1 Mpx tile read 1.7 Mpx)."""
-    return _sampled_heights(models, paths, _sample_windows(roi), los_heights(models[0]))
-
-
-def _sample_windows(roi) -> list[tuple[int, int, int, int]]:
-    """The five windows of :func:`scene_heights` in ``roi`` (repeated in a small ROI)."""
-    col, row, w, h = roi
-    side = min(SAMPLE_WINDOW_PX, w, h)
-    windows = []
-    for fx, fy in ((0.5, 0.5), (0.25, 0.25), (0.75, 0.25), (0.25, 0.75), (0.75, 0.75)):
-        c0 = int(min(max(col + fx * w - side / 2, col), col + w - side))
-        r0 = int(min(max(row + fy * h - side / 2, row), row + h - side))
-        windows.append((c0, r0, side, side))
-    return windows
-
-
-def _sampled_heights(models, paths, windows, limits) -> tuple[float, float] | None:
-    """The 0.5-99.5 percentiles of the tie points' heights in ``windows`` widened by
-    :data:`HEIGHT_MARGIN_M` or a quarter of the span, within ``limits``; ``None`` with fewer
-    than 20 ties."""
-    found = []
-    for window in windows:
-        ground = window_tie_ground(models, paths, window)
-        if ground is not None:  # else no texture there: the other windows
-            found.append(ground[:, 2])
-    heights = np.concatenate(found) if found else np.zeros(0)
-    heights = heights[np.isfinite(heights)]
-    if heights.size < 20:
-        return None
-    lo, hi = (float(v) for v in np.percentile(heights, [0.5, 99.5]))
-    margin = max(HEIGHT_MARGIN_M, 0.25 * (hi - lo))
-    lo, hi = max(lo - margin, limits[0]), min(hi + margin, limits[1])
-    return (lo, hi) if lo < hi else None
-
-
 @dataclasses.dataclass(frozen=True)
 class WholeDSMJob:
     """The work of an untiled DSM, the one tile of its plan (``job(tile, path)``, in this
@@ -353,13 +315,13 @@ def dsm_heights(
     roi = settings.roi or (0, 0, *image_size(paths[0]))
     if dem is not None:
         lo, hi = footprint_dem_heights(models[0], dem, roi)
-        check_dem(models, paths, _sample_windows(roi)[0], dem, (lo, hi))  # refuses a wrong DEM
+        check_dem(models, paths, sample_windows(roi)[0], dem, (lo, hi))  # refuses a wrong DEM
         return (lo - HEIGHT_MARGIN_M, hi + HEIGHT_MARGIN_M), "dem"
     if tiled:
         heights = scene_heights(models, paths, roi)
     else:
-        windows = list(dict.fromkeys(_sample_windows(roi)))
-        heights = _sampled_heights(models, paths, windows, validity_heights(models[0]))
+        windows = list(dict.fromkeys(sample_windows(roi)))
+        heights = sampled_heights(models, paths, windows, validity_heights(models[0]))
     if heights is not None:
         return heights, "tie points"
     return (los_heights if tiled else validity_heights)(models[0]), "the model's validity range"
@@ -381,8 +343,8 @@ def plan_dsm(
     The terrain's heights (:func:`dsm_heights`: ``settings.heights``, else ``dem``'s +-50 m,
     else sampled by :func:`scene_heights`, else the reference model's validity range): the
     grid covers the ROI's footprint at their middle, and each tile reads the reference window
-    that sees it at both; the tie points' height range is ``settings.heights`` or the DEM's
-    (else each tile's coarse matching). ``tiled=False``: a plan of one tile whose work is
+    that sees it at both; the tie points' height range is :func:`tile_tie_heights` (the plan's,
+    else each tile's coarse matching). ``tiled=False``: a plan of one tile whose work is
     :func:`~jaxgeo.stereo.dsm_from_images` over the ROI (:class:`WholeDSMJob`, run in this
     process; ``progress``: a bar per pair), its grid the ROI's footprint between both heights.
     ``orientation``: :func:`dsm_from_images`.
@@ -429,7 +391,7 @@ def plan_dsm(
     if tiled:
         per_pair = tuple(pair_orientation(orientation, len(paths), 0, i)
                          for i in range(1, len(paths)))  # fmt: skip
-        tie = settings.heights if settings.heights is not None or dem is None else (lo, hi)
+        tie = tile_tie_heights(models, (lo, hi), source)
         job = DSMJob(**grid, heights=(float(lo), float(hi)),
                      margin_m=_margin_m(res_m, settings.max_hole_m),
                      settings=dataclasses.replace(settings, heights=tie, roi=None),

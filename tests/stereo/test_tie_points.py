@@ -181,3 +181,34 @@ def test_join_ties_makes_multi_image_points():
     np.testing.assert_allclose(first, [[10, 20], [11, 21], [12, 22]])
     empty = join_ties([])
     assert len(empty.point) == 0 and empty.n_conflicting == 0
+
+
+def test_a_few_strongest_keypoints_give_the_same_ties_on_the_s2p_triplet(shared_data):
+    """``MatchSettings(keypoints=...)`` (what a DSM tile and the plan's height search use): the
+    strongest 1500 keypoints of image 1 (image 2's window as many per pixel) still give true
+    ties, hundreds of them, and the same relative bias across the epipolar curves and the same
+    height range as all of them (test above: -0.68 px)."""
+    folder = shared_data / "s2p_triplet"
+    im1, im2 = open_image(folder / "img_01.tif"), open_image(folder / "img_02.tif")
+    ties = tie_points(im1.model, im2.model, im1.path, im2.path, MatchSettings(keypoints=1500))
+    rep = ties.report
+    check_bookkeeping(ties)
+    # measured: 1500 / 1530 keypoints of 15132 / 14702, 631 ties (256 on the DSM, 98.8 % within
+    # 5 m, median -2.27 m), across -0.688 px (-0.684 with all); range 40..347 m (40..361 m)
+    assert rep.n_keypoints[0] <= 1500 * 1.05 and len(ties) > 400
+    frac, n_on_dsm, median_dh = true_fraction(
+        ties, dsm_heights(ties.ground, folder / "expected_dsm.tif"), 5.0
+    )
+    assert n_on_dsm > 200 and frac >= 0.9 and -4.0 < median_dh < -1.0
+    assert abs(rep.across_px - (-0.68)) < 0.1
+    with rasterio.open(folder / "expected_dsm.tif") as src:
+        terrain = np.nanpercentile(src.read(1), [1, 99])
+    lo, hi = rep.height_range_m
+    assert lo < terrain[0] and terrain[1] < hi
+
+
+def test_keypoints_must_be_a_positive_count():
+    for bad in (0, -5):
+        with pytest.raises(TieError, match="keypoints"):
+            MatchSettings(keypoints=bad)
+    assert MatchSettings(keypoints=500).keypoints == 500 and MatchSettings().keypoints is None

@@ -267,3 +267,27 @@ def test_the_reference_window_is_read_and_searched_once_per_tile(tmp_path):
     os.utime(path, ns=(st.st_atime_ns, st.st_mtime_ns + 10**9))
     reference_features(path, (10, 0, 120, 100), read, 500)
     assert len(reads) == 3
+
+
+def test_capped_keypoints_are_spread_over_the_image():
+    """``sift_features(..., most=n)``: about ``n`` keypoints, the strongest of each cell of a grid
+    in turn, so a quarter of the image with four times the contrast does not take them all (the
+    strongest of all would cluster there; a rectification needs ties everywhere)."""
+    import cv2
+
+    from jaxgeo.stereo import sift_features
+    from jaxgeo.stereo._matching import to_uint8
+
+    rng = np.random.default_rng(4)
+    image = cv2.GaussianBlur(rng.normal(size=(400, 400)).astype(np.float32), (0, 0), 2.0)
+    image[:200, :200] *= 4.0
+    image8 = to_uint8(image, (-0.6, 0.6))
+    every, _ = sift_features(image8)
+    xy, desc = sift_features(image8, most=400)
+    assert len(every) > 1000 and 390 <= len(xy) <= 400 and desc.shape == (len(xy), 128)
+    weak = ~((xy[:, 0] < 200) & (xy[:, 1] < 200))
+    assert weak.mean() > 0.6  # three quarters of the area, three quarters of the keypoints
+    # each kept keypoint is one of the full detection's (same place)
+    from scipy.spatial import cKDTree
+
+    assert np.all(cKDTree(every).query(xy)[0] < 1e-6)

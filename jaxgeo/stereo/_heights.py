@@ -1,0 +1,76 @@
+"""The heights a DSM's plan searches (:func:`~._tiled.plan_dsm`): the terrain's height range
+under the ROI from the tie points of five windows of the reference (each tile's window is
+projected at it), and the range each tile's own tie points search (that range widened, so that no
+tile matches coarsely over the models' whole validity range first)."""
+
+from __future__ import annotations
+
+import numpy as np
+
+from ._dem_check import window_tie_ground
+from ._ties import validity_heights
+from ._triangulation import los_heights
+
+SAMPLE_WINDOW_PX = 512
+"""Side (px) of the five reference windows whose tie points give a scene's height range."""
+HEIGHT_MARGIN_M = 50.0
+"""Metres (at least; a quarter of the span if more) added on both sides of the sampled heights."""
+
+
+def scene_heights(models, paths, roi) -> tuple[float, float] | None:
+    """The terrain's height range (m) under ``roi = (col, row, w, h)`` of the first image, from
+    the tie points of the pair (first, second) in five windows of :data:`SAMPLE_WINDOW_PX` (the
+    centre and the four quarters' centres): their 0.5-99.5 percentiles widened by
+    :data:`HEIGHT_MARGIN_M` or a quarter of the span; ``None`` with fewer than 20 ties. A tile's
+    reference window is projected at these heights: the models' whole validity range instead
+    (hundreds of metres) widens every window by its parallax (a 1 Mpx tile read 1.7 Mpx)."""
+    return sampled_heights(models, paths, sample_windows(roi), los_heights(models[0]))
+
+
+def sample_windows(roi) -> list[tuple[int, int, int, int]]:
+    """The five windows of :func:`scene_heights` in ``roi`` (repeated in a small ROI)."""
+    col, row, w, h = roi
+    side = min(SAMPLE_WINDOW_PX, w, h)
+    windows = []
+    for fx, fy in ((0.5, 0.5), (0.25, 0.25), (0.75, 0.25), (0.25, 0.75), (0.75, 0.75)):
+        c0 = int(min(max(col + fx * w - side / 2, col), col + w - side))
+        r0 = int(min(max(row + fy * h - side / 2, row), row + h - side))
+        windows.append((c0, r0, side, side))
+    return windows
+
+
+def sampled_heights(models, paths, windows, limits) -> tuple[float, float] | None:
+    """The 0.5-99.5 percentiles of the tie points' heights in ``windows`` widened by
+    :data:`HEIGHT_MARGIN_M` or a quarter of the span, within ``limits``; ``None`` with fewer
+    than 20 ties."""
+    found = []
+    for window in windows:
+        ground = window_tie_ground(models, paths, window)
+        if ground is not None:  # else no texture there: the other windows
+            found.append(ground[:, 2])
+    heights = np.concatenate(found) if found else np.zeros(0)
+    heights = heights[np.isfinite(heights)]
+    if heights.size < 20:
+        return None
+    lo, hi = (float(v) for v in np.percentile(heights, [0.5, 99.5]))
+    margin = max(HEIGHT_MARGIN_M, 0.25 * (hi - lo))
+    lo, hi = max(lo - margin, limits[0]), min(hi + margin, limits[1])
+    return (lo, hi) if lo < hi else None
+
+
+def tile_tie_heights(models, heights, source) -> tuple[float, float] | None:
+    """The height range (m) a tile's tie points search, from the plan's ``heights`` and their
+    ``source`` (:func:`dsm_heights`): as given, the DEM's, or the sampled tie points' widened
+    once more by their margin (:data:`HEIGHT_MARGIN_M` or a quarter of the span; the models'
+    common validity range at most): a tile's ties reach terrain a little beyond what the five
+    windows saw, and its disparity range follows them. ``None`` (each tile matches coarsely
+    over the validity range first) when nothing measured the heights."""
+    if source in ("given", "dem"):
+        return tuple(float(v) for v in heights)
+    if source != "tie points":
+        return None
+    lo, hi = heights
+    margin = max(HEIGHT_MARGIN_M, 0.25 * (hi - lo))
+    valid = [validity_heights(m) for m in models]
+    lo, hi = max(lo - margin, *(v[0] for v in valid)), min(hi + margin, *(v[1] for v in valid))
+    return (float(lo), float(hi)) if lo < hi else None
