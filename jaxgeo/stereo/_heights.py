@@ -5,10 +5,13 @@ tile matches coarsely over the models' whole validity range first)."""
 
 from __future__ import annotations
 
+import dataclasses
+
 import numpy as np
 
 from ._dem_check import window_tie_ground
-from ._ties import validity_heights
+from ._match_settings import TieError
+from ._ties import MatchSettings, tie_points, validity_heights
 from ._triangulation import los_heights
 
 SAMPLE_WINDOW_PX = 512
@@ -74,3 +77,47 @@ def tile_tie_heights(models, heights, source) -> tuple[float, float] | None:
     valid = [validity_heights(m) for m in models]
     lo, hi = max(lo - margin, *(v[0] for v in valid)), min(hi + margin, *(v[1] for v in valid))
     return (float(lo), float(hi)) if lo < hi else None
+
+
+END_FRACTION = 0.1
+END_SHARE = 0.02
+"""A range searched is too narrow for a tile when more than ``END_SHARE`` of its tie points (and
+at least 5) lie within ``END_FRACTION`` of its span from one end (:func:`crowds_range_end`)."""
+
+
+def crowds_range_end(heights: np.ndarray, searched: tuple[float, float] | None) -> bool:
+    """Whether tie points of ``heights`` (m) crowd an end of the height range ``searched``: the
+    terrain may go on beyond it (a steep tile beyond what the plan's five windows saw, a
+    ``--heights`` too narrow), where no tie is found and the disparity range stops short.
+
+    Why: a plan's range is the windows' heights widened twice (:func:`tile_tie_heights`), so
+    a tile inside it has its ties well within; ties cut off at an end show the terrain beyond."""
+    if searched is None:
+        return False
+    h = np.asarray(heights, float)
+    h = h[np.isfinite(h)]
+    lo, hi = searched
+    edge = END_FRACTION * (hi - lo)
+    least = max(5.0, END_SHARE * len(h))
+    return bool(np.sum(h < lo + edge) >= least or np.sum(h > hi - edge) >= least)
+
+
+def ties_over_terrain(models, paths, match: MatchSettings, dem, features, least: int):
+    """:func:`~._ties.tie_points` of ``models = (ref, sec)`` over ``match.height_range_m``, and
+    again over a coarse matching's range when those ties crowd an end of it
+    (:func:`crowds_range_end`) or are fewer than ``least`` (a DEM's range is kept).
+    ``features``: both images' keypoints (image 2's found where the narrow range puts the ROI:
+    not reused then). Returns the ties and whether the range was widened."""
+    (ref, sec), (f1, f2) = models, features
+    narrow = match.height_range_m is not None and dem is None
+    try:
+        ties = tie_points(ref, sec, *paths, match, dem=dem, features1=f1, features2=f2)
+    except TieError:
+        if not narrow:
+            raise
+        ties = None
+    enough = ties is not None and len(ties) >= least
+    if not narrow or (enough and not crowds_range_end(ties.ground[:, 2], match.height_range_m)):
+        return ties, False
+    wide = dataclasses.replace(match, height_range_m=None)  # image 2's keypoints: its own search
+    return tie_points(ref, sec, *paths, wide, features1=f1), True

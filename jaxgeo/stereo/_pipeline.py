@@ -45,12 +45,13 @@ from ._dense import (
     y_shift_at,
 )
 from ._dsm import DSMGrid, local_utm_epsg, point_spacing, rasterize, to_map
+from ._heights import ties_over_terrain
 from ._keypoints import reference_features, sift_level, window_keypoints
 from ._matching import stretch_limits
 from ._rectification import EpipolarGrids, epipolar_grids
 from ._settings import DEFAULT_DSM, DSMSettings
 from ._stages import stage
-from ._ties import MatchSettings, tie_points
+from ._ties import MatchSettings
 from ._triangulation import (
     MIN_LATTICE_POINTS,
     StereoError,
@@ -232,11 +233,11 @@ def stereo_pair(
             most2 = TIE_KEYPOINTS * part2.size / (data_win[2] * data_win[3])  # same density
             features2 = window_keypoints(part2, (c, r), lims[1], int(np.ceil(most2)), level=2)
     with stage("ties"):
-        ties = tie_points(
-            ref, sec, ref_path, sec_path, MatchSettings(
-                roi=data_win, height_range_m=settings.heights, epipolar_tol_px=epipolar_tol_px),
-            dem=dem, features1=features1, features2=features2,
-        )  # fmt: skip
+        match = MatchSettings(roi=data_win, height_range_m=settings.heights,
+                              epipolar_tol_px=epipolar_tol_px)  # fmt: skip
+        ties, stats["tie_heights_widened"] = ties_over_terrain(
+            (ref, sec), paths, match, dem, (features1, features2), MIN_TIE_POINTS
+        )
     if len(ties) < MIN_TIE_POINTS:
         raise StereoError(
             f"stereo: only {len(ties)} verified tie points between {ref_path} and {sec_path} "

@@ -237,6 +237,39 @@ def test_the_tiles_search_the_plans_heights_widened(scene, setup):
     assert tile_tie_heights(models, (v_lo, v_hi), "tie points") == (v_lo, v_hi)
 
 
+def test_a_tile_whose_ties_crowd_an_end_of_the_plans_heights_searches_wider(scene):
+    """Terrain beyond the heights a tile searches (a steep tile the plan's five windows missed,
+    a ``--heights`` too narrow): its ties pile up at that end, and the tile searches again over
+    a coarse matching's range: the same disparity range as a tile that matched coarsely, not one
+    cut short. A range holding the terrain is searched once."""
+    import dataclasses
+
+    from jaxgeo.stereo import stereo_pair
+    from jaxgeo.stereo._heights import crowds_range_end
+    from jaxgeo.stereo._ties import validity_heights
+
+    folder, models, paths = scene
+    with rasterio.open(folder / "truth_dsm.tif") as src:
+        truth = src.read(1)
+    p5, p95 = np.percentile(truth[np.isfinite(truth)], [5, 95])
+    roi = (100, 100, 200, 200)
+    base = DSMSettings(res_m=RES, roi=roi)
+    v_lo, v_hi = validity_heights(models[0])
+    assert v_lo < p5 - 20 and p95 + 20 < v_hi
+    runs = {name: stereo_pair(models, paths, dataclasses.replace(base, heights=h)).stats
+            for name, h in (("coarse", None), ("holding", (p5 - 20.0, p95 + 20.0)),
+                            ("narrow", (p5 - 20.0, 0.5 * (p5 + p95))))}  # fmt: skip
+    assert not runs["holding"]["tie_heights_widened"]
+    assert runs["narrow"]["tie_heights_widened"]
+    want = np.array(runs["coarse"]["disparity_range_px"])
+    assert np.allclose(runs["narrow"]["disparity_range_px"], want, atol=3.0), runs
+    h = np.linspace(10.0, 90.0, 200)
+    assert not crowds_range_end(h, (0.0, 100.0))
+    assert crowds_range_end(np.concatenate([h, np.full(10, 95.0)]), (0.0, 100.0))
+    assert crowds_range_end(np.concatenate([h, np.full(10, 3.0)]), (0.0, 100.0))
+    assert not crowds_range_end(h, None)
+
+
 def test_default_workers_are_one_per_core_for_several_tiles(monkeypatch):
     """``jaxgeo dsm`` starts its workers before the planning with the rule ``tiled_dsm`` uses."""
     from jaxgeo.stereo import _tiled
