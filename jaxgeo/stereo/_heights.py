@@ -85,9 +85,12 @@ END_SHARE = 0.02
 at least 5) lie within ``END_FRACTION`` of its span from one end (:func:`crowds_range_end`)."""
 
 
-def crowds_range_end(heights: np.ndarray, searched: tuple[float, float] | None) -> bool:
-    """Whether tie points of ``heights`` (m) crowd an end of the height range ``searched``: the
-    terrain may go on beyond it (a steep tile beyond what the plan's five windows saw, a
+def crowds_range_end(
+    heights: np.ndarray, searched: tuple[float, float] | None, limits=(-np.inf, np.inf)
+) -> bool:
+    """Whether tie points of ``heights`` (m) crowd an end of the height range ``searched`` that
+    lies inside ``limits`` (the models' validity range: nothing is searched beyond it): the
+    terrain may go on beyond that end (a steep tile beyond what the plan's five windows saw, a
     ``--heights`` too narrow), where no tie is found and the disparity range stops short.
 
     Why: a plan's range is the windows' heights widened twice (:func:`tile_tie_heights`), so
@@ -99,15 +102,16 @@ def crowds_range_end(heights: np.ndarray, searched: tuple[float, float] | None) 
     lo, hi = searched
     edge = END_FRACTION * (hi - lo)
     least = max(5.0, END_SHARE * len(h))
-    return bool(np.sum(h < lo + edge) >= least or np.sum(h > hi - edge) >= least)
+    low = lo > limits[0] and np.sum(h < lo + edge) >= least
+    return bool(low or (hi < limits[1] and np.sum(h > hi - edge) >= least))
 
 
 def ties_over_terrain(models, paths, match: MatchSettings, dem, features, least: int):
     """:func:`~._ties.tie_points` of ``models = (ref, sec)`` over ``match.height_range_m``, and
-    again over a coarse matching's range when those ties crowd an end of it
-    (:func:`crowds_range_end`) or are fewer than ``least`` (a DEM's range is kept).
-    ``features``: both images' keypoints (image 2's found where the narrow range puts the ROI:
-    not reused then). Returns the ties and whether the range was widened."""
+    again over a coarse matching's range when those ties crowd an end of it inside the models'
+    validity range (:func:`crowds_range_end`) or are fewer than ``least`` (a DEM's range is
+    kept). ``features``: both images' keypoints (for the first search only). Returns the ties
+    and whether the range was widened."""
     (ref, sec), (f1, f2) = models, features
     narrow = match.height_range_m is not None and dem is None
     try:
@@ -116,8 +120,14 @@ def ties_over_terrain(models, paths, match: MatchSettings, dem, features, least:
         if not narrow:
             raise
         ties = None
+    valid = [validity_heights(m) for m in models]
+    limits = (max(v[0] for v in valid), min(v[1] for v in valid))
     enough = ties is not None and len(ties) >= least
-    if not narrow or (enough and not crowds_range_end(ties.ground[:, 2], match.height_range_m)):
+    h = None if ties is None else ties.ground[:, 2]
+    if not narrow or (enough and not crowds_range_end(h, match.height_range_m, limits)):
         return ties, False
-    wide = dataclasses.replace(match, height_range_m=None)  # image 2's keypoints: its own search
-    return tie_points(ref, sec, *paths, wide, features1=f1), True
+    # both images' own full-resolution search: keypoints of one level (OpenCV's SIFT places a
+    # keypoint of its doubled first octave a quarter pixel off; mixing a half-resolution
+    # reference with a full-resolution secondary measured a false 0.25 px vertical disparity)
+    wide = dataclasses.replace(match, height_range_m=None)
+    return tie_points(ref, sec, *paths, wide), True

@@ -252,8 +252,7 @@ def test_a_tile_whose_ties_crowd_an_end_of_the_plans_heights_searches_wider(scen
     with rasterio.open(folder / "truth_dsm.tif") as src:
         truth = src.read(1)
     p5, p95 = np.percentile(truth[np.isfinite(truth)], [5, 95])
-    roi = (100, 100, 200, 200)
-    base = DSMSettings(res_m=RES, roi=roi)
+    base = DSMSettings(res_m=RES, roi=(0, 0, SIZE, SIZE))  # keypoints at half resolution
     v_lo, v_hi = validity_heights(models[0])
     assert v_lo < p5 - 20 and p95 + 20 < v_hi
     runs = {name: stereo_pair(models, paths, dataclasses.replace(base, heights=h)).stats
@@ -263,11 +262,15 @@ def test_a_tile_whose_ties_crowd_an_end_of_the_plans_heights_searches_wider(scen
     assert runs["narrow"]["tie_heights_widened"]
     want = np.array(runs["coarse"]["disparity_range_px"])
     assert np.allclose(runs["narrow"]["disparity_range_px"], want, atol=3.0), runs
+    # the second search's keypoints all of one resolution: no false vertical disparity
+    vertical = [runs[k]["vertical_disparity_px"] for k in ("coarse", "holding", "narrow")]
+    assert np.ptp(vertical) < 0.05, vertical
     h = np.linspace(10.0, 90.0, 200)
     assert not crowds_range_end(h, (0.0, 100.0))
     assert crowds_range_end(np.concatenate([h, np.full(10, 95.0)]), (0.0, 100.0))
     assert crowds_range_end(np.concatenate([h, np.full(10, 3.0)]), (0.0, 100.0))
     assert not crowds_range_end(h, None)
+    assert not crowds_range_end(np.concatenate([h, np.full(10, 95.0)]), (0.0, 100.0), (0, 100))
 
 
 def test_default_workers_are_one_per_core_for_several_tiles(monkeypatch):
