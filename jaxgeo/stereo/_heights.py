@@ -82,52 +82,67 @@ def tile_tie_heights(models, heights, source) -> tuple[float, float] | None:
 END_FRACTION = 0.1
 END_SHARE = 0.02
 """A range searched is too narrow for a tile when more than ``END_SHARE`` of its tie points (and
-at least 5) lie within ``END_FRACTION`` of its span from one end (:func:`crowds_range_end`)."""
+at least 5) lie within ``END_FRACTION`` of its span from one end (:func:`crowded_ends`)."""
+WIDENINGS = 2
+"""How many times a tile widens its tie points' height range (each time by its span at the
+crowded ends) before it falls back to a coarse matching over the models' validity range."""
 
 
-def crowds_range_end(
-    heights: np.ndarray, searched: tuple[float, float] | None, limits=(-np.inf, np.inf)
-) -> bool:
-    """Whether tie points of ``heights`` (m) crowd an end of the height range ``searched`` that
-    lies inside ``limits`` (the models' validity range: nothing is searched beyond it): the
-    terrain may go on beyond that end (a steep tile beyond what the plan's five windows saw, a
-    ``--heights`` too narrow), where no tie is found and the disparity range stops short.
+def crowded_ends(
+    heights: np.ndarray | None, searched: tuple[float, float], limits=(-np.inf, np.inf)
+) -> tuple[bool, bool]:
+    """Whether tie points of ``heights`` (m; ``None``: too few ties, both ends) crowd the low
+    and the high end of the height range ``searched``, each only inside ``limits`` (the models'
+    validity range: nothing is searched beyond it): the terrain may go on beyond that end (a
+    steep tile beyond what the plan's five windows saw, a ``--heights`` too narrow), where no
+    tie is found and the disparity range stops short.
 
     Why: a plan's range is the windows' heights widened twice (:func:`tile_tie_heights`), so
     a tile inside it has its ties well within; ties cut off at an end show the terrain beyond."""
-    if searched is None:
-        return False
+    lo, hi = searched
+    if heights is None:
+        return lo > limits[0], hi < limits[1]
     h = np.asarray(heights, float)
     h = h[np.isfinite(h)]
-    lo, hi = searched
     edge = END_FRACTION * (hi - lo)
     least = max(5.0, END_SHARE * len(h))
     low = lo > limits[0] and np.sum(h < lo + edge) >= least
-    return bool(low or (hi < limits[1] and np.sum(h > hi - edge) >= least))
+    return bool(low), bool(hi < limits[1] and np.sum(h > hi - edge) >= least)
 
 
 def ties_over_terrain(models, paths, match: MatchSettings, dem, features, least: int):
-    """:func:`~._ties.tie_points` of ``models = (ref, sec)`` over ``match.height_range_m``, and
-    again over a coarse matching's range when those ties crowd an end of it inside the models'
-    validity range (:func:`crowds_range_end`) or are fewer than ``least`` (a DEM's range is
-    kept). ``features``: both images' keypoints (for the first search only). Returns the ties
-    and whether the range was widened."""
-    (ref, sec), (f1, f2) = models, features
-    narrow = match.height_range_m is not None and dem is None
-    try:
-        ties = tie_points(ref, sec, *paths, match, dem=dem, features1=f1, features2=f2)
-    except TieError:
-        if not narrow:
-            raise
-        ties = None
+    """:func:`~._ties.tie_points` of ``models = (ref, sec)`` over ``match.height_range_m``; when
+    those ties crowd an end of it inside the models' validity range (:func:`crowded_ends`) or
+    are fewer than ``least``, again over the range widened by its span at those ends (up to
+    :data:`WIDENINGS` times), then over a coarse matching's range. A DEM's range is kept.
+    ``features = (f1, f2, secondary)``: image 1's keypoints, image 2's, and the function giving
+    image 2's where a height range puts the ROI (keypoints of one resolution level: OpenCV's
+    SIFT places a keypoint of its doubled first octave a quarter pixel off, so a
+    half-resolution reference with full-resolution secondary keypoints measured a false
+    0.25 px vertical disparity). Returns the ties and whether the range was widened."""
+    (ref, sec), (f1, f2, secondary) = models, features
+    if match.height_range_m is None or dem is not None:
+        return tie_points(ref, sec, *paths, match, dem=dem, features1=f1, features2=f2), False
     valid = [validity_heights(m) for m in models]
     limits = (max(v[0] for v in valid), min(v[1] for v in valid))
-    enough = ties is not None and len(ties) >= least
-    h = None if ties is None else ties.ground[:, 2]
-    if not narrow or (enough and not crowds_range_end(h, match.height_range_m, limits)):
-        return ties, False
-    # both images' own full-resolution search: keypoints of one level (OpenCV's SIFT places a
-    # keypoint of its doubled first octave a quarter pixel off; mixing a half-resolution
-    # reference with a full-resolution secondary measured a false 0.25 px vertical disparity)
-    wide = dataclasses.replace(match, height_range_m=None)
-    return tie_points(ref, sec, *paths, wide), True
+    for k in range(WIDENINGS + 1):
+        try:
+            ties = tie_points(ref, sec, *paths, match, features1=f1, features2=f2)
+        except TieError:
+            ties = None
+        h = None if ties is None or len(ties) < least else ties.ground[:, 2]
+        low, high = crowded_ends(h, match.height_range_m, limits)
+        if ties is not None and not (low or high):
+            return ties, k > 0
+        if not (low or high):
+            break
+        lo, hi = match.height_range_m
+        span = hi - lo
+        wider = (
+            max(lo - span, limits[0]) if low else lo,
+            min(hi + span, limits[1]) if high else hi,
+        )
+        match = dataclasses.replace(match, height_range_m=wider)
+        f2 = secondary(wider)
+    # both images' own full-resolution search over a coarse matching's range
+    return tie_points(ref, sec, *paths, dataclasses.replace(match, height_range_m=None)), True

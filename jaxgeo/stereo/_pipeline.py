@@ -222,21 +222,24 @@ def stereo_pair(
         img2 = read_window(sec_path, win2)
         lims = (lim1, stretch_limits(img2[::2, ::2]))
     log("tie points")
-    features2 = None  # a small window: tie_points' own search (full resolution)
-    if sift_level(data_win[2:]) > 1:
-        with stage("sift"):  # the secondary's, where the ties' heights (else any) put the ROI
-            ties_h = settings.heights if settings.heights is not None else h_valid
-            c, r, cw, rh = _sec_window(ref, sec, data_win, ties_h, sec_size, paths,
+
+    def secondary(heights):  # image 2's keypoints where ``heights`` put the ROI (None: a small
+        if sift_level(data_win[2:]) == 1:  # window, tie_points' own full-resolution search)
+            return None
+        with stage("sift"):
+            c, r, cw, rh = _sec_window(ref, sec, data_win, heights, sec_size, paths,
                                        margin=int(epipolar_tol_px) + 16)  # fmt: skip
             c, r = max(c, win2[0]), max(r, win2[1])  # within img2
             part2 = img2[r - win2[1] : r - win2[1] + rh, c - win2[0] : c - win2[0] + cw]
             most2 = TIE_KEYPOINTS * part2.size / (data_win[2] * data_win[3])  # same density
-            features2 = window_keypoints(part2, (c, r), lims[1], int(np.ceil(most2)), level=2)
+            return window_keypoints(part2, (c, r), lims[1], int(np.ceil(most2)), level=2)
+
+    features = (features1, secondary(h_valid if settings.heights is None else settings.heights))
     with stage("ties"):
         match = MatchSettings(roi=data_win, height_range_m=settings.heights,
                               epipolar_tol_px=epipolar_tol_px)  # fmt: skip
         ties, stats["tie_heights_widened"] = ties_over_terrain(
-            (ref, sec), paths, match, dem, (features1, features2), MIN_TIE_POINTS
+            (ref, sec), paths, match, dem, (*features, secondary), MIN_TIE_POINTS
         )
     if len(ties) < MIN_TIE_POINTS:
         raise StereoError(

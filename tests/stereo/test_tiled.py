@@ -241,11 +241,12 @@ def test_a_tile_whose_ties_crowd_an_end_of_the_plans_heights_searches_wider(scen
     """Terrain beyond the heights a tile searches (a steep tile the plan's five windows missed,
     a ``--heights`` too narrow): its ties pile up at that end, and the tile searches again over
     a coarse matching's range: the same disparity range as a tile that matched coarsely, not one
-    cut short. A range holding the terrain is searched once."""
+    cut short (widened by its span at that end, keypoints of one resolution). A range holding
+    the terrain is searched once."""
     import dataclasses
 
     from jaxgeo.stereo import stereo_pair
-    from jaxgeo.stereo._heights import crowds_range_end
+    from jaxgeo.stereo._heights import crowded_ends
     from jaxgeo.stereo._ties import validity_heights
 
     folder, models, paths = scene
@@ -266,11 +267,13 @@ def test_a_tile_whose_ties_crowd_an_end_of_the_plans_heights_searches_wider(scen
     vertical = [runs[k]["vertical_disparity_px"] for k in ("coarse", "holding", "narrow")]
     assert np.ptp(vertical) < 0.05, vertical
     h = np.linspace(10.0, 90.0, 200)
-    assert not crowds_range_end(h, (0.0, 100.0))
-    assert crowds_range_end(np.concatenate([h, np.full(10, 95.0)]), (0.0, 100.0))
-    assert crowds_range_end(np.concatenate([h, np.full(10, 3.0)]), (0.0, 100.0))
-    assert not crowds_range_end(h, None)
-    assert not crowds_range_end(np.concatenate([h, np.full(10, 95.0)]), (0.0, 100.0), (0, 100))
+    assert crowded_ends(h, (0.0, 100.0)) == (False, False)
+    assert crowded_ends(np.concatenate([h, np.full(10, 95.0)]), (0.0, 100.0)) == (False, True)
+    assert crowded_ends(np.concatenate([h, np.full(10, 3.0)]), (0.0, 100.0)) == (True, False)
+    assert crowded_ends(None, (0.0, 100.0), (0.0, 200.0)) == (False, True)  # too few ties
+    # an end at the models' validity limit: nothing to search beyond it
+    assert crowded_ends(np.concatenate([h, np.full(10, 95.0)]), (0.0, 100.0), (0, 100)) == (
+        False, False)  # fmt: skip
 
 
 def test_default_workers_are_one_per_core_for_several_tiles(monkeypatch):
