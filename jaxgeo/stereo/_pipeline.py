@@ -150,15 +150,6 @@ def _sec_window(ref, sec, window, h_range, size, paths, margin=64):
     return c0, r0, c1 - c0, r1 - r0
 
 
-def _in_window(xy, window):
-    """``(n,)`` True where pixel ``xy`` falls in ``window = (col, row, w, h)`` (pixel edges)."""
-    col, row, w, h = window
-    return (
-        (xy[:, 0] >= col - 0.5) & (xy[:, 0] < col + w - 0.5)
-        & (xy[:, 1] >= row - 0.5) & (xy[:, 1] < row + h - 0.5)
-    )  # fmt: skip
-
-
 def stereo_pair(
     models: Sequence[AbstractSensorModel],
     paths: Sequence[str | os.PathLike],
@@ -295,11 +286,10 @@ def stereo_pair(
         r1 = min(r0 + band, rows_e)
         disp, disp_sigma, valid_l, images = dense.band(r0, r1, keep)
         with stage("triangulation"):
-            # the band's mesh row block by row block, then only the matched pixels: no
-            # (pixels, 2) float64 mesh per band
-            xl = grids.mesh_to_sensor("left", np.arange(x0, x1, dtype=float),
-                                      np.arange(r0, r1, dtype=float))  # fmt: skip
-            in_roi = valid_l & _in_window(xl.reshape(-1, 2), roi).reshape(valid_l.shape)
+            # the pixels the ROI holds, cell by cell of the grids, then only the matched
+            # pixels: no (pixels, 2) float64 mesh per band
+            cols, rows = np.arange(x0, x1, dtype=float), np.arange(r0, r1, dtype=float)
+            in_roi = valid_l & grids.mesh_in_window("left", cols, rows, roi)
             n_valid += int(in_roi.sum())
             sel = np.isfinite(disp) & in_roi
             n_disp += int(sel.sum())

@@ -291,3 +291,22 @@ def test_capped_keypoints_are_spread_over_the_image():
     from scipy.spatial import cKDTree
 
     assert np.all(cKDTree(every).query(xy)[0] < 1e-6)
+
+
+def test_the_mesh_in_a_window_equals_each_pixel_mapped(pair):
+    """``EpipolarGrids.mesh_in_window`` (grid cells decided by their nodes, the rest mapped) is
+    the pixel-by-pixel test of :meth:`mesh_to_sensor`, windows cutting cells and the mesh
+    reaching beyond the nodes (extrapolated columns) included."""
+    _, grids = pair
+    rows, cols = grids.epipolar_shape
+    xs, ys = np.arange(-40, cols + 40, dtype=float), np.arange(-5, rows + 5, dtype=float)
+    sensor = grids.mesh_to_sensor("left", xs, ys)
+    decided = 0
+    for window in ((37, 21, 200, 230), (0, 0, 300, 300), (120, -10, 17, 400), (400, 0, 50, 50)):
+        col, row, w, h = window
+        want = ((sensor[..., 0] >= col - 0.5) & (sensor[..., 0] < col + w - 0.5)
+                & (sensor[..., 1] >= row - 0.5) & (sensor[..., 1] < row + h - 0.5))  # fmt: skip
+        got = grids.mesh_in_window("left", xs, ys, window)
+        assert np.array_equal(got, want), window
+        decided += want.any() and not want.all()
+    assert decided >= 2  # windows cutting the mesh, not only all in or all out
