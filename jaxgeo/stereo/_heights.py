@@ -115,12 +115,12 @@ def ties_over_terrain(models, paths, match: MatchSettings, dem, features, least:
     those ties crowd an end of it inside the models' validity range (:func:`crowded_ends`) or
     are fewer than ``least``, again over the range widened by its span at those ends (up to
     :data:`WIDENINGS` times), then over a coarse matching's range. A DEM's range is kept.
-    ``features = (f1, f2, secondary)``: image 1's keypoints, image 2's, and the function giving
-    image 2's where a height range puts the ROI (keypoints of one resolution level: OpenCV's
+    ``features = (f1, f2, keypoints)``: image 1's keypoints, image 2's, and the function giving
+    both where a height range puts the ROI in image 2 (keypoints of one resolution level: OpenCV's
     SIFT places a keypoint of its doubled first octave a quarter pixel off, so a
     half-resolution reference with full-resolution secondary keypoints measured a false
     0.25 px vertical disparity). Returns the ties and whether the range was widened."""
-    (ref, sec), (f1, f2, secondary) = models, features
+    (ref, sec), (f1, f2, keypoints) = models, features
     if match.height_range_m is None or dem is not None:
         return tie_points(ref, sec, *paths, match, dem=dem, features1=f1, features2=f2), False
     valid = [validity_heights(m) for m in models]
@@ -143,6 +143,6 @@ def ties_over_terrain(models, paths, match: MatchSettings, dem, features, least:
             min(hi + span, limits[1]) if high else hi,
         )
         match = dataclasses.replace(match, height_range_m=wider)
-        f2 = secondary(wider)
+        f1, f2 = keypoints(wider)
     # both images' own full-resolution search over a coarse matching's range
     return tie_points(ref, sec, *paths, dataclasses.replace(match, height_range_m=None)), True

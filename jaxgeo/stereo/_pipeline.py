@@ -214,23 +214,26 @@ def stereo_pair(
         lims = (lim1, stretch_limits(img2[::2, ::2]))
     log("tie points")
 
-    def secondary(heights):  # image 2's keypoints where ``heights`` put the ROI (None: a small
-        if sift_level(data_win[2:]) == 1:  # window, tie_points' own full-resolution search)
-            return None
+    def keypoints(heights):  # both images' where ``heights`` put the ROI in image 2 (None:
+        if sift_level(data_win[2:]) == 1:  # tie_points' own full-resolution search)
+            return features1, None
         with stage("sift"):
-            c, r, cw, rh = _sec_window(ref, sec, data_win, heights, sec_size, paths,
-                                       margin=int(epipolar_tol_px) + 16)  # fmt: skip
+            try:
+                c, r, cw, rh = _sec_window(ref, sec, data_win, heights, sec_size, paths,
+                                           margin=int(epipolar_tol_px) + 16)  # fmt: skip
+            except StereoError:  # not there: both searched anew at one level (full)
+                return None, None
             c, r = max(c, win2[0]), max(r, win2[1])  # within img2
             part2 = img2[r - win2[1] : r - win2[1] + rh, c - win2[0] : c - win2[0] + cw]
             most2 = TIE_KEYPOINTS * part2.size / (data_win[2] * data_win[3])  # same density
-            return window_keypoints(part2, (c, r), lims[1], int(np.ceil(most2)), level=2)
+            return features1, window_keypoints(part2, (c, r), lims[1], int(np.ceil(most2)), 2)
 
-    features = (features1, secondary(h_valid if settings.heights is None else settings.heights))
+    features = keypoints(h_valid if settings.heights is None else settings.heights)
     with stage("ties"):
         match = MatchSettings(roi=data_win, height_range_m=settings.heights,
                               epipolar_tol_px=epipolar_tol_px)  # fmt: skip
         ties, stats["tie_heights_widened"] = ties_over_terrain(
-            (ref, sec), paths, match, dem, (*features, secondary), MIN_TIE_POINTS
+            (ref, sec), paths, match, dem, (*features, keypoints), MIN_TIE_POINTS
         )
     if len(ties) < MIN_TIE_POINTS:
         raise StereoError(
