@@ -126,11 +126,11 @@ def _host_available_bytes() -> int:
     return os.sysconf("SC_AVPHYS_PAGES") * os.sysconf("SC_PAGE_SIZE")
 
 
-def memory_budget(device=None) -> tuple[int, str]:
-    """Bytes a band may use on ``device`` (default: JAX's default device) and where that comes
-    from: :data:`DEVICE_SHARE` of an accelerator's free memory (its ``bytes_limit`` less
-    ``bytes_in_use``), :data:`HOST_SHARE` of the host's available memory on a CPU (whose
-    device reports no limit). Read at each call: it follows what else holds memory."""
+def memory_available(device=None) -> tuple[int, str, float]:
+    """Bytes ``device`` (default: JAX's default device) has free, what they are, and the share
+    of them a band may use: an accelerator's free memory (its ``bytes_limit`` less
+    ``bytes_in_use``, :data:`DEVICE_SHARE`), else the host's available memory (a CPU, whose
+    device reports no limit; :data:`HOST_SHARE`). Read at each call."""
     device = jax.devices()[0] if device is None else device
     try:
         stats = device.memory_stats() or {}
@@ -138,9 +138,15 @@ def memory_budget(device=None) -> tuple[int, str]:
         stats = {}
     if stats.get("bytes_limit"):
         free = int(stats["bytes_limit"]) - int(stats.get("bytes_in_use", 0))
-        return int(DEVICE_SHARE * free), f"{DEVICE_SHARE:.0%} of {device.platform}'s free memory"
-    host = f"{HOST_SHARE:.0%} of the host's available memory"
-    return int(HOST_SHARE * _host_available_bytes()), host
+        return free, f"{device.platform}'s free memory", DEVICE_SHARE
+    return _host_available_bytes(), "the host's available memory", HOST_SHARE
+
+
+def memory_budget(device=None) -> tuple[int, str]:
+    """Bytes a band may use on ``device`` and where that comes from: its share of
+    :func:`memory_available` (it follows what else holds memory)."""
+    free, what, share = memory_available(device)
+    return int(share * free), f"{share:.0%} of {what}"
 
 
 def chunk_rows(rows: int, cols: int, n_disp: int, budget_bytes: int, source: str = "") -> int:
@@ -378,8 +384,10 @@ def census_sgm(left8, right8, disp_min, disp_max, penalties, checks=(10, 1), n_p
     rows, cols = np.shape(left8)
     if memory_bytes is None:
         budget, source = memory_budget()
-    else:
-        budget, source = int(memory_bytes), "as set"
+    else:  # never past what the device has: such a band would be killed mid-run
+        free, what, _ = memory_available()
+        budget = min(int(memory_bytes), free)
+        source = "as set" if budget == int(memory_bytes) else f"as set, capped at {what}"
     keep = chunk_rows(rows, cols, hi - lo + 1, budget, source)
     if keep >= rows:
         return _one_chunk(left8, right8, lo, hi, penalties, checks, n_paths)

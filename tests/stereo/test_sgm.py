@@ -130,6 +130,11 @@ def test_the_memory_a_band_needs_sets_its_chunks():
     left8 = np.zeros((64, 64), np.uint8)
     with pytest.raises(SGMMemoryError, match="needs"):
         sgm_disparity(left8, left8, 0, 15, SGMSettings(matcher="jax", memory_mb=0.01))
+    # a budget past what the machine has is capped at it (the band would be killed mid-run):
+    # a band larger than the host's memory is refused, naming the cap
+    huge = np.zeros((64, 2**16), np.uint8)
+    with pytest.raises(SGMMemoryError, match="as set, capped at the host's available memory"):
+        census_sgm(huge, huge, 0, 2**15, PEN, memory_bytes=2**60)
 
 
 def test_a_band_matched_in_chunks_equals_one_pass():
